@@ -1,0 +1,88 @@
+"""Helpers shared by the subcommands: file arguments, keys, JSON, progress bars."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from keyfill.errors import UsageError
+from keyfill.motion import Keys, Motion
+
+FORMAT_CHOICE = click.Choice(["bvh", "usda", "usdc", "usd"], case_sensitive=False)
+
+
+def verbosity(ctx: click.Context | None = None) -> int:
+    ctx = ctx or click.get_current_context(silent=True)
+    while ctx is not None:
+        if ctx.obj and "verbosity" in ctx.obj:
+            return ctx.obj["verbosity"]
+        ctx = ctx.parent
+    return 0
+
+
+def progress(iterable=None, **kwargs):
+    """A tqdm progress bar on stderr, silent with ``-q`` or when stderr is not a terminal."""
+    from tqdm import tqdm
+
+    disable = verbosity() < 0 or not sys.stderr.isatty()
+    return tqdm(iterable, disable=disable, file=sys.stderr, dynamic_ncols=True, **kwargs)
+
+
+def emit_json(data: dict) -> None:
+    """Print a machine-readable summary on stdout."""
+    click.echo(json.dumps(data, indent=2, sort_keys=True, default=_jsonable))
+
+
+def _jsonable(x):
+    import numpy as np
+
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(f"cannot write {type(x).__name__} as JSON")
+
+
+def say(message: str, min_verbosity: int = 0) -> None:
+    """A human-readable line on stderr (so stdout stays clean for data and JSON)."""
+    if verbosity() >= min_verbosity:
+        click.echo(message, err=True)
+
+
+def keys_options(f):
+    """``--keys`` and ``--key-every`` options."""
+    f = click.option(
+        "--key-every",
+        type=int,
+        metavar="N",
+        help="A key every N frames from frame 0, plus the last frame.",
+    )(f)
+    f = click.option("--keys", "keys_text", metavar="LIST", help="Key frame numbers, e.g. 0,12,30.")(f)
+    return f
+
+
+def resolve_keys(motion: Motion, keys_text: str | None, key_every: int | None, min_keys: int = 2) -> Keys:
+    """The keys for ``motion``: from ``--keys``, ``--key-every``, or the file's own keys."""
+    if keys_text is not None and key_every is not None:
+        raise UsageError("give --keys or --key-every, not both")
+    if keys_text is not None:
+        keys = Keys.parse(keys_text)
+    elif key_every is not None:
+        keys = Keys.every(key_every, motion.num_frames)
+    elif motion.keys is not None:
+        keys = motion.keys
+    else:
+        raise UsageError("this file records no keys; give --keys (e.g. 0,12,30) or --key-every N")
+    return keys.check(motion.num_frames, min_keys=min_keys)
+
+
+def output_format(path: str, fmt: str | None) -> str | None:
+    """``--format`` is required for ``-`` (stdout) and otherwise overrides the suffix."""
+    if path == "-" and fmt is None:
+        raise UsageError("writing to '-' needs --format (bvh, usda or usdc)")
+    return fmt

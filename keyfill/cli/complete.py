@@ -1,0 +1,58 @@
+"""``keyfill complete``: fill in the frames between keys."""
+
+from __future__ import annotations
+
+import click
+
+from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, output_format, resolve_keys, say
+from keyfill.learn.methods import METHODS
+
+
+@click.command()
+@click.argument("src", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("-o", "--output", "dst", required=True, type=click.Path(dir_okay=False, allow_dash=True),
+              help="Output file (.bvh, .usda, .usdc, .usd) or '-' with --format.")
+@keys_options
+@click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
+              help="In-betweening method.")
+@click.option("--model", type=click.Path(exists=True), help="Model file or folder for a learned method.")
+@click.option("--exact-keys/--no-exact-keys", default=True, show_default=True,
+              help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")
+@click.option("--device", default="cpu", show_default=True, help="Torch device for learned methods.")
+@click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
+@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
+@click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
+def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, device, fmt, in_fmt, as_json):
+    """Fill in the frames between the keys of SRC and write the result.
+
+    Keys come from --keys or --key-every, or else from the file itself (the
+    authored time samples of a sparse USD file). Only the key frames of SRC
+    are read; every other frame is generated. Frames at keys come out
+    identical to the input keys.
+
+    \b
+    Methods:
+      linear   lerp of translations, slerp of rotations
+      cubic    C1 cubic splines (log-map cubic for rotations)
+    and the learned methods whose models are installed (see --method).
+
+    \b
+    Examples:
+      keyfill complete keys.usda -o filled.usda
+      keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
+      keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
+    """
+    from keyfill import io
+    from keyfill.learn.methods import CompleteOptions
+    from keyfill.learn.methods import complete as run
+
+    motion = io.load(src, in_fmt)
+    keys = resolve_keys(motion, keys_text, key_every)
+    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device)
+    result = run(motion, keys, method, options)
+    io.save(result.motion, dst, output_format(dst, fmt))
+    if as_json:
+        emit_json({"input": src, "output": dst, **result.info})
+    elif dst != "-":
+        say(f"wrote {dst}: {motion.num_frames} frames completed from {len(keys)} keys with {method}")

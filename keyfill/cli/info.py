@@ -1,0 +1,81 @@
+"""``keyfill info``: what a motion file holds."""
+
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from keyfill.cli.common import FORMAT_CHOICE, emit_json
+
+
+def describe(motion, path: str) -> dict:
+    """A JSON-ready summary of ``motion``: skeleton, timing, keys, bounding box."""
+    sk = motion.skeleton
+    world = motion.world_positions() if motion.num_frames else np.zeros((0, sk.num_joints, 3))
+    box = None
+    if motion.num_frames:
+        box = {"min": world.min(axis=(0, 1)).tolist(), "max": world.max(axis=(0, 1)).tolist()}
+    return {
+        "file": path,
+        "frames": motion.num_frames,
+        "fps": motion.fps,
+        "duration_s": motion.duration,
+        "num_joints": sk.num_joints,
+        "num_channels": sk.num_channels,
+        "meters_per_unit": sk.meters_per_unit,
+        "up_axis": sk.up_axis,
+        "joints": [
+            {
+                "name": sk.names[j],
+                "parent": sk.names[sk.parents[j]] if sk.parents[j] >= 0 else None,
+                "channels": list(sk.channels[j]),
+                "euler_order": sk.euler_orders[j],
+                "offset": sk.offsets[j].tolist(),
+            }
+            for j in range(sk.num_joints)
+        ],
+        "keys": motion.keys.to_list() if motion.keys is not None else None,
+        "bounding_box": box,
+    }
+
+
+@click.command()
+@click.argument("file", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--format", "fmt", type=FORMAT_CHOICE, help="Input format (needed when FILE is '-').")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
+def info(file, fmt, as_json):
+    """Show what a BVH or USD motion file holds.
+
+    Skeleton (joints, channels, Euler orders), frame count, frame rate,
+    duration, keys and the world-space bounding box.
+
+    \b
+    Examples:
+      keyfill info walk.bvh
+      keyfill info keys.usda --json | jq .keys
+      cat walk.bvh | keyfill info - --format bvh
+    """
+    from keyfill import io
+
+    motion = io.load(file, fmt)
+    d = describe(motion, file)
+    if as_json:
+        emit_json(d)
+        return
+    click.echo(f"{file}: {d['frames']} frames at {d['fps']:g} fps ({d['duration_s']:.3f} s), "
+               f"{d['num_joints']} joints, {d['num_channels']} channels")
+    click.echo(f"units: {d['meters_per_unit']:g} m, up axis {d['up_axis']}")
+    keys = d["keys"]
+    click.echo(f"keys: {', '.join(map(str, keys)) if keys is not None else 'none recorded'}")
+    if d["bounding_box"]:
+        lo, hi = d["bounding_box"]["min"], d["bounding_box"]["max"]
+        click.echo("bounding box: " + " ".join(f"{a}[{l:.4g}, {h:.4g}]" for a, l, h in zip("xyz", lo, hi)))
+    width = max(len(j["name"]) for j in d["joints"])
+    for j in d["joints"]:
+        depth, p = 0, j["parent"]
+        parents = {x["name"]: x["parent"] for x in d["joints"]}
+        while p is not None:
+            depth, p = depth + 1, parents[p]
+        name = "  " * depth + j["name"]
+        chans = " ".join(j["channels"]) or "-"
+        click.echo(f"  {name:<{width + 2 * depth}}  {j['euler_order']}  {chans}")

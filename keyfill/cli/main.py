@@ -1,0 +1,121 @@
+"""The ``keyfill`` command group: global options, lazy subcommands, error reporting."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+
+import click
+
+from keyfill import __version__
+from keyfill.errors import KeyfillError
+
+#: subcommand -> "module:attribute". Modules are imported only when used, so
+#: ``keyfill info`` never pays for torch or pybullet.
+COMMANDS = {
+    "info": "keyfill.cli.info:info",
+    "convert": "keyfill.cli.convert:convert",
+    "complete": "keyfill.cli.complete:complete",
+    "simulate": "keyfill.cli.simulate:simulate",
+    "train": "keyfill.cli.train:train",
+    "evaluate": "keyfill.cli.evaluate:evaluate",
+    "edit-tangents": "keyfill.cli.edit_tangents:edit_tangents",
+    "pose": "keyfill.cli.pose:pose",
+    "plot": "keyfill.cli.plot:plot",
+    "preview": "keyfill.cli.preview:preview",
+}
+
+
+class LazyGroup(click.Group):
+    """A click group whose subcommands live in modules imported on first use."""
+
+    def __init__(self, *args, lazy: dict[str, str] | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.lazy = dict(lazy or {})
+
+    def _available(self) -> list[str]:
+        return [n for n, target in self.lazy.items() if importlib.util.find_spec(target.split(":")[0]) is not None]
+
+    def list_commands(self, ctx):
+        return sorted(set(super().list_commands(ctx)) | set(self._available()))
+
+    def get_command(self, ctx, name):
+        if name in self.lazy and name in self._available():
+            module, attr = self.lazy[name].split(":")
+            return getattr(importlib.import_module(module), attr)
+        return super().get_command(ctx, name)
+
+
+@click.group(
+    cls=LazyGroup,
+    lazy=COMMANDS,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
+@click.option("-q", "--quiet", count=True, help="Print less (no progress bars).")
+@click.option("-v", "--verbose", count=True, help="Print more.")
+@click.option("--debug", is_flag=True, help="Show Python tracebacks for errors.")
+@click.version_option(__version__, prog_name="keyfill")
+@click.pass_context
+def cli(ctx, quiet, verbose, debug):
+    """keyfill fills in the frames between keyframes of character animation.
+
+    It reads and writes BVH and USD files and offers spline baselines, learned
+    in-betweening (ARNN, transformer), a physics-based hopping-lamp dataset and
+    tangent-space editing of Bezier curves, all on one Motion data type.
+
+    \b
+    Examples:
+      keyfill info walk.bvh
+      keyfill convert walk.bvh walk.usda
+      keyfill complete keys.usda -o filled.bvh --method cubic
+
+    Exit codes: 0 success, 1 the work failed, 2 usage error.
+    """
+    ctx.ensure_object(dict)
+    ctx.obj["verbosity"] = verbose - quiet
+    ctx.obj["debug"] = debug
+
+
+def _error(message: str) -> None:
+    click.echo(f"keyfill: error: {' '.join(str(message).split())}", err=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI; returns the exit code (also used by ``python -m keyfill``)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in args
+    try:
+        cli.main(args=args, prog_name="keyfill", standalone_mode=False)
+        return 0
+    except click.exceptions.Exit as e:
+        return e.exit_code
+    except click.exceptions.Abort:
+        _error("interrupted")
+        return 130
+    except click.UsageError as e:
+        if debug:
+            raise
+        cmd = e.ctx.command_path if e.ctx is not None else "keyfill"
+        _error(f"{e.format_message()} (see '{cmd} --help')")
+        return 2
+    except KeyfillError as e:
+        if debug:
+            raise
+        _error(str(e))
+        return e.exit_code
+    except KeyboardInterrupt:
+        _error("interrupted")
+        return 130
+    except BrokenPipeError:
+        return 1
+    except Exception as e:  # a bug: say so in one line unless --debug
+        if debug:
+            raise
+        _error(f"internal error: {type(e).__name__}: {e} (run with --debug for the traceback)")
+        return 1
+
+
+def entry_point() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

@@ -1,0 +1,52 @@
+"""The errors keyfill raises.
+
+Every error keyfill expects (bad files, bad options, infeasible edits, broken
+model files) is a :class:`KeyfillError`. Its message is one line that makes
+sense on its own; the CLI prints it as ``keyfill: error: <message>`` and exits
+with :attr:`KeyfillError.exit_code`. Anything else is a bug and shows a
+traceback only with ``--debug``.
+"""
+
+from __future__ import annotations
+
+
+class KeyfillError(Exception):
+    """Base of all expected errors. ``exit_code`` 1: the work failed."""
+
+    exit_code = 1
+
+
+class UsageError(KeyfillError):
+    """Options that cannot work together or with this input (exit code 2)."""
+
+    exit_code = 2
+
+
+class FormatError(KeyfillError):
+    """A file that cannot be read as what it claims to be.
+
+    ``path`` and ``line`` (1-based) are put in front of the message when known.
+    """
+
+    def __init__(self, message: str, path: object = None, line: int | None = None):
+        where = ""
+        if path is not None:
+            where = f"{path}"
+            if line is not None:
+                where += f":{line}"
+            where += ": "
+        super().__init__(where + message)
+        self.path = path
+        self.line = line
+
+
+class DataError(KeyfillError):
+    """Valid files whose content cannot be used for the requested work."""
+
+
+class ModelError(KeyfillError):
+    """A model file that is not a keyfill model, is damaged, or does not fit the input."""
+
+
+class InfeasibleError(KeyfillError):
+    """An edit or search whose constraints cannot all be met."""

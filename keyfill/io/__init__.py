@@ -1,0 +1,105 @@
+"""Reading and writing motion files: ``load(path) -> Motion``, ``save(motion, path)``.
+
+The format comes from the suffix (``.bvh``, ``.usda``, ``.usdc``, ``.usd``) or
+from ``format=`` (required for ``-``, standard input or output). Each format
+module offers ``read(path, label=None) -> Motion`` (``label`` names the file in
+error messages) and ``write(motion, path, **options)``. Saving is atomic: the file appears
+complete or not at all (see :func:`atomic_output`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+from keyfill.errors import FormatError, UsageError
+from keyfill.motion import Motion
+
+#: format name -> module implementing it
+FORMATS = {"bvh": "keyfill.io.bvh", "usda": "keyfill.io.usd", "usdc": "keyfill.io.usd", "usd": "keyfill.io.usd"}
+STDIO = "-"
+
+
+def format_of(path: str | os.PathLike, format: str | None = None) -> str:
+    """The format name for ``path``: ``format`` when given, else from the suffix."""
+    if format is not None:
+        fmt = format.lower().lstrip(".")
+        if fmt not in FORMATS:
+            raise UsageError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}")
+        return fmt
+    if str(path) == STDIO:
+        raise UsageError("reading or writing '-' needs --format (bvh, usda or usdc)")
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in FORMATS:
+        raise UsageError(f"{path}: unknown file type {Path(path).suffix or '(no suffix)'!r}; expected .bvh, .usda, .usdc or .usd")
+    return suffix
+
+
+def _module(fmt: str):
+    return importlib.import_module(FORMATS[fmt])
+
+
+def load(path: str | os.PathLike, format: str | None = None) -> Motion:
+    """Read a motion file (``"-"``: standard input, with ``format``)."""
+    fmt = format_of(path, format)
+    mod = _module(fmt)
+    if str(path) == STDIO:
+        with tempfile.TemporaryDirectory() as tmp:
+            p = Path(tmp) / ("stdin." + fmt)
+            p.write_bytes(sys.stdin.buffer.read())
+            return mod.read(p, label="<stdin>")
+    p = Path(path)
+    if not p.is_file():
+        raise FormatError("no such file" if not p.exists() else "not a file", p)
+    return mod.read(p)
+
+
+def save(motion: Motion, path: str | os.PathLike, format: str | None = None, **options) -> None:
+    """Write ``motion`` atomically (``"-"``: standard output, with ``format``).
+
+    ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key files).
+    """
+    fmt = format_of(path, format)
+    mod = _module(fmt)
+    if str(path) == STDIO:
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / ("stdout." + fmt)
+            mod.write(motion, out, **options)
+            sys.stdout.flush()
+            sys.stdout.buffer.write(out.read_bytes())
+            sys.stdout.buffer.flush()
+        return
+    with atomic_output(path) as tmp:
+        mod.write(motion, tmp, **options)
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds.
+
+    The temporary file keeps ``path``'s suffix (writers such as USD pick their
+    format from it). On any error it is removed, so no partial output remains.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise UsageError(f"{path}: the output folder {str(folder)!r} does not exist")
+    if path.is_dir():
+        raise UsageError(f"{path}: is a folder, not a file")
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

@@ -1,0 +1,428 @@
+"""BVH files: read any hierarchy and channel layout, write it back as it came.
+
+Reading parses the hierarchy by tokens (names may hold ``:`` and other
+punctuation; tabs, CRLF and trailing spaces are fine) and the motion block in
+bulk with numpy: one vectorised pass counts the values on every line (so a bad
+line is named by its number), one C-level pass converts them. Each joint keeps
+its own channel list and Euler order; angles are intrinsic in channel order.
+
+Position channels give the joint's local translation (replacing the OFFSET's
+component on that axis), as Blender, MotionBuilder and bvhio read them.
+
+Writing keeps each joint's channel order, the hierarchy order and the End
+Sites, writes numbers with 12 significant digits (round trips to 1e-12
+relative; never ``%f``), and keeps Euler curves continuous: no 360-degree
+jumps and no flips between the two Euler solutions of a rotation.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from keyfill import rotations as R
+from keyfill.errors import DataError, FormatError
+from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion, Skeleton, check_channels
+
+NUMBER_FORMAT = "%.12g"
+_MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
+
+
+# --- reading -----------------------------------------------------------------
+
+
+class _TokenStream:
+    """Whitespace-separated tokens of the hierarchy, each with its 1-based line number."""
+
+    def __init__(self, lines: list[str], path):
+        self.path = path
+        self.lines = lines
+        self.items = [(tok, n + 1) for n, line in enumerate(lines) for tok in line.split()]
+        self.pos = 0
+
+    def error(self, message: str, line: int | None = None) -> FormatError:
+        if line is None:
+            line = self.items[min(self.pos, len(self.items) - 1)][1] if self.items else 1
+        return FormatError(message, self.path, line)
+
+    def peek(self) -> str | None:
+        return self.items[self.pos][0] if self.pos < len(self.items) else None
+
+    def next(self, expected: str) -> tuple[str, int]:
+        if self.pos >= len(self.items):
+            last = self.items[-1][1] if self.items else 1
+            raise FormatError(f"hierarchy ends early: expected {expected}", self.path, last)
+        item = self.items[self.pos]
+        self.pos += 1
+        return item
+
+    def expect(self, word: str) -> int:
+        tok, line = self.next(repr(word))
+        if tok != word:
+            raise FormatError(f"expected {word!r}, found {tok!r}", self.path, line)
+        return line
+
+    def rest_of_line(self, line: int) -> list[str]:
+        out = []
+        while self.pos < len(self.items) and self.items[self.pos][1] == line:
+            out.append(self.items[self.pos][0])
+            self.pos += 1
+        return out
+
+    def numbers(self, count: int, what: str) -> np.ndarray:
+        vals = []
+        for _ in range(count):
+            tok, line = self.next(what)
+            try:
+                v = float(tok)
+            except ValueError:
+                raise FormatError(f"expected a number in {what}, found {tok!r}", self.path, line) from None
+            if not np.isfinite(v):
+                raise FormatError(f"{what} holds {tok!r}, which is not a finite number", self.path, line)
+            vals.append(v)
+        return np.array(vals)
+
+
+class _Hierarchy:
+    def __init__(self):
+        self.names: list[str] = []
+        self.parents: list[int] = []
+        self.offsets: list[np.ndarray] = []
+        self.channels: list[tuple[str, ...]] = []
+        self.end_sites: list[tuple[int, np.ndarray]] = []
+
+
+def _parse_joint(ts: _TokenStream, h: _Hierarchy, parent: int, keyword_line: int) -> None:
+    parts = ts.rest_of_line(keyword_line)
+    opened = bool(parts) and parts[-1] == "{"
+    if opened:
+        parts = parts[:-1]
+    if not parts:
+        raise ts.error("a joint needs a name", keyword_line)
+    name = " ".join(parts)
+    if name in h.names:
+        raise ts.error(f"joint name {name!r} appears twice", keyword_line)
+    if not opened:
+        ts.expect("{")
+    j = len(h.names)
+    h.names.append(name)
+    h.parents.append(parent)
+    h.offsets.append(None)
+    h.channels.append(())
+    while True:
+        tok, line = ts.next(f"'}}' closing joint {name!r}")
+        if tok == "OFFSET":
+            h.offsets[j] = ts.numbers(3, f"the OFFSET of {name!r}")
+        elif tok == "CHANNELS":
+            ctok, cline = ts.next("a channel count")
+            try:
+                n = int(ctok)
+            except ValueError:
+                raise ts.error(f"CHANNELS of {name!r} needs a count, found {ctok!r}", cline) from None
+            if n in (4, 5) or not 0 <= n <= 6:
+                raise ts.error(f"joint {name!r} has {n} channels; a BVH joint has 0, 1, 2, 3 or 6", cline)
+            names = [ts.next(f"{n} channel names for {name!r}")[0] for _ in range(n)]
+            try:
+                h.channels[j] = check_channels(names)
+            except ValueError as e:
+                raise ts.error(f"joint {name!r}: {e}", cline) from None
+        elif tok in ("JOINT", "ROOT"):
+            if tok == "ROOT":
+                raise ts.error(f"ROOT inside joint {name!r}; a ROOT starts a new hierarchy", line)
+            _parse_joint(ts, h, j, line)
+        elif tok == "End":
+            ts.expect("Site")
+            ts.expect("{")
+            ts.expect("OFFSET")
+            h.end_sites.append((j, ts.numbers(3, f"the End Site OFFSET of {name!r}")))
+            ts.expect("}")
+        elif tok == "}":
+            break
+        else:
+            raise ts.error(f"unexpected {tok!r} in joint {name!r}", line)
+    if h.offsets[j] is None:
+        raise ts.error(f"joint {name!r} has no OFFSET", keyword_line)
+
+
+def _header_value(lines: list[str], start: int, label: str, path) -> tuple[str, int]:
+    """Find ``label`` (e.g. ``"Frames:"``) on the first non-empty line from ``start``; return its value."""
+    n = start
+    while n < len(lines) and not lines[n].strip():
+        n += 1
+    if n >= len(lines):
+        raise FormatError(f"motion ends early: expected '{label}'", path, len(lines))
+    text = lines[n].strip()
+    if not text.replace(" ", "").replace("\t", "").lower().startswith(label.replace(" ", "").lower()):
+        raise FormatError(f"expected '{label}', found {text[:40]!r}", path, n + 1)
+    value = text.split(":", 1)[1].strip()
+    return value, n
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _count_values_per_line(data: bytes) -> np.ndarray:
+    """Number of whitespace-separated tokens on each line of ``data`` (vectorised)."""
+    buf = np.frombuffer(data, dtype=np.uint8)
+    if buf.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    space = buf <= 32  # space, tab, CR, LF, other controls
+    starts = np.flatnonzero(~space & np.concatenate(([True], space[:-1])))
+    newlines = np.flatnonzero(buf == 10)
+    num_lines = len(newlines) + (0 if buf[-1] == 10 else 1)
+    return np.bincount(np.searchsorted(newlines, starts), minlength=num_lines)
+
+
+def _first_bad_token(lines: list[bytes]) -> tuple[int, str]:
+    for i, line in enumerate(lines):
+        for tok in line.split():
+            try:
+                float(tok)
+            except ValueError:
+                return i, tok.decode("utf-8", "replace")
+    return 0, ""
+
+
+def _snap_fps(frame_time: float) -> float:
+    """``1 / frame_time``, snapped to a whole rate when the file rounded ``1/n`` (e.g. .0333333)."""
+    fps = 1.0 / frame_time
+    whole = round(fps)
+    if whole > 0 and abs(frame_time - 1.0 / whole) < 5e-7:
+        return float(whole)
+    return fps
+
+
+def parse(raw: bytes | str, path=None) -> Motion:
+    """Parse BVH text (bytes or str) into a :class:`Motion`; ``path`` only labels errors."""
+    if isinstance(raw, str):
+        raw = raw.encode("utf-8")
+    label = path if path is not None else "<bvh>"
+    if not raw.strip():
+        raise FormatError("the file is empty", label)
+    m = _MOTION_RE.search(raw)
+    if m is None:
+        head = _decode(raw).splitlines()
+        ts = _TokenStream(head, label)
+        if ts.peek() != "HIERARCHY":
+            raise FormatError("not a BVH file: it does not start with HIERARCHY", label, 1)
+        raise FormatError("no MOTION section: the file ends early", label, max(len(head), 1))
+    header_lines = _decode(raw[: m.start()]).splitlines()
+    ts = _TokenStream(header_lines, label)
+    if ts.peek() != "HIERARCHY":
+        raise FormatError("not a BVH file: it does not start with HIERARCHY", label, ts.items[0][1] if ts.items else 1)
+    ts.next("HIERARCHY")
+    h = _Hierarchy()
+    while ts.peek() is not None:
+        tok, line = ts.next("ROOT")
+        if tok != "ROOT":
+            raise ts.error(f"expected ROOT, found {tok!r}", line)
+        _parse_joint(ts, h, -1, line)
+    if not h.names:
+        raise FormatError("the hierarchy has no joints", label, len(header_lines))
+
+    motion_line = len(header_lines)  # 0-based index of the MOTION line
+    after = raw[m.end() :]
+    # Locate 'Frames:' and 'Frame Time:' allowing blank lines between them.
+    lines_text = _decode(after[: min(len(after), 4096)]).split("\n")
+    frames_val, i_frames = _header_value(lines_text, 1, "Frames:", label)
+    ft_val, i_ft = _header_value(lines_text, i_frames + 1, "Frame Time:", label)
+    frames_line_no = motion_line + i_frames + 1
+    ft_line_no = motion_line + i_ft + 1
+    try:
+        num_frames = int(frames_val)
+        if num_frames < 0:
+            raise ValueError
+    except ValueError:
+        raise FormatError(f"'Frames:' needs a non-negative whole number, found {frames_val!r}", label, frames_line_no) from None
+    try:
+        frame_time = float(ft_val)
+    except ValueError:
+        raise FormatError(f"'Frame Time:' needs a number, found {ft_val!r}", label, ft_line_no) from None
+    if not (np.isfinite(frame_time) and frame_time > 0):
+        raise FormatError(f"'Frame Time:' must be positive, found {ft_val}", label, ft_line_no)
+
+    # Byte offset of the first data line: skip i_ft + 1 lines of ``after``.
+    data_start = 0
+    for _ in range(i_ft + 1):
+        nl = after.find(b"\n", data_start)
+        data_start = len(after) if nl < 0 else nl + 1
+    data = after[data_start:]
+    first_data_line = motion_line + i_ft + 2  # 1-based file line of data[0]
+
+    num_channels = sum(len(c) for c in h.channels)
+    counts = _count_values_per_line(data)
+    nonempty = np.flatnonzero(counts > 0)
+    wrong = nonempty[:num_frames][counts[nonempty[:num_frames]] != num_channels]
+    if len(wrong):
+        i = int(wrong[0])
+        raise FormatError(
+            f"{int(counts[i])} values on this line, expected {num_channels} (one per channel)", label, first_data_line + i
+        )
+    if num_channels and len(nonempty) != num_frames:
+        where = first_data_line + int(nonempty[num_frames]) if len(nonempty) > num_frames else frames_line_no
+        raise FormatError(
+            f"'Frames: {num_frames}' but {len(nonempty)} lines of motion data follow", label, where
+        )
+    if num_channels == 0 or num_frames == 0:
+        values = np.zeros((num_frames, num_channels))
+    else:
+        lines = data.split(b"\n")
+        try:
+            values = np.loadtxt(lines, dtype=np.float64, comments=None, ndmin=2)
+        except ValueError:
+            i, tok = _first_bad_token(lines)
+            raise FormatError(f"{tok!r} is not a number", label, first_data_line + i) from None
+        if not np.all(np.isfinite(values)):
+            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+            raise FormatError("a value is NaN or infinite", label, first_data_line + int(nonempty[row]))
+
+    skeleton = Skeleton(
+        names=tuple(h.names),
+        parents=np.array(h.parents),
+        offsets=np.array(h.offsets),
+        channels=tuple(h.channels),
+        end_sites=tuple(h.end_sites),
+    )
+    rot, pos = channels_to_pose(values, skeleton)
+    return Motion(skeleton, _snap_fps(frame_time), rot, pos)
+
+
+def channels_to_pose(values: np.ndarray, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """BVH channel values ``(F, C)`` (degrees, file units) -> ``(rotations (F,J,4), positions (F,J,3))``."""
+    F, J = values.shape[0], skeleton.num_joints
+    pos = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
+    angles = np.zeros((F, J, 3))
+    orders = skeleton.euler_orders
+    col = 0
+    for j, chans in enumerate(skeleton.channels):
+        for c in chans:
+            axis = "XYZ".index(c[0])
+            if c in POSITION_CHANNELS:
+                pos[:, j, axis] = values[:, col]
+            else:
+                angles[:, j, orders[j].index(c[0])] = np.deg2rad(values[:, col])
+            col += 1
+    rot = np.empty((F, J, 4))
+    for order in set(orders):
+        js = [j for j in range(J) if orders[j] == order]
+        rot[:, js] = R.euler_to_quat(angles[:, js], order)
+    return rot, pos
+
+
+def read(path: str | Path, label=None) -> Motion:
+    """Read a BVH file; ``label`` (default: the path) names it in error messages."""
+    path = Path(path)
+    return parse(path.read_bytes(), label if label is not None else path)
+
+
+# --- writing -----------------------------------------------------------------
+
+
+def pose_to_channels(motion: Motion) -> np.ndarray:
+    """``(F, C)`` BVH channel values (degrees, file units) of ``motion`` in its skeleton's layout.
+
+    Raises :class:`DataError` when the motion does something the channels cannot
+    hold (a rotation about an axis without a channel, a translation of a joint
+    without position channels).
+    """
+    sk = motion.skeleton
+    F, J = motion.num_frames, sk.num_joints
+    orders = sk.euler_orders
+    angles = np.empty((F, J, 3))
+    for order in set(orders):
+        js = [j for j in range(J) if orders[j] == order]
+        angles[:, js] = R.quat_to_euler(motion.rotations[:, js], order)
+    scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
+    columns = []
+    for j, chans in enumerate(sk.channels):
+        rot_axes = [c[0] for c in chans if c in ROTATION_CHANNELS]
+        pos_axes = [c[0] for c in chans if c in POSITION_CHANNELS]
+        a = angles[:, j]
+        if len(rot_axes) == 3:
+            a = R.euler_continuous_np(a)
+        else:
+            missing = a[:, len(rot_axes) :]
+            if F and np.abs(missing).max() > 1e-6:
+                f = int(np.argmax(np.abs(missing).max(axis=1)))
+                raise DataError(
+                    f"joint {sk.names[j]!r} rotates about an axis that its BVH channels "
+                    f"({' '.join(chans) or 'none'}) cannot hold, at frame {f}"
+                )
+            a = np.unwrap(a, axis=0) if F else a
+        fixed = [i for i in range(3) if "XYZ"[i] not in pos_axes]
+        if F and fixed:
+            dev = np.abs(motion.positions[:, j, fixed] - sk.offsets[j, fixed])
+            if dev.max() > 1e-6 * scale:
+                f = int(np.argmax(dev.max(axis=1)))
+                raise DataError(
+                    f"joint {sk.names[j]!r} moves away from its OFFSET at frame {f} but has no position "
+                    f"channel for that axis ({' '.join(chans) or 'no channels'})"
+                )
+        deg = np.rad2deg(a)
+        for c in chans:
+            if c in POSITION_CHANNELS:
+                columns.append(motion.positions[:, j, "XYZ".index(c[0])])
+            else:
+                columns.append(deg[:, orders[j].index(c[0])])
+    if not columns:
+        return np.zeros((F, 0))
+    return np.stack(columns, axis=1)
+
+
+def _fmt(values) -> str:
+    return " ".join(NUMBER_FORMAT % v for v in values)
+
+
+def _write_joint(sk: Skeleton, j: int, depth: int, out: list[str], children: list[list[int]], ends) -> None:
+    ind = "\t" * depth
+    out.append(f"{ind}{'ROOT' if sk.parents[j] < 0 else 'JOINT'} {sk.names[j]}")
+    out.append(f"{ind}{{")
+    out.append(f"{ind}\tOFFSET {_fmt(sk.offsets[j])}")
+    chans = sk.channels[j]
+    if chans or sk.parents[j] < 0:
+        out.append(f"{ind}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}")
+    for k in children[j]:
+        _write_joint(sk, k, depth + 1, out, children, ends)
+    for offset in ends.get(j, []):
+        out.append(f"{ind}\tEnd Site")
+        out.append(f"{ind}\t{{")
+        out.append(f"{ind}\t\tOFFSET {_fmt(offset)}")
+        out.append(f"{ind}\t}}")
+    out.append(f"{ind}}}")
+
+
+def dumps(motion: Motion) -> str:
+    """BVH text of ``motion`` in its skeleton's channel layout."""
+    sk = motion.skeleton
+    values = pose_to_channels(motion)
+    children: list[list[int]] = [[] for _ in range(sk.num_joints)]
+    for j, p in enumerate(sk.parents):
+        if p >= 0:
+            children[p].append(j)
+    ends: dict[int, list[np.ndarray]] = {}
+    for j, off in sk.end_sites:
+        ends.setdefault(j, []).append(off)
+    out = ["HIERARCHY"]
+    for j in range(sk.num_joints):
+        if sk.parents[j] < 0:
+            _write_joint(sk, j, 0, out, children, ends)
+    out.append("MOTION")
+    out.append(f"Frames: {motion.num_frames}")
+    out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
+    if values.shape[1]:
+        line = " ".join([NUMBER_FORMAT] * values.shape[1])
+        out.extend(line % tuple(row) for row in values.tolist())
+    else:
+        out.extend("" for _ in range(motion.num_frames))
+    return "\n".join(out) + "\n"
+
+
+def write(motion: Motion, path: str | Path) -> None:
+    """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`)."""
+    Path(path).write_text(dumps(motion), encoding="utf-8", newline="\n")

@@ -1,0 +1,328 @@
+"""USD files (``.usda``, ``.usdc``, ``.usd``) through UsdSkel.
+
+Layout keyfill writes::
+
+    /<Root>                 SkelRoot, the stage's defaultPrim
+    /<Root>/Skeleton        Skeleton: joints (paths), jointNames, restTransforms
+                            (local), bindTransforms (world); SkelBindingAPI with
+                            skel:animationSource -> Animation
+    /<Root>/Skeleton/Animation
+                            SkelAnimation: translations, rotations, scales as
+                            time samples, one per frame (time code = frame index)
+
+Stage metadata: ``timeCodesPerSecond`` = ``framesPerSecond`` = fps,
+``startTimeCode`` 0, ``endTimeCode`` F-1, ``upAxis``, ``metersPerUnit``. The
+Skeleton's ``customData["keyfill"]`` keeps what USD has no place for, so that
+BVH -> USD -> BVH gives the same file: original joint names (USD joint paths
+must be identifiers), BVH channel layouts and End Sites, and the keys.
+
+Reading accepts any UsdSkel file: the first Skeleton under the default prim (or
+anywhere) and its animation source (or the first SkelAnimation). The
+animation's joint order is remapped onto the skeleton's; joints it does not
+animate keep their rest transform. When the animation's samples are sparse
+(fewer sample times than frames in the stage's time range), frames in between
+are USD's interpolation of the samples and the sample times become the keys of
+the motion.
+
+USD stores translations and rotations as 32-bit floats: a round trip through
+USD keeps about 7 significant digits.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from keyfill.errors import DataError, FormatError
+from keyfill.kinematics import fk
+from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Keys, Motion, Skeleton
+
+CUSTOM_KEY = "keyfill"
+_DEFAULT_ROOT_CHANNELS = POSITION_CHANNELS + ("Zrotation", "Xrotation", "Yrotation")
+_DEFAULT_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
+
+
+def _pxr():
+    try:
+        from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+    except ImportError as e:  # pragma: no cover - usd-core is a dependency
+        raise FormatError(f"USD support needs the usd-core package ({e})") from None
+    return Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+
+def _identifier(name: str) -> str:
+    ident = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    if not ident or ident[0].isdigit():
+        ident = "_" + ident
+    return ident
+
+
+def joint_paths(skeleton: Skeleton) -> list[str]:
+    """UsdSkel joint paths (``"Hips/Spine"``): names made identifiers, unique among siblings."""
+    paths: list[str] = []
+    used: set[str] = set()
+    for j, name in enumerate(skeleton.names):
+        base = _identifier(name)
+        p = skeleton.parents[j]
+        prefix = paths[p] + "/" if p >= 0 else ""
+        cand, n = prefix + base, 1
+        while cand in used:
+            cand, n = f"{prefix}{base}_{n}", n + 1
+        used.add(cand)
+        paths.append(cand)
+    return paths
+
+
+def _quat_to_xyzw(q: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(q[..., [1, 2, 3, 0]], dtype=np.float32)
+
+
+def _matrices(Gf, Vt, rot: np.ndarray, pos: np.ndarray):
+    """Vt.Matrix4dArray of row-vector transforms from quaternions (J,4) and translations (J,3)."""
+    out = []
+    for q, t in zip(rot, pos):
+        m = Gf.Matrix4d(1.0)
+        m.SetRotateOnly(Gf.Quatd(float(q[0]), Gf.Vec3d(*map(float, q[1:]))))
+        m.SetTranslateOnly(Gf.Vec3d(*map(float, t)))
+        out.append(m)
+    return Vt.Matrix4dArray(out)
+
+
+def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str = "Root") -> None:
+    """Write ``motion`` to a USD file (format from the suffix).
+
+    Args:
+        sparse: author time samples only at ``motion.keys`` (a keyframe file);
+            readers then see the keys as the motion's keys.
+        root_name: name of the SkelRoot prim.
+    """
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
+    sk = motion.skeleton
+    stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if sk.up_axis == "Y" else UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, float(sk.meters_per_unit))
+    stage.SetTimeCodesPerSecond(motion.fps)
+    stage.SetFramesPerSecond(motion.fps)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(max(motion.num_frames - 1, 0))
+
+    root = UsdSkel.Root.Define(stage, "/" + _identifier(root_name))
+    stage.SetDefaultPrim(root.GetPrim())
+    skel = UsdSkel.Skeleton.Define(stage, root.GetPath().AppendChild("Skeleton"))
+    anim = UsdSkel.Animation.Define(stage, skel.GetPath().AppendChild("Animation"))
+    paths = Vt.TokenArray(joint_paths(sk))
+    skel.CreateJointsAttr(paths)
+    skel.CreateJointNamesAttr(Vt.TokenArray([p.rsplit("/", 1)[-1] for p in paths]))
+    ident = np.zeros((sk.num_joints, 4))
+    ident[:, 0] = 1
+    skel.CreateRestTransformsAttr(_matrices(Gf, Vt, ident, sk.offsets))
+    world_rot, world_pos = fk(ident, sk.offsets, sk.parents)
+    skel.CreateBindTransformsAttr(_matrices(Gf, Vt, world_rot, world_pos))
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+
+    custom = {
+        "names": Vt.StringArray(list(sk.names)),
+        "channels": Vt.StringArray([" ".join(c) for c in sk.channels]),
+        "endSiteJoints": Vt.IntArray([j for j, _ in sk.end_sites]),
+        "endSiteOffsets": Vt.Vec3dArray([Gf.Vec3d(*map(float, o)) for _, o in sk.end_sites]),
+    }
+    if motion.keys is not None:
+        custom["keys"] = Vt.IntArray(motion.keys.to_list())
+    skel.GetPrim().SetCustomDataByKey(CUSTOM_KEY, custom)
+
+    anim.CreateJointsAttr(paths)
+    t_attr = anim.CreateTranslationsAttr()
+    r_attr = anim.CreateRotationsAttr()
+    s_attr = anim.CreateScalesAttr()
+    s_attr.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * sk.num_joints))
+    frames = range(motion.num_frames)
+    if sparse:
+        if motion.keys is None:
+            raise DataError("a sparse USD file needs keys")
+        frames = motion.keys.to_list()
+    rot = _quat_to_xyzw(motion.rotations)
+    pos = np.ascontiguousarray(motion.positions, dtype=np.float32)
+    for f in frames:
+        t_attr.Set(Vt.Vec3fArray.FromNumpy(pos[f]), Usd.TimeCode(f))
+        r_attr.Set(Vt.QuatfArray.FromNumpy(rot[f]), Usd.TimeCode(f))
+    stage.GetRootLayer().Export(str(path))
+
+
+# --- reading -----------------------------------------------------------------
+
+
+def _find_skeleton(stage, UsdSkel, label):
+    prims = []
+    start = stage.GetDefaultPrim() or stage.GetPseudoRoot()
+    for root in (start, stage.GetPseudoRoot()):
+        prims = [p for p in _prims(root) if p.IsA(UsdSkel.Skeleton)]
+        if prims:
+            break
+    if not prims:
+        raise FormatError("no UsdSkel Skeleton in this file", label)
+    return UsdSkel.Skeleton(prims[0])
+
+
+def _prims(root):
+    """All prims under ``root`` (included), depth first."""
+    from pxr import Usd
+
+    return Usd.PrimRange(root)
+
+
+def _find_animation(stage, skel, UsdSkel, label):
+    source = UsdSkel.BindingAPI(skel.GetPrim()).GetAnimationSourceRel().GetTargets()
+    if source:
+        prim = stage.GetPrimAtPath(source[0])
+        if prim and prim.IsA(UsdSkel.Animation):
+            return UsdSkel.Animation(prim)
+        raise FormatError(f"the Skeleton's animation source {source[0]} is not a SkelAnimation", label)
+    anims = [p for p in _prims(stage.GetPseudoRoot()) if p.IsA(UsdSkel.Animation)]
+    if not anims:
+        raise FormatError("no UsdSkel SkelAnimation in this file", label)
+    return UsdSkel.Animation(anims[0])
+
+
+def _rest_local(skel, joints: list[str], label) -> tuple[np.ndarray, np.ndarray]:
+    """Rest ``(rotations (J,4), translations (J,3))`` from restTransforms (or bindTransforms)."""
+    rest = skel.GetRestTransformsAttr().Get()
+    J = len(joints)
+    if rest is None or len(rest) != J:
+        bind = skel.GetBindTransformsAttr().Get()
+        if bind is None or len(bind) != J:
+            raise FormatError("the Skeleton has neither restTransforms nor bindTransforms for its joints", label)
+        # Local from world bind transforms.
+        index = {p: i for i, p in enumerate(joints)}
+        local = []
+        for i, p in enumerate(joints):
+            parent = p.rsplit("/", 1)[0] if "/" in p else None
+            m = bind[i] if parent is None else bind[i] * bind[index[parent]].GetInverse()
+            local.append(m)
+        rest = local
+    rot = np.empty((J, 4))
+    pos = np.empty((J, 3))
+    for i, m in enumerate(rest):
+        q = m.ExtractRotationQuat()
+        rot[i] = [q.GetReal(), *q.GetImaginary()]
+        pos[i] = list(m.ExtractTranslation())
+    return rot, pos
+
+
+def _sample_times(attrs) -> list[float]:
+    times: set[float] = set()
+    for a in attrs:
+        times.update(a.GetTimeSamples())
+    return sorted(times)
+
+
+def read(path: str | Path, label=None) -> Motion:
+    """Read a UsdSkel animation into a :class:`Motion`; ``label`` names the file in errors."""
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
+    label = label if label is not None else path
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Exception as e:  # pxr raises Tf.ErrorException with a multi-line text
+        first = str(e).strip().splitlines()
+        raise FormatError(f"not a readable USD file ({first[-1].strip() if first else 'parse error'})", label) from None
+    if stage is None:
+        raise FormatError("not a readable USD file", label)
+    skel = _find_skeleton(stage, UsdSkel, label)
+    joints = [str(t) for t in (skel.GetJointsAttr().Get() or [])]
+    if not joints:
+        raise FormatError(f"the Skeleton {skel.GetPath()} has no joints", label)
+    topo = UsdSkel.Topology(Vt.TokenArray(joints))
+    ok, why = topo.Validate()
+    if not ok:
+        raise FormatError(f"the Skeleton's joints are not a valid hierarchy: {why}", label)
+    parents = np.array(topo.GetParentIndices(), dtype=np.int64)
+    if np.any(parents >= np.arange(len(joints))):
+        raise FormatError("the Skeleton lists a joint before its parent", label)
+    anim = _find_animation(stage, skel, UsdSkel, label)
+    anim_joints = [str(t) for t in (anim.GetJointsAttr().Get() or [])]
+    index = {p: i for i, p in enumerate(joints)}
+    unknown = [p for p in anim_joints if p not in index]
+    if unknown:
+        raise FormatError(f"the animation's joint {unknown[0]!r} is not in the Skeleton", label)
+    to_skel = np.array([index[p] for p in anim_joints], dtype=np.int64)
+    if len(set(to_skel.tolist())) != len(to_skel):
+        raise FormatError("the animation lists a joint twice", label)
+
+    rest_rot, rest_pos = _rest_local(skel, joints, label)
+    t_attr, r_attr, s_attr = anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr()
+    times = _sample_times([t_attr, r_attr])
+    start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+    if not stage.HasAuthoredMetadata("startTimeCode") and times:
+        start, end = times[0], times[-1]
+    if times and (times[0] < start or times[-1] > end):
+        start, end = min(start, times[0]), max(end, times[-1])
+    num_frames = int(round(end - start)) + 1 if times or stage.HasAuthoredMetadata("endTimeCode") else 1
+    fps = stage.GetTimeCodesPerSecond()
+
+    rot = np.broadcast_to(rest_rot, (num_frames, len(joints), 4)).copy()
+    pos = np.broadcast_to(rest_pos, (num_frames, len(joints), 3)).copy()
+    n = len(anim_joints)
+    for f in range(num_frames):
+        tc = Usd.TimeCode(start + f)
+        for attr, out, width in ((t_attr, pos, 3), (r_attr, rot, 4)):
+            v = attr.Get(tc)
+            if v is None:
+                continue
+            a = np.asarray(v, dtype=np.float64)
+            if a.shape != (n, width):
+                raise FormatError(
+                    f"{attr.GetName()} at time {start + f:g} holds {len(a)} values for {n} animated joints", label
+                )
+            out[f, to_skel] = a[:, [3, 0, 1, 2]] if width == 4 else a
+        s = s_attr.Get(tc)
+        if s is not None and len(s) and np.abs(np.asarray(s, dtype=np.float64) - 1).max() > 1e-3:
+            raise DataError(f"{label}: joints are scaled at time {start + f:g}; keyfill motions have no scale")
+    norms = np.linalg.norm(rot, axis=-1, keepdims=True)
+    if np.any(norms < 1e-6):
+        raise FormatError("a rotation is zero (not a quaternion)", label)
+    rot /= norms
+
+    custom = skel.GetPrim().GetCustomDataByKey(CUSTOM_KEY) or {}
+    skeleton = _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label)
+    keys = None
+    if "keys" in custom:
+        keys = Keys(np.array(list(custom["keys"]), dtype=np.int64))
+    elif times and len(times) < num_frames:
+        frames = np.array([t - start for t in times])
+        if np.any(np.abs(frames - np.round(frames)) > 1e-6):
+            raise DataError(f"{label}: animation samples at fractional time codes cannot be keys")
+        keys = Keys(np.round(frames).astype(np.int64))
+    return Motion(skeleton, fps, rot, pos, keys=keys)
+
+
+def _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label) -> Skeleton:
+    J = len(joints)
+    names = list(custom.get("names", []))
+    if len(names) != J:
+        names = [p.rsplit("/", 1)[-1] for p in joints]
+    channels_text = list(custom.get("channels", []))
+    if len(channels_text) == J:
+        channels = [tuple(c.split()) for c in channels_text]
+    else:
+        # No layout recorded: roots and joints whose translation moves get
+        # position channels, every joint gets three rotation channels.
+        moving = np.abs(pos - rest_pos).max(axis=0).max(axis=-1) > 1e-6 * max(1.0, np.abs(rest_pos).max())
+        channels = [
+            _DEFAULT_ROOT_CHANNELS if parents[j] < 0 or moving[j] else _DEFAULT_CHANNELS for j in range(J)
+        ]
+    ends = list(zip(custom.get("endSiteJoints", []), custom.get("endSiteOffsets", [])))
+    up = str(UsdGeom.GetStageUpAxis(stage)).upper()
+    mpu = UsdGeom.GetStageMetersPerUnit(stage)
+    try:
+        return Skeleton(
+            names=tuple(names),
+            parents=parents,
+            offsets=rest_pos,
+            channels=tuple(channels),
+            end_sites=tuple((int(j), np.array(list(o))) for j, o in ends),
+            meters_per_unit=float(mpu),
+            up_axis=up if up in ("Y", "Z") else "Y",
+        )
+    except DataError as e:
+        raise FormatError(str(e), label) from None

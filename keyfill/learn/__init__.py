@@ -1,0 +1,1 @@
+"""Learned and baseline in-betweening: datasets, models, training, metrics, baselines."""

@@ -1,0 +1,109 @@
+"""Spline in-betweening: ``linear`` and ``cubic``.
+
+Both fill every frame from the key frames alone; frames at keys are copied from
+the input unchanged (bit-identical), frames before the first key or after the
+last hold that key.
+
+* ``linear``: lerp of translations, shortest-path slerp of rotations.
+* ``cubic``: C1 cubic Hermite curves through the keys with Catmull-Rom style
+  tangents for uneven key spacing (at key ``i``, the slopes of the two
+  neighbouring segments weighted by the length of the other one; one-sided
+  at the ends). Translations use them directly. Rotations use the same
+  construction in the log map: on the segment from key ``i`` to ``i+1``,
+  ``q(u) = q_i * exp(v(u))`` where ``v`` is the Hermite cubic from 0 to
+  ``log(q_i^-1 q_i+1)`` whose end tangents are the key angular velocities
+  (mapped through the inverse right Jacobian of SO(3)), so the angular
+  velocity is continuous across keys.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from keyfill import rotations as R
+from keyfill.motion import Keys, Motion
+
+
+def segment_coordinates(num_frames: int, key_frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For every frame, the segment index ``s`` (keys ``s``, ``s+1``) and ``u`` in [0, 1].
+
+    Frames before the first key get ``(0, 0)``; after the last key ``(K-2, 1)``.
+    Returns ``(s (F,) int, u (F,) float)``.
+    """
+    k = np.asarray(key_frames)
+    f = np.clip(np.arange(num_frames), k[0], k[-1])
+    s = np.clip(np.searchsorted(k, f, side="right") - 1, 0, len(k) - 2)
+    u = (f - k[s]) / (k[s + 1] - k[s])
+    return s, u
+
+
+def _tangents(slopes: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Key tangents (K, ...) from segment slopes (K-1, ...) and segment lengths (K-1,)."""
+    K = len(h) + 1
+    out = np.empty((K,) + slopes.shape[1:])
+    out[0], out[-1] = slopes[0], slopes[-1]
+    if K > 2:
+        hl = h[:-1].reshape((-1,) + (1,) * (slopes.ndim - 1))
+        hr = h[1:].reshape(hl.shape)
+        out[1:-1] = (hr * slopes[:-1] + hl * slopes[1:]) / (hl + hr)
+    return out
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def inverse_right_jacobian(phi: np.ndarray) -> np.ndarray:
+    """``J_r^-1(phi)`` of SO(3), ``(..., 3, 3)``: maps body angular velocity to d(phi)/dt."""
+    theta = np.linalg.norm(phi, axis=-1)[..., None, None]
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    coef = np.where(small, 1 / 12 + theta**2 / 720, 1 / t**2 - (1 + np.cos(t)) / (2 * t * np.sin(t)))
+    K = _skew(phi)
+    return np.eye(3) + 0.5 * K + coef * (K @ K)
+
+
+def _hermite(u: np.ndarray):
+    u2, u3 = u * u, u * u * u
+    return 2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u, -2 * u3 + 3 * u2, u3 - u2
+
+
+def _keep_keys(out_rot, out_pos, motion: Motion, keys: Keys) -> Motion:
+    k = keys.frames
+    out_rot[k] = motion.rotations[k]
+    out_pos[k] = motion.positions[k]
+    return motion.replace(rotations=out_rot, positions=out_pos, keys=keys)
+
+
+def linear(motion: Motion, keys: Keys) -> Motion:
+    """Lerp translations and slerp rotations between the keys of ``motion``."""
+    k = keys.frames
+    s, u = segment_coordinates(motion.num_frames, k)
+    p0, p1 = motion.positions[k[s]], motion.positions[k[s + 1]]
+    pos = p0 + u[:, None, None] * (p1 - p0)
+    q0, q1 = motion.rotations[k[s]], motion.rotations[k[s + 1]]
+    rot = R.quat_slerp(q0, q1, np.broadcast_to(u[:, None], q0.shape[:2]))
+    return _keep_keys(rot, pos, motion, keys)
+
+
+def cubic(motion: Motion, keys: Keys) -> Motion:
+    """C1 cubic Hermite splines through the keys (translations and log-map rotations)."""
+    k = keys.frames
+    s, u = segment_coordinates(motion.num_frames, k)
+    h = np.diff(k).astype(np.float64)  # (K-1,)
+    hf = h[s][:, None, None]
+    h00, h10, h01, h11 = (c[:, None, None] for c in _hermite(u))
+
+    P = motion.positions[k]  # (K, J, 3)
+    m = _tangents(np.diff(P, axis=0) / h[:, None, None], h)  # per-frame tangents
+    pos = h00 * P[s] + h10 * hf * m[s] + h01 * P[s + 1] + h11 * hf * m[s + 1]
+
+    Q = R.quat_continuous_np(motion.rotations[k], axis=0)
+    phi = R.quat_to_rotvec(R.quat_mul(R.quat_conjugate(Q[:-1]), Q[1:]))  # (K-1, J, 3)
+    omega = _tangents(phi / h[:, None, None], h)  # body angular velocity at keys (K, J, 3)
+    end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), omega[1:])  # (K-1, J, 3)
+    v = h01 * phi[s] + h10 * hf * omega[s] + h11 * hf * end_tangent[s]
+    rot = R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v)))
+    return _keep_keys(rot, pos, motion, keys)

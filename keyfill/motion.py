@@ -1,0 +1,319 @@
+"""The one data type that flows through keyfill: ``Skeleton``, ``Motion``, ``Keys``.
+
+A :class:`Motion` holds whole arrays, never per-frame objects:
+
+* ``rotations (F, J, 4)``: local unit quaternions (w, x, y, z) per frame and joint;
+* ``positions (F, J, 3)``: local translations in the file's units; equal to the
+  skeleton's rest ``offsets`` for joints whose translation is not animated.
+
+Frame ``i`` is at time ``i / fps`` seconds. A :class:`Skeleton` also keeps what
+is needed to write a file back the way it came (per-joint BVH channel layout,
+End Sites, units and up axis).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from keyfill.errors import DataError, UsageError
+from keyfill.kinematics import fk
+
+POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
+ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+_CANONICAL = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
+
+
+def canonical_channel(name: str) -> str:
+    """``"xROTATION"`` -> ``"Xrotation"``; raises ``ValueError`` for unknown names."""
+    try:
+        return _CANONICAL[name.lower()]
+    except KeyError:
+        raise ValueError(
+            f"unknown channel {name!r}; expected one of {', '.join(POSITION_CHANNELS + ROTATION_CHANNELS)}"
+        ) from None
+
+
+def check_channels(channels: Sequence[str]) -> tuple[str, ...]:
+    """Validate one joint's channel list and return it in canonical spelling.
+
+    A joint has at most one channel per axis and kind, and 0, 1, 2, 3 or 6
+    channels in all (4 and 5 occur in no BVH exporter and are refused).
+    """
+    out = tuple(canonical_channel(c) for c in channels)
+    if len(set(out)) != len(out):
+        raise ValueError(f"repeated channel in {' '.join(out)}")
+    if len(out) in (4, 5):
+        raise ValueError(f"{len(out)} channels ({' '.join(out)}); a joint has 0, 1, 2, 3 or 6")
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """A joint hierarchy and its rest pose.
+
+    Attributes:
+        names: ``J`` joint names (unique; any characters but whitespace).
+        parents: ``(J,)`` int parent index per joint, ``-1`` for roots; ``parents[j] < j``.
+        offsets: ``(J, 3)`` rest translation of each joint in its parent's frame.
+        channels: per joint, its BVH channel names in file order (e.g.
+            ``("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")``).
+        end_sites: ``(joint index, (3,) offset)`` for each BVH End Site.
+        meters_per_unit: size of one unit of ``offsets`` and positions in meters.
+        up_axis: ``"Y"`` or ``"Z"``.
+    """
+
+    names: tuple[str, ...]
+    parents: np.ndarray
+    offsets: np.ndarray
+    channels: tuple[tuple[str, ...], ...]
+    end_sites: tuple[tuple[int, np.ndarray], ...] = ()
+    meters_per_unit: float = 0.01
+    up_axis: str = "Y"
+
+    def __post_init__(self):
+        names = tuple(str(n) for n in self.names)
+        parents = np.asarray(self.parents, dtype=np.int64).reshape(-1)
+        offsets = np.asarray(self.offsets, dtype=np.float64)
+        J = len(names)
+        if J == 0:
+            raise DataError("a skeleton needs at least one joint")
+        if parents.shape != (J,) or offsets.shape != (J, 3):
+            raise DataError(f"skeleton arrays disagree: {J} names, parents {parents.shape}, offsets {offsets.shape}")
+        if len(set(names)) != J:
+            dup = next(n for n in names if names.count(n) > 1)
+            raise DataError(f"joint name {dup!r} appears twice")
+        bad = [j for j in range(J) if not (-1 <= parents[j] < j)]
+        if bad:
+            raise DataError(f"joint {names[bad[0]]!r}: its parent must come before it")
+        if len(self.channels) != J:
+            raise DataError(f"{len(self.channels)} channel lists for {J} joints")
+        channels = tuple(check_channels(c) for c in self.channels)
+        ends = tuple((int(j), np.asarray(o, dtype=np.float64).reshape(3)) for j, o in self.end_sites)
+        if self.up_axis not in ("Y", "Z"):
+            raise DataError(f"up axis must be Y or Z, not {self.up_axis!r}")
+        if not np.all(np.isfinite(offsets)) or not self.meters_per_unit > 0:
+            raise DataError("skeleton offsets must be finite and the unit positive")
+        offsets.setflags(write=False)
+        parents.setflags(write=False)
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "parents", parents)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "channels", channels)
+        object.__setattr__(self, "end_sites", ends)
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        """Index of joint ``name``; the error lists the valid names."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise UsageError(f"unknown joint {name!r}; joints are: {', '.join(self.names)}") from None
+
+    @property
+    def euler_orders(self) -> tuple[str, ...]:
+        """Per joint, the intrinsic Euler order of its rotation channels.
+
+        Joints with fewer than three rotation channels get the missing axes
+        appended (their angles are zero in the file).
+        """
+        orders = []
+        for chans in self.channels:
+            axes = "".join(c[0] for c in chans if c in ROTATION_CHANNELS)
+            orders.append(axes + "".join(a for a in "XYZ" if a not in axes))
+        return tuple(orders)
+
+    @property
+    def has_position_channels(self) -> np.ndarray:
+        """``(J,)`` bool: the joint has at least one position channel."""
+        return np.array([any(c in POSITION_CHANNELS for c in ch) for ch in self.channels])
+
+    @property
+    def num_channels(self) -> int:
+        return sum(len(c) for c in self.channels)
+
+    def children(self, j: int) -> list[int]:
+        return [int(k) for k in np.flatnonzero(self.parents == j)]
+
+    def rest_world_positions(self) -> np.ndarray:
+        """``(J, 3)`` world joint positions with identity rotations and rest offsets."""
+        ident = np.zeros((self.num_joints, 4))
+        ident[:, 0] = 1
+        return fk(ident, self.offsets, self.parents)[1]
+
+    def same_as(self, other: "Skeleton", atol: float = 1e-6) -> bool:
+        """Same joints, hierarchy and rest offsets (channels and end sites may differ)."""
+        return (
+            self.names == other.names
+            and np.array_equal(self.parents, other.parents)
+            and np.allclose(self.offsets, other.offsets, atol=atol)
+        )
+
+    def difference(self, other: "Skeleton", atol: float = 1e-6) -> str | None:
+        """A one-line description of the first difference from ``other``, or None."""
+        if self.num_joints != other.num_joints:
+            return f"{self.num_joints} joints vs {other.num_joints}"
+        for j in range(self.num_joints):
+            if self.names[j] != other.names[j]:
+                return f"joint {j} is {self.names[j]!r} vs {other.names[j]!r}"
+            if self.parents[j] != other.parents[j]:
+                return f"joint {self.names[j]!r} has a different parent"
+            if not np.allclose(self.offsets[j], other.offsets[j], atol=atol):
+                return f"joint {self.names[j]!r} has a different rest offset"
+        return None
+
+    def replace(self, **changes) -> "Skeleton":
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True, eq=False)
+class Keys:
+    """Keyframe indices of a motion.
+
+    Attributes:
+        frames: ``(K,)`` strictly increasing non-negative frame indices.
+        mask: optional ``(K, J)`` bool, which joints are keyed at each key
+            (``None``: all joints at every key).
+    """
+
+    frames: np.ndarray
+    mask: np.ndarray | None = field(default=None)
+
+    def __post_init__(self):
+        frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
+        if np.any(frames < 0):
+            raise UsageError(f"key {int(frames[frames < 0][0])} is negative")
+        d = np.diff(frames)
+        if np.any(d == 0):
+            raise UsageError(f"key {int(frames[1:][d == 0][0])} appears twice")
+        if np.any(d < 0):
+            i = int(np.flatnonzero(d < 0)[0])
+            raise UsageError(f"keys must be in increasing order: {int(frames[i])} comes before {int(frames[i + 1])}")
+        frames.setflags(write=False)
+        object.__setattr__(self, "frames", frames)
+        if self.mask is not None:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.ndim != 2 or mask.shape[0] != len(frames):
+                raise UsageError(f"key mask of shape {mask.shape} for {len(frames)} keys")
+            object.__setattr__(self, "mask", mask)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    @classmethod
+    def parse(cls, text: str) -> "Keys":
+        """Keys from ``"0,12,30"`` (the ``--keys`` option)."""
+        try:
+            frames = [int(t) for t in text.replace(" ", "").split(",") if t != ""]
+        except ValueError:
+            raise UsageError(f"--keys takes frame numbers separated by commas, like 0,12,30; got {text!r}") from None
+        return cls(np.array(frames, dtype=np.int64))
+
+    @classmethod
+    def every(cls, step: int, num_frames: int) -> "Keys":
+        """A key every ``step`` frames from frame 0, plus the last frame."""
+        if step < 1:
+            raise UsageError(f"--key-every must be at least 1, got {step}")
+        frames = np.arange(0, num_frames, step)
+        if num_frames > 0 and frames[-1] != num_frames - 1:
+            frames = np.append(frames, num_frames - 1)
+        return cls(frames)
+
+    def check(self, num_frames: int, min_keys: int = 2) -> "Keys":
+        """Raise a :class:`UsageError` unless the keys fit a motion of ``num_frames`` frames."""
+        if len(self.frames) < min_keys:
+            raise UsageError(f"at least {min_keys} keys are needed, got {len(self.frames)}")
+        if len(self.frames) and self.frames[-1] >= num_frames:
+            raise UsageError(
+                f"key {int(self.frames[-1])} is out of range: the motion has {num_frames} frames (0-{num_frames - 1})"
+            )
+        return self
+
+    def to_list(self) -> list[int]:
+        return [int(f) for f in self.frames]
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """Skeletal animation as arrays.
+
+    Attributes:
+        skeleton: the :class:`Skeleton`.
+        fps: frames per second (> 0).
+        rotations: ``(F, J, 4)`` float64 local unit quaternions (w, x, y, z).
+        positions: ``(F, J, 3)`` float64 local translations, file units.
+        keys: the keyframes, when the file or the caller defines them.
+    """
+
+    skeleton: Skeleton
+    fps: float
+    rotations: np.ndarray
+    positions: np.ndarray
+    keys: Keys | None = None
+
+    def __post_init__(self):
+        rot = np.asarray(self.rotations, dtype=np.float64)
+        pos = np.asarray(self.positions, dtype=np.float64)
+        J = self.skeleton.num_joints
+        if rot.ndim != 3 or rot.shape[1:] != (J, 4):
+            raise DataError(f"rotations must be (frames, {J}, 4), got {rot.shape}")
+        if pos.shape != rot.shape[:2] + (3,):
+            raise DataError(f"positions must be {rot.shape[:2] + (3,)}, got {pos.shape}")
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            raise DataError(f"fps must be positive, got {self.fps}")
+        if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(pos))):
+            f = int(np.flatnonzero(~(np.isfinite(rot).all(axis=(1, 2)) & np.isfinite(pos).all(axis=(1, 2))))[0])
+            raise DataError(f"frame {f} holds a value that is not finite")
+        if self.keys is not None:
+            self.keys.check(rot.shape[0], min_keys=0)
+        object.__setattr__(self, "rotations", rot)
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "fps", float(self.fps))
+
+    @property
+    def num_frames(self) -> int:
+        return self.rotations.shape[0]
+
+    @property
+    def num_joints(self) -> int:
+        return self.skeleton.num_joints
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last frame."""
+        return max(self.num_frames - 1, 0) / self.fps
+
+    def world(self) -> tuple[np.ndarray, np.ndarray]:
+        """World ``(rotations (F, J, 4), positions (F, J, 3))`` by forward kinematics."""
+        return fk(self.rotations, self.positions, self.skeleton.parents)
+
+    def world_positions(self) -> np.ndarray:
+        """World joint positions ``(F, J, 3)``."""
+        return self.world()[1]
+
+    def replace(self, **changes) -> "Motion":
+        return dataclasses.replace(self, **changes)
+
+    def frames(self, index: slice | Iterable[int]) -> "Motion":
+        """A motion of the selected frames (keys outside the selection are dropped)."""
+        idx = np.arange(self.num_frames)[index] if isinstance(index, slice) else np.asarray(list(index))
+        keys = None
+        if self.keys is not None:
+            lookup = {int(f): i for i, f in enumerate(idx)}
+            kept = [lookup[int(f)] for f in self.keys.frames if int(f) in lookup]
+            keys = Keys(np.array(sorted(kept), dtype=np.int64))
+        return self.replace(rotations=self.rotations[idx], positions=self.positions[idx], keys=keys)
+
+    @classmethod
+    def rest(cls, skeleton: Skeleton, num_frames: int = 1, fps: float = 30.0) -> "Motion":
+        """A motion that holds the rest pose for ``num_frames`` frames."""
+        rot = np.zeros((num_frames, skeleton.num_joints, 4))
+        rot[..., 0] = 1
+        pos = np.broadcast_to(skeleton.offsets, (num_frames, skeleton.num_joints, 3)).copy()
+        return cls(skeleton, fps, rot, pos)

@@ -1,0 +1,300 @@
+"""Rotation maths: quaternions, rotation vectors, matrices and Euler angles.
+
+Conventions (used everywhere in keyfill):
+
+* Quaternions are ``(w, x, y, z)``, unit length, Hamilton product. ``q`` and
+  ``-q`` are the same rotation; functions that compare rotations account for it.
+* A quaternion rotates a column vector: ``v' = q v q*``, i.e. matrices are
+  ``v' = R @ v`` and composition ``quat_mul(a, b)`` applies ``b`` first, then ``a``.
+* Euler orders are three upper-case letters (``"ZXY"``) and always mean
+  *intrinsic* rotations applied in that order, as in BVH ``CHANNELS`` lines:
+  angles ``(a, b, c)`` in order ``"ZXY"`` give ``R = Rz(a) @ Rx(b) @ Ry(c)``.
+  The extrinsic reading of the same matrix is the reversed order. Angles are
+  radians; degrees appear only in BVH text.
+* Rotation vectors are ``axis * angle`` (radians).
+
+All functions take arrays with any leading batch shape, ``(..., 4)`` for
+quaternions, ``(..., 3)`` for vectors and angles, ``(..., 3, 3)`` for matrices.
+They accept numpy arrays or torch tensors and return the same kind: the torch
+path is differentiable and is the "torch twin" that training code uses (tests
+check that both agree). Functions named ``*_np`` are numpy only.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+EULER_ORDERS: tuple[str, ...] = tuple("".join(p) for p in itertools.permutations("XYZ"))
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+_EPS = 1e-12
+
+
+def _xp(x):
+    """The array namespace of ``x``: ``torch`` for tensors, else ``numpy``."""
+    if type(x).__module__.startswith("torch"):
+        import torch
+
+        return torch
+    return np
+
+
+def _safe_div(num, den, xp):
+    """``num / den`` where ``den`` may be zero (those entries come out 0)."""
+    tiny = xp.abs(den) < _EPS
+    return xp.where(tiny, 0 * num, num / xp.where(tiny, 1 + 0 * den, den))
+
+
+def check_order(order: str) -> str:
+    """Return ``order`` upper-cased if it names one of the six Euler orders."""
+    up = order.upper()
+    if up not in EULER_ORDERS:
+        raise ValueError(f"unknown Euler order {order!r}; expected one of {', '.join(EULER_ORDERS)}")
+    return up
+
+
+# --- quaternions -------------------------------------------------------------
+
+
+def quat_identity(shape=(), like=None):
+    """Identity quaternions of batch ``shape``: ``(*shape, 4)`` float64 (or like ``like``)."""
+    xp = np if like is None else _xp(like)
+    if xp is np:
+        q = np.zeros((*shape, 4))
+    else:
+        q = xp.zeros((*shape, 4), dtype=like.dtype, device=like.device)
+    q[..., 0] = 1
+    return q
+
+
+def quat_normalize(q):
+    """Unit quaternions ``(..., 4)``."""
+    xp = _xp(q)
+    return q / xp.sqrt(xp.sum(q * q, axis=-1, keepdims=True))
+
+
+def quat_conjugate(q):
+    """Conjugate ``(w, -x, -y, -z)``; the inverse of a unit quaternion."""
+    xp = _xp(q)
+    return xp.concat([q[..., :1], -q[..., 1:]], axis=-1)
+
+
+def quat_mul(a, b):
+    """Hamilton product ``a * b`` (rotation ``b`` first, then ``a``); broadcasts."""
+    xp = _xp(a)
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return xp.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def _cross(a, b):
+    xp = _xp(a)
+    return xp.stack(
+        [
+            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
+        ],
+        axis=-1,
+    )
+
+
+def quat_rotate(q, v):
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``; broadcasts."""
+    w = q[..., :1]
+    u = q[..., 1:]
+    t = 2 * _cross(u, v)
+    return v + w * t + _cross(u, t)
+
+
+def quat_to_rotvec(q):
+    """Rotation vectors ``(..., 3)`` (axis * angle, angle in [0, pi]) of unit quaternions."""
+    xp = _xp(q)
+    q = xp.where(q[..., :1] < 0, -q, q)  # angle in [0, pi]
+    v = q[..., 1:]
+    s = xp.sqrt(xp.sum(v * v, axis=-1, keepdims=True))
+    w = q[..., :1]
+    angle = 2 * xp.atan2(s, w)
+    # angle / s -> 2 / w as s -> 0; both branches finite so gradients stay finite.
+    small = s < 1e-8
+    s_safe = xp.where(small, 1 + 0 * s, s)
+    scale = xp.where(small, 2 / w, angle / s_safe)
+    return v * scale
+
+
+def quat_from_rotvec(r):
+    """Unit quaternions ``(..., 4)`` from rotation vectors ``(..., 3)``."""
+    xp = _xp(r)
+    theta2 = xp.sum(r * r, axis=-1, keepdims=True)
+    small = theta2 < 1e-12
+    theta = xp.sqrt(xp.where(small, 1 + 0 * theta2, theta2))
+    half = 0.5 * theta
+    # sin(theta/2)/theta, with its series near zero.
+    k = xp.where(small, 0.5 - theta2 / 48, xp.sin(half) / theta)
+    w = xp.where(small, 1 - theta2 / 8, xp.cos(half))
+    return xp.concat([w, r * k], axis=-1)
+
+
+def quat_angle(a, b):
+    """Angle in radians ``(...)`` of the rotation between ``a`` and ``b`` (sign-agnostic)."""
+    xp = _xp(a)
+    d = quat_mul(quat_conjugate(a), b)
+    s = xp.sqrt(xp.sum(d[..., 1:] ** 2, axis=-1))
+    return 2 * xp.atan2(s, xp.abs(d[..., 0]))
+
+
+def quat_slerp(q0, q1, t):
+    """Shortest-path spherical interpolation; ``t`` broadcasts against ``q0[..., 0]``.
+
+    Exact at ``t = 0`` (returns ``q0``) and ``t = 1`` (returns ``q1`` up to sign).
+    """
+    xp = _xp(q0)
+    t = t[..., None] if hasattr(t, "shape") and t.shape != () else t
+    d = quat_mul(quat_conjugate(q0), q1)
+    d = xp.where(d[..., :1] < 0, -d, d)
+    return quat_normalize(quat_mul(q0, quat_from_rotvec(quat_to_rotvec(d) * t)))
+
+
+def quat_continuous_np(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along ``axis`` so that consecutive quaternions have a positive dot product."""
+    q = np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0).copy()
+    if len(q) > 1:
+        dots = np.sum(q[1:] * q[:-1], axis=-1)
+        flips = np.cumsum(dots < 0, axis=0) % 2 == 1
+        q[1:][flips] *= -1
+    return np.moveaxis(q, 0, axis)
+
+
+def quat_to_matrix(q):
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    xp = _xp(q)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    return xp.stack([xp.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def quat_from_matrix(m):
+    """Unit quaternions ``(..., 4)`` with ``w >= 0`` from rotation matrices ``(..., 3, 3)``.
+
+    Uses the best-conditioned of the four classic formulas per matrix, so it is
+    accurate for every rotation, including 180-degree turns.
+    """
+    xp = _xp(m)
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    m01, m02, m10 = m[..., 0, 1], m[..., 0, 2], m[..., 1, 0]
+    m12, m20, m21 = m[..., 1, 2], m[..., 2, 0], m[..., 2, 1]
+    cands = xp.stack(
+        [
+            xp.stack([1 + m00 + m11 + m22, m21 - m12, m02 - m20, m10 - m01], axis=-1),
+            xp.stack([m21 - m12, 1 + m00 - m11 - m22, m01 + m10, m02 + m20], axis=-1),
+            xp.stack([m02 - m20, m01 + m10, 1 - m00 + m11 - m22, m12 + m21], axis=-1),
+            xp.stack([m10 - m01, m02 + m20, m12 + m21, 1 - m00 - m11 + m22], axis=-1),
+        ],
+        axis=-2,
+    )  # (..., 4 candidates, 4); candidate i has component i = 4 * q_i^2
+    diag = xp.stack([cands[..., i, i] for i in range(4)], axis=-1)
+    best = xp.argmax(diag, axis=-1)
+    if xp is np:
+        q = np.take_along_axis(cands, best[..., None, None], axis=-2)[..., 0, :]
+    else:
+        idx = best[..., None, None].expand(*best.shape, 1, 4)
+        q = xp.gather(cands, -2, idx)[..., 0, :]
+    q = quat_normalize(q)
+    return xp.where(q[..., :1] < 0, -q, q)
+
+
+# --- Euler angles ------------------------------------------------------------
+
+
+def _axis_quat(angle, axis: int):
+    xp = _xp(angle)
+    half = 0.5 * angle
+    c, s = xp.cos(half), xp.sin(half)
+    zero = 0 * s
+    comps = [c, zero, zero, zero]
+    comps[axis + 1] = s
+    return xp.stack(comps, axis=-1)
+
+
+def euler_to_quat(angles, order: str):
+    """Unit quaternions ``(..., 4)`` from intrinsic Euler angles ``(..., 3)`` (radians)."""
+    order = check_order(order)
+    q = _axis_quat(angles[..., 0], _AXIS[order[0]])
+    q = quat_mul(q, _axis_quat(angles[..., 1], _AXIS[order[1]]))
+    return quat_mul(q, _axis_quat(angles[..., 2], _AXIS[order[2]]))
+
+
+def matrix_to_euler(m, order: str):
+    """Intrinsic Euler angles ``(..., 3)`` in radians from rotation matrices ``(..., 3, 3)``.
+
+    The middle angle lies in ``[-pi/2, pi/2]``, the others in ``(-pi, pi]``. At
+    gimbal lock (middle angle +-pi/2) the third angle is set to zero.
+    """
+    xp = _xp(m)
+    order = check_order(order)
+    i, j, k = (_AXIS[c] for c in order)
+    s = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of XYZ: +1
+    cos_b = xp.sqrt(m[..., i, i] ** 2 + m[..., i, j] ** 2)
+    b = xp.atan2(s * m[..., i, k], cos_b)
+    locked = cos_b < 1e-9
+    a = xp.atan2(-s * m[..., j, k], m[..., k, k])
+    c = xp.atan2(-s * m[..., i, j], m[..., i, i])
+    # Gimbal lock: only a +- c is defined; put it all in a (c = 0).
+    a_locked = xp.atan2(s * m[..., k, j], m[..., j, j])
+    a = xp.where(locked, a_locked, a)
+    c = xp.where(locked, 0 * c, c)
+    return xp.stack([a, b, c], axis=-1)
+
+
+def euler_to_matrix(angles, order: str):
+    """Rotation matrices ``(..., 3, 3)`` from intrinsic Euler angles ``(..., 3)``."""
+    return quat_to_matrix(euler_to_quat(angles, order))
+
+
+def quat_to_euler(q, order: str):
+    """Intrinsic Euler angles ``(..., 3)`` in radians of unit quaternions ``(..., 4)``."""
+    return matrix_to_euler(quat_to_matrix(q), order)
+
+
+def euler_continuous_np(angles: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Make Euler angle curves continuous along ``axis`` (the time axis).
+
+    Each frame's angles ``(a, b, c)`` may be replaced by the same rotation's other
+    Euler solution ``(a + pi, pi - b, c + pi)`` and shifted by multiples of
+    ``2 pi``, so that no curve jumps between consecutive frames. ``angles`` are
+    radians in the ranges :func:`matrix_to_euler` returns; the rotations are
+    unchanged.
+    """
+    x = np.moveaxis(np.asarray(angles, dtype=np.float64), axis, 0)
+    if len(x) < 2:
+        return np.moveaxis(x.copy(), 0, axis)
+    alt = np.stack([x[..., 0] + np.pi, np.pi - x[..., 1], x[..., 2] + np.pi], axis=-1)
+
+    def wrap(d):
+        return (d + np.pi) % (2 * np.pi) - np.pi
+
+    # A branch switch between frames shows as a half-turn jump of the first and
+    # last angles. Count switches cumulatively and use the other solution on odd
+    # counts; then remove whole turns.
+    d_same = np.abs(wrap(np.diff(x, axis=0))).sum(axis=-1)
+    d_swap = np.abs(wrap(alt[1:] - x[:-1])).sum(axis=-1)
+    switch = d_swap < d_same
+    odd = np.concatenate([np.zeros_like(switch[:1]), np.cumsum(switch, axis=0) % 2 == 1])
+    chosen = np.where(odd[..., None], alt, x)
+    chosen = np.unwrap(chosen, axis=0)
+    # Start near the principal range.
+    chosen = chosen - 2 * np.pi * np.round(chosen[:1] / (2 * np.pi))
+    return np.moveaxis(chosen, 0, axis)

@@ -1,0 +1,1 @@
+"""Physics-based hopping-lamp ("Luxo") dataset: pybullet model, PD control, annealing search."""

@@ -121,13 +121,13 @@ def quat_to_rotvec(q):
     xp = _xp(q)
     q = xp.where(q[..., :1] < 0, -q, q)  # angle in [0, pi]
     v = q[..., 1:]
-    s = xp.sqrt(xp.sum(v * v, axis=-1, keepdims=True))
     w = q[..., :1]
-    angle = 2 * xp.atan2(s, w)
-    # angle / s -> 2 / w as s -> 0; both branches finite so gradients stay finite.
-    small = s < 1e-8
-    s_safe = xp.where(small, 1 + 0 * s, s)
-    scale = xp.where(small, 2 / w, angle / s_safe)
+    s2 = xp.sum(v * v, axis=-1, keepdims=True)
+    # angle / s -> 2 / w as s -> 0. Both branches stay finite (no sqrt of 0),
+    # so torch gradients are finite at the identity too.
+    small = s2 < 1e-16
+    s = xp.sqrt(xp.where(small, 1 + 0 * s2, s2))
+    scale = xp.where(small, 2 / w, 2 * xp.atan2(s, w) / s)
     return v * scale
 
 

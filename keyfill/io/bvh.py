@@ -347,9 +347,14 @@ def pose_to_channels(motion: Motion) -> np.ndarray:
         if len(rot_axes) == 3:
             a = R.euler_continuous_np(a)
         else:
-            missing = a[:, len(rot_axes) :]
-            if F and np.abs(missing).max() > 1e-6:
-                f = int(np.argmax(np.abs(missing).max(axis=1)))
+            # Of the two Euler solutions, use the one whose missing angles are zero.
+            alt = np.stack([a[:, 0] + np.pi, np.pi - a[:, 1], a[:, 2] + np.pi], axis=-1)
+            wrapped = lambda x: np.abs((x + np.pi) % (2 * np.pi) - np.pi)  # noqa: E731
+            use_alt = wrapped(alt[:, len(rot_axes) :]).sum(axis=1) < wrapped(a[:, len(rot_axes) :]).sum(axis=1)
+            a = np.where(use_alt[:, None], alt, a)
+            missing = wrapped(a[:, len(rot_axes) :])
+            if F and missing.max() > 1e-6:
+                f = int(np.argmax(missing.max(axis=1)))
                 raise DataError(
                     f"joint {sk.names[j]!r} rotates about an axis that its BVH channels "
                     f"({' '.join(chans) or 'none'}) cannot hold, at frame {f}"
@@ -385,8 +390,7 @@ def _write_joint(sk: Skeleton, j: int, depth: int, out: list[str], children: lis
     out.append(f"{ind}{{")
     out.append(f"{ind}\tOFFSET {_fmt(sk.offsets[j])}")
     chans = sk.channels[j]
-    if chans or sk.parents[j] < 0:
-        out.append(f"{ind}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}")
+    out.append(f"{ind}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}")
     for k in children[j]:
         _write_joint(sk, k, depth + 1, out, children, ends)
     for offset in ends.get(j, []):

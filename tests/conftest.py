@@ -1,0 +1,24 @@
+"""Shared test helpers: where fixtures and the shared data live."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+DATA = Path(__file__).parent / "data"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+BVH_FIXTURES = SHARED / "bvh_fixtures"
+
+
+def shared_path(*parts: str) -> Path:
+    """A path under ../shared/data, or skip the test with the reason."""
+    p = SHARED.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"needs {p} (the shared data folder beside the checkout); it is absent here")
+    return p
+
+
+def shared_fixtures() -> list[Path]:
+    """All BVH files in ../shared/data/bvh_fixtures (skips when absent)."""
+    return sorted(shared_path("bvh_fixtures").glob("*.bvh"))

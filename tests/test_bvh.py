@@ -1,0 +1,206 @@
+"""BVH reading and writing: fixtures, random hierarchies and layouts, exactness, continuity."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from conftest import DATA, shared_fixtures
+from keyfill import rotations as R
+from keyfill.io import bvh
+from keyfill.motion import Motion
+
+LOCAL_FIXTURES = sorted(DATA.glob("*.bvh"))
+
+
+def assert_same_motion(a: Motion, b: Motion, rot_tol=1e-9, pos_tol=1e-9):
+    assert a.skeleton.names == b.skeleton.names
+    assert np.array_equal(a.skeleton.parents, b.skeleton.parents)
+    assert a.skeleton.channels == b.skeleton.channels
+    np.testing.assert_allclose(a.skeleton.offsets, b.skeleton.offsets, atol=pos_tol)
+    assert a.num_frames == b.num_frames
+    if a.num_frames:
+        assert R.quat_angle(a.rotations, b.rotations).max() < rot_tol
+        assert np.abs(a.positions - b.positions).max() < pos_tol
+
+
+def round_trip(m: Motion) -> Motion:
+    return bvh.parse(bvh.dumps(m))
+
+
+@pytest.mark.parametrize("path", LOCAL_FIXTURES, ids=lambda p: p.name)
+def test_local_fixture_round_trip(path):
+    m = bvh.read(path)
+    assert_same_motion(m, round_trip(m), rot_tol=1e-6, pos_tol=1e-6)
+    assert [len(o) for _, o in m.skeleton.end_sites] == [3] * len(m.skeleton.end_sites)
+
+
+def test_shared_fixtures_round_trip_exactly():
+    for path in shared_fixtures():
+        m = bvh.read(path)
+        m2 = round_trip(m)
+        assert_same_motion(m, m2, rot_tol=1e-6, pos_tol=1e-6)
+        height = np.ptp(m.skeleton.rest_world_positions()[:, 1])
+        assert np.abs(m.world_positions() - m2.world_positions()).max() < 1e-6 * height
+
+
+def test_fixture_facts():
+    cmu = bvh.read(DATA / "cmu_02_03_cgspeed_first4frames.bvh")
+    assert (cmu.num_frames, cmu.num_joints, cmu.skeleton.num_channels, cmu.fps) == (4, 31, 96, 120.0)
+    assert set(cmu.skeleton.euler_orders) == {"ZYX"}
+    mix = bvh.read(DATA / "bvhtoolbox_test_freebvh_mixamo.bvh")
+    assert (mix.num_frames, mix.num_joints, mix.skeleton.num_channels, mix.fps) == (69, 55, 168, 30.0)
+    assert mix.skeleton.names[0] == "mixamorig:Hips"
+
+
+def test_edge_layouts_fixture():
+    """Several ROOTs, 0/1/2/3/6-channel joints, positions on an inner joint, CRLF, tabs, exponents."""
+    m = bvh.read(DATA / "edge_layouts_crlf.bvh")
+    sk = m.skeleton
+    assert sk.names == ("mixamo:Hips|a.b", "Spine-1", "Head", "Slider", "Prop", "Lid")
+    assert list(sk.parents) == [-1, 0, 1, 0, -1, 4]
+    assert [len(c) for c in sk.channels] == [6, 2, 0, 3, 3, 1]
+    assert sk.euler_orders == ("YXZ", "XZY", "XYZ", "YXZ", "ZXY", "ZXY")
+    np.testing.assert_allclose(sk.offsets[1], [0, 15, 0])  # "1.5e1"
+    assert m.fps == 24.0  # 0.0416667 snapped
+    # Frame 1 values: root position and the inner joint's X/Z translation (Y stays the offset's).
+    np.testing.assert_allclose(m.positions[1, 0], [1.5, 91, -0.24])
+    np.testing.assert_allclose(m.positions[1, 3], [3.5, 0, 0.75])
+    # Frame 1: Slider turns -179.5 degrees about Y, Lid 12.5 degrees about Z.
+    slider = R.euler_to_quat(np.deg2rad([-179.5, 0, 0]), "YXZ")
+    lid = R.euler_to_quat(np.deg2rad([12.5, 0, 0]), "ZXY")
+    assert R.quat_angle(m.rotations[1, 3], slider) < 1e-12
+    assert R.quat_angle(m.rotations[1, 5], lid) < 1e-12
+    assert_same_motion(m, round_trip(m), rot_tol=1e-9, pos_tol=1e-9)
+
+
+def test_written_numbers_round_trip_and_are_not_fixed_point():
+    m = bvh.read(DATA / "edge_layouts_crlf.bvh")
+    text = bvh.dumps(m)
+    assert "0.001" in text and "0.00100000" not in text  # %.12g, never %f padding
+    assert bvh.dumps(bvh.parse(text)) == text  # writing is a fixed point
+
+
+def test_written_euler_curves_are_continuous():
+    """A joint spinning steadily past 180 degrees is written without 360-degree jumps."""
+    m = bvh.read(DATA / "edge_layouts_crlf.bvh")
+    F = 60
+    angles = np.zeros((F, 3))
+    angles[:, 0] = np.linspace(0, 4 * np.pi, F)  # two full turns about Y (root order YXZ)
+    angles[:, 1] = 0.3
+    rot = np.repeat(m.rotations[:1], F, axis=0)
+    rot[:, 0] = R.euler_to_quat(angles, "YXZ")
+    pos = np.repeat(m.positions[:1], F, axis=0)
+    spin = m.replace(rotations=rot, positions=pos)
+    values = bvh.pose_to_channels(spin)
+    root_y = values[:, 3]  # root channels: X/Y/Z position, then Yrotation
+    assert np.abs(np.diff(root_y)).max() < 20  # degrees per frame: no wraps
+    assert root_y[-1] - root_y[0] == pytest.approx(720, abs=1e-6)
+
+
+# --- random hierarchies and channel layouts ---------------------------------------------
+
+AXES = "XYZ"
+
+
+@st.composite
+def channel_layout(draw):
+    rot_n = draw(st.integers(0, 3))
+    pos_n = draw(st.sampled_from([p for p in range(4) if p + rot_n not in (4, 5)]))
+    rot = draw(st.permutations(AXES))[:rot_n]
+    pos = draw(st.permutations(AXES))[:pos_n]
+    chans = [a + "position" for a in pos] + [a + "rotation" for a in rot]
+    order = draw(st.permutations(range(len(chans)))) if chans else []
+    return [chans[i] for i in order]
+
+
+@st.composite
+def bvh_text(draw):
+    J = draw(st.integers(1, 7))
+    parents = [-1] + [draw(st.one_of(st.just(-1), st.integers(0, j - 1))) if j else -1 for j in range(1, J)]
+    layouts = [draw(channel_layout()) for _ in range(J)]
+    F = draw(st.integers(0, 5))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    names = [f"j{j}:{draw(st.sampled_from(['a', 'B.c', 'x-y', 'L|1']))}" for j in range(J)]
+    children = {j: [k for k in range(J) if parents[k] == j] for j in range(J)}
+    lines = ["HIERARCHY"]
+
+    def joint(j, depth):
+        ind = "\t" * depth
+        lines.append(f"{ind}{'ROOT' if parents[j] < 0 else 'JOINT'} {names[j]}")
+        lines.append(ind + "{")
+        lines.append(f"{ind}\tOFFSET " + " ".join(f"{v:.6f}" for v in rng.uniform(-20, 20, 3)))
+        lines.append(f"{ind}\tCHANNELS {len(layouts[j])} {' '.join(layouts[j])}".rstrip())
+        for k in children[j]:
+            joint(k, depth + 1)
+        if not children[j]:
+            lines.append(f"{ind}\tEnd Site")
+            lines.append(f"{ind}\t{{\n{ind}\t\tOFFSET 0 1 0\n{ind}\t}}")
+        lines.append(ind + "}")
+
+    # Roots in index order keep the file order equal to the joint order.
+    for j in range(J):
+        if parents[j] < 0:
+            joint(j, 0)
+    lines += ["MOTION", f"Frames: {F}", "Frame Time: 0.0333333"]
+    C = sum(len(c) for c in layouts)
+    for _ in range(F):
+        lines.append(" ".join(f"{v:.6f}" for v in rng.uniform(-180, 180, C)))
+    return "\n".join(lines) + "\n"
+
+
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(text=bvh_text())
+def test_random_hierarchies_round_trip(text):
+    m = bvh.parse(text)
+    m2 = round_trip(m)
+    assert_same_motion(m, m2, rot_tol=1e-9, pos_tol=1e-9)
+    assert bvh.dumps(m2) == bvh.dumps(m)
+    if m.num_frames:
+        np.testing.assert_allclose(m.world_positions(), m2.world_positions(), atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(text=bvh_text())
+def test_channel_values_are_read_as_written(text):
+    """Angles and translations come back as the file wrote them (modulo equivalent Euler angles)."""
+    m = bvh.parse(text)
+    if not m.num_frames:
+        return
+    raw = np.array([[float(v) for v in line.split()] for line in text.split("Frame Time: 0.0333333\n")[1].splitlines()])
+    if raw.size == 0:
+        return
+    written = bvh.pose_to_channels(m)
+    col = 0
+    for j, chans in enumerate(m.skeleton.channels):
+        n = len(chans)
+        block_raw, block_w = raw[:, col : col + n], written[:, col : col + n]
+        rot_cols = [i for i, c in enumerate(chans) if c.endswith("rotation")]
+        pos_cols = [i for i, c in enumerate(chans) if c.endswith("position")]
+        np.testing.assert_allclose(block_w[:, pos_cols], block_raw[:, pos_cols], atol=1e-9)
+        if rot_cols:
+            order = "".join(chans[i][0] for i in rot_cols)
+            full = order + "".join(a for a in AXES if a not in order)
+            pad = np.zeros((len(raw), 3))
+            pad_w = np.zeros((len(raw), 3))
+            pad[:, : len(rot_cols)] = block_raw[:, rot_cols]
+            pad_w[:, : len(rot_cols)] = block_w[:, rot_cols]
+            q_raw = R.euler_to_quat(np.deg2rad(pad), full)
+            q_w = R.euler_to_quat(np.deg2rad(pad_w), full)
+            assert R.quat_angle(q_raw, q_w).max() < 1e-9
+        col += n
+
+
+def test_large_file_parses_in_bulk(tmp_path: Path):
+    """10,000 frames of 132 channels parse and write back exactly."""
+    m = bvh.read(DATA / "cmu_02_03_cgspeed_first4frames.bvh")
+    big = m.frames(np.arange(10_000) % m.num_frames)
+    text = bvh.dumps(big)
+    again = bvh.parse(text)
+    assert again.num_frames == 10_000
+    assert_same_motion(big, again, rot_tol=1e-9, pos_tol=1e-9)

@@ -1,0 +1,126 @@
+"""keyfill against independent readers: bvhio (default suite) and Blender (``-m interop``).
+
+Both compare world joint positions, the quantity that every reader must agree
+on whatever its internal conventions: keyfill's forward kinematics
+(``Motion.world_positions()``) against bvhio's ``PositionWorld`` and against
+the bone heads that Blender computes after importing keyfill's BVH and USD
+output. Each shared fixture is checked as it came and, for bvhio, also after
+keyfill wrote it back, so the writer is checked by a peer too.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import BVH_FIXTURES, shared_path
+from keyfill import io
+from keyfill.motion import Motion
+
+sys.path.insert(0, str(Path(__file__).parent / "interop"))
+from blender_check import blender_deviation, blender_missing  # noqa: E402
+
+FIXTURE_NAMES = sorted(p.name for p in BVH_FIXTURES.glob("*.bvh")) if BVH_FIXTURES.is_dir() else ["(absent)"]
+#: bvhio keeps transforms in float32 (glm.vec3 / glm.quat): tolerance relative to the skeleton's height
+BVHIO_TOL = 1e-4
+#: Blender works in float32 too; the issue's bound, relative to the skeleton's height
+BLENDER_TOL = 1e-4
+
+
+def height(motion: Motion) -> float:
+    """The skeleton's rest height (extent along Y of the rest pose), in file units."""
+    return float(np.ptp(motion.skeleton.rest_world_positions()[:, 1]))
+
+
+def bvhio_world_positions(path: Path, names: tuple[str, ...]) -> np.ndarray:
+    """bvhio's world position of every joint ``(F, J, 3)``, joints in the order of ``names``."""
+    bvhio = pytest.importorskip("bvhio")
+    root = bvhio.readAsHierarchy(str(path))
+    joints = {joint.Name: joint for joint, _, _ in root.layout()}
+    assert sorted(joints) == sorted(names), "bvhio sees other joints than keyfill"
+    order = [joints[n] for n in names]
+    num_frames = len(root.Keyframes)
+    out = np.empty((num_frames, len(names), 3))
+    for f in range(num_frames):
+        root.loadPose(f)
+        out[f] = [tuple(j.PositionWorld) for j in order]
+    return out
+
+
+def fixture(name: str) -> Path:
+    return shared_path("bvh_fixtures", name)
+
+
+@pytest.mark.parametrize("name", FIXTURE_NAMES)
+def test_world_positions_match_bvhio(name, tmp_path):
+    path = fixture(name)
+    motion = io.load(path)
+    ours = motion.world_positions()
+    tol = BVHIO_TOL * height(motion)
+
+    theirs = bvhio_world_positions(path, motion.skeleton.names)
+    assert theirs.shape == ours.shape
+    assert np.abs(theirs - ours).max() < tol
+
+    # keyfill's own output, read by bvhio, gives the same world positions.
+    written = tmp_path / name
+    io.save(motion, written)
+    theirs_written = bvhio_world_positions(written, motion.skeleton.names)
+    assert np.abs(theirs_written - ours).max() < tol
+
+
+def test_bvhio_comparison_can_fail(tmp_path):
+    """The check above is not vacuous: one changed channel value is caught."""
+    path = fixture("dataset-1_walk_normal_002.bvh")
+    motion = io.load(path)
+    rot = motion.rotations.copy()
+    rot[5, 1] = [np.cos(0.05), 0, np.sin(0.05), 0]  # Hips turned 0.1 rad at frame 5
+    io.save(motion.replace(rotations=rot), tmp_path / "changed.bvh")
+    theirs = bvhio_world_positions(tmp_path / "changed.bvh", motion.skeleton.names)
+    dev = np.abs(theirs - motion.world_positions()).max(axis=(1, 2))
+    assert dev[5] > 100 * BVHIO_TOL * height(motion)
+    assert np.delete(dev, 5).max() < BVHIO_TOL * height(motion)
+
+
+# --- Blender (optional: pytest -m interop) -----------------------------------
+
+#: one fixture per layout: 6 channels on every joint (ZXY), 3 channels ZYX with a
+#: 120 fps T-pose (CMU), ZYX with ``:`` in every name (Mixamo)
+BLENDER_FIXTURES = [
+    "dataset-1_dash_normal_001.bvh",
+    "cmu_02_03_cgspeed_first4frames.bvh",
+    "bvhtoolbox_test_freebvh_mixamo.bvh",
+]
+
+
+@pytest.fixture(scope="module")
+def blender():
+    why = blender_missing()
+    if why:
+        pytest.skip(why)
+
+
+@pytest.mark.interop
+@pytest.mark.parametrize("suffix", [".bvh", ".usda", ".usdc"])
+@pytest.mark.parametrize("name", BLENDER_FIXTURES)
+def test_blender_imports_keyfill_output_with_same_world_positions(blender, name, suffix, tmp_path):
+    motion = io.load(fixture(name))
+    per_frame, h, result = blender_deviation(motion, tmp_path, suffix)
+    assert result["frames"] == motion.num_frames == len(per_frame)
+    worst = per_frame.max()
+    assert worst < BLENDER_TOL * h, f"Blender deviates by {worst:.3g} units ({worst / h:.2g} of the height)"
+
+
+@pytest.mark.interop
+@pytest.mark.parametrize("suffix", [".bvh", ".usda"])
+def test_blender_comparison_can_fail(blender, suffix, tmp_path):
+    """A file whose Hips turn 0.1 rad more at frame 5 is caught at frame 5 only."""
+    motion = io.load(fixture("dataset-1_walk_normal_002.bvh"))
+    rot = motion.rotations.copy()
+    rot[5, 1] = [np.cos(0.05), 0, np.sin(0.05), 0]
+    per_frame, h, _ = blender_deviation(motion.replace(rotations=rot), tmp_path, suffix, expected=motion)
+    assert per_frame[5] > 100 * BLENDER_TOL * h
+    assert np.delete(per_frame, 5).max() < BLENDER_TOL * h

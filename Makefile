@@ -1,0 +1,32 @@
+# keyfill: `make demo` and `make test` each create .venv, install keyfill with
+# pinned dependencies (torch==2.13.0, the local CPU build) and run.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.keyfill-installed
+OUT := out/demo
+
+.PHONY: demo test test-slow test-interop benchmarks clean
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	@mkdir -p $(OUT)
+	$(BIN)/keyfill complete examples/mixamo_keys.usda -o $(OUT)/mixamo_cubic.usda --method cubic
+	$(BIN)/keyfill convert $(OUT)/mixamo_cubic.usda $(OUT)/mixamo_cubic.bvh
+	@echo "demo: completed examples/mixamo_keys.usda; results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh)"
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q -m slow
+
+test-interop: $(STAMP)
+	$(BIN)/python -m pytest -q -m interop
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

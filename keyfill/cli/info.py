@@ -70,12 +70,12 @@ def info(file, fmt, as_json):
     if d["bounding_box"]:
         lo, hi = d["bounding_box"]["min"], d["bounding_box"]["max"]
         click.echo("bounding box: " + " ".join(f"{a}[{l:.4g}, {h:.4g}]" for a, l, h in zip("xyz", lo, hi)))
-    width = max(len(j["name"]) for j in d["joints"])
-    for j in d["joints"]:
-        depth, p = 0, j["parent"]
-        parents = {x["name"]: x["parent"] for x in d["joints"]}
-        while p is not None:
-            depth, p = depth + 1, parents[p]
-        name = "  " * depth + j["name"]
-        chans = " ".join(j["channels"]) or "-"
-        click.echo(f"  {name:<{width + 2 * depth}}  {j['euler_order']}  {chans}")
+    parents = {j["name"]: j["parent"] for j in d["joints"]}
+
+    def depth(name):
+        return 0 if parents[name] is None else 1 + depth(parents[name])
+
+    rows = [("  " * depth(j["name"]) + j["name"], j["euler_order"], " ".join(j["channels"]) or "-") for j in d["joints"]]
+    width = max(len(r[0]) for r in rows)
+    for name, order, chans in rows:
+        click.echo(f"  {name:<{width}}  {order}  {chans}")

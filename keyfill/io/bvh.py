@@ -198,12 +198,59 @@ def _snap_fps(frame_time: float) -> float:
     return fps
 
 
+def _values_fast(data: bytes, num_frames: int, num_channels: int) -> np.ndarray | None:
+    """The ``(F, C)`` channel values in one C-level pass, or None when anything is off.
+
+    Well-formed files take only this path; :func:`_values_checked` runs when it
+    returns None and finds the line to blame.
+    """
+    if not (num_frames and num_channels):
+        return None
+    try:
+        values = np.loadtxt(data.split(b"\n"), dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        return None
+    if values.shape != (num_frames, num_channels) or not np.all(np.isfinite(values)):
+        return None
+    return values
+
+
+def _values_checked(data: bytes, num_frames: int, num_channels: int, label, first_data_line: int, frames_line_no: int):
+    """The channel values, with a :class:`FormatError` naming the first bad line (the slow path)."""
+    counts = _count_values_per_line(data)
+    nonempty = np.flatnonzero(counts > 0)
+    wrong = nonempty[:num_frames][counts[nonempty[:num_frames]] != num_channels]
+    if len(wrong):
+        i = int(wrong[0])
+        raise FormatError(
+            f"{int(counts[i])} values on this line, expected {num_channels} (one per channel)", label, first_data_line + i
+        )
+    if num_channels and len(nonempty) != num_frames:
+        where = first_data_line + int(nonempty[num_frames]) if len(nonempty) > num_frames else frames_line_no
+        raise FormatError(
+            f"'Frames: {num_frames}' but {len(nonempty)} lines of motion data follow", label, where
+        )
+    if num_channels == 0 or num_frames == 0:
+        values = np.zeros((num_frames, num_channels))
+    else:
+        lines = data.split(b"\n")
+        try:
+            values = np.loadtxt(lines, dtype=np.float64, comments=None, ndmin=2)
+        except ValueError:
+            i, tok = _first_bad_token(lines)
+            raise FormatError(f"{tok!r} is not a number", label, first_data_line + i) from None
+        if not np.all(np.isfinite(values)):
+            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+            raise FormatError("a value is NaN or infinite", label, first_data_line + int(nonempty[row]))
+    return values
+
+
 def parse(raw: bytes | str, path=None) -> Motion:
     """Parse BVH text (bytes or str) into a :class:`Motion`; ``path`` only labels errors."""
     if isinstance(raw, str):
         raw = raw.encode("utf-8")
     label = path if path is not None else "<bvh>"
-    if not raw.strip():
+    if not raw or raw.isspace():  # isspace() stops at the first other byte; strip() would copy
         raise FormatError("the file is empty", label)
     m = _MOTION_RE.search(raw)
     if m is None:
@@ -256,31 +303,9 @@ def parse(raw: bytes | str, path=None) -> Motion:
     first_data_line = motion_line + i_ft + 2  # 1-based file line of data[0]
 
     num_channels = sum(len(c) for c in h.channels)
-    counts = _count_values_per_line(data)
-    nonempty = np.flatnonzero(counts > 0)
-    wrong = nonempty[:num_frames][counts[nonempty[:num_frames]] != num_channels]
-    if len(wrong):
-        i = int(wrong[0])
-        raise FormatError(
-            f"{int(counts[i])} values on this line, expected {num_channels} (one per channel)", label, first_data_line + i
-        )
-    if num_channels and len(nonempty) != num_frames:
-        where = first_data_line + int(nonempty[num_frames]) if len(nonempty) > num_frames else frames_line_no
-        raise FormatError(
-            f"'Frames: {num_frames}' but {len(nonempty)} lines of motion data follow", label, where
-        )
-    if num_channels == 0 or num_frames == 0:
-        values = np.zeros((num_frames, num_channels))
-    else:
-        lines = data.split(b"\n")
-        try:
-            values = np.loadtxt(lines, dtype=np.float64, comments=None, ndmin=2)
-        except ValueError:
-            i, tok = _first_bad_token(lines)
-            raise FormatError(f"{tok!r} is not a number", label, first_data_line + i) from None
-        if not np.all(np.isfinite(values)):
-            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
-            raise FormatError("a value is NaN or infinite", label, first_data_line + int(nonempty[row]))
+    values = _values_fast(data, num_frames, num_channels)
+    if values is None:
+        values = _values_checked(data, num_frames, num_channels, label, first_data_line, frames_line_no)
 
     skeleton = Skeleton(
         names=tuple(h.names),

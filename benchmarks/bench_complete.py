@@ -1,0 +1,129 @@
+"""``keyfill complete --method cubic`` end to end on a 10,000-frame, 22-joint BVH file.
+
+The input is the first 10,000 frames of Bandai dataset-1's clips concatenated
+(see ``bench_bvh_io.py``; built once under ``data/bench/``). The command runs
+as a subprocess, process start included, with a key every 10 frames::
+
+    keyfill complete IN -o OUT --method cubic --key-every 10
+
+and the median of ``--repeat`` runs is compared with the goal (under 1 s).
+The split comes from the same work done in this process with library calls
+(``io.load``, ``learn.methods.complete``, ``io.save``; medians too), and the
+start-up from ``keyfill complete --help`` (interpreter, imports, click).
+
+    .venv/bin/python benchmarks/bench_complete.py
+    .venv/bin/python benchmarks/bench_complete.py --repeat 9 --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench_bvh_io import Skipped, concatenated_bvh, load_average, machine, median_time
+
+GOAL_SECONDS = 1.0
+FRAMES = 10_000
+KEY_EVERY = 10
+
+
+def keyfill_command() -> list[str]:
+    """The ``keyfill`` console script of this interpreter's environment (else ``python -m keyfill``)."""
+    script = Path(sys.executable).with_name("keyfill")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "keyfill"]
+
+
+def timed_run(cmd: list[str]) -> float:
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed (exit {proc.returncode}): {proc.stderr.strip()}")
+    return seconds
+
+
+def run(repeat: int, out_dir: Path) -> dict:
+    from keyfill import io
+    from keyfill.learn.methods import complete
+    from keyfill.motion import Keys
+
+    src = concatenated_bvh(frames=FRAMES)
+    dst = out_dir / "completed.bvh"
+    cmd = keyfill_command() + ["complete", str(src), "-o", str(dst), "--method", "cubic", "--key-every", str(KEY_EVERY)]
+
+    e2e = [timed_run(cmd) for _ in range(repeat)]
+    startup = [timed_run(keyfill_command() + ["complete", "--help"]) for _ in range(repeat)]
+
+    # The result is real: every frame is there and the key frames are the input's.
+    motion = io.load(src)
+    written = io.load(dst)
+    keys = Keys.every(KEY_EVERY, motion.num_frames)
+    height = float(np.ptp(motion.skeleton.rest_world_positions()[:, 1]))
+    key_error = np.abs(written.world_positions()[keys.frames] - motion.world_positions()[keys.frames]).max()
+    if written.num_frames != motion.num_frames or key_error > 1e-6 * height:
+        raise AssertionError(f"the completed file is wrong: {written.num_frames} frames, key error {key_error}")
+
+    t_read, motion = median_time(lambda: io.load(src), repeat)
+    t_compute, result = median_time(lambda: complete(motion, keys, "cubic"), repeat)
+    lib_out = out_dir / "library.bvh"
+    t_write, _ = median_time(lambda: io.save(result.motion, lib_out), repeat)
+    t_e2e, t_startup = float(np.median(e2e)), float(np.median(startup))
+    return {
+        "command": " ".join(["keyfill"] + cmd[len(keyfill_command()):]),
+        "input": {"frames": motion.num_frames, "joints": motion.num_joints, "bytes": src.stat().st_size,
+                  "keys": len(keys)},
+        "output_bytes": dst.stat().st_size,
+        "repeat": repeat,
+        "end_to_end_seconds": t_e2e,
+        "end_to_end_runs": e2e,
+        "split_seconds": {
+            "start-up (keyfill complete --help)": t_startup,
+            "read (io.load)": t_read,
+            "compute (complete, cubic)": t_compute,
+            "write (io.save)": t_write,
+            "rest (end to end minus the above)": t_e2e - t_startup - t_read - t_compute - t_write,
+        },
+        "goal": {"seconds": GOAL_SECONDS, "met": t_e2e < GOAL_SECONDS},
+    }
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=5, help="runs per measurement; the median is reported (default 5)")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    args = parser.parse_args(argv)
+    load_before = load_average()
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            result = run(args.repeat, Path(tmp))
+    except Skipped as e:
+        print(f"bench_complete: skipped: {e}", file=sys.stderr)
+        return 0
+    result["machine"] = machine()
+    result["load_average"] = {"before": load_before, "after": load_average()}
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    inp = result["input"]
+    print(f"{result['command']}")
+    print(f"input: {inp['frames']} frames, {inp['joints']} joints, {inp['bytes'] / 1e6:.1f} MB, {inp['keys']} keys; "
+          f"output {result['output_bytes'] / 1e6:.1f} MB; median of {args.repeat}")
+    print(f"end to end: {result['end_to_end_seconds']:.3f} s "
+          f"(runs: {', '.join(f'{t:.3f}' for t in result['end_to_end_runs'])})")
+    for name, seconds in result["split_seconds"].items():
+        print(f"  {name:36s} {seconds:6.3f} s")
+    goal = result["goal"]
+    print(f"goal: under {goal['seconds']:g} s: {'met' if goal['met'] else 'MISSED'}")
+    print(f"machine: {result['machine']}; load average before {load_before}, after {result['load_average']['after']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -426,6 +426,23 @@ def _write_joint(sk: Skeleton, j: int, depth: int, out: list[str], children: lis
     out.append(f"{ind}}}")
 
 
+def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
+    """The %-template of one motion line and the columns it takes, ``(C,)`` bool.
+
+    A channel whose values all print the same (e.g. the translation of a joint
+    that only rotates) is printed once, into the template. Rounding to
+    ``NUMBER_FORMAT`` is monotonic, so the column's minimum and maximum printing
+    alike (with one sign bit, for -0) means every value does.
+    """
+    if not len(values):
+        return " ".join([NUMBER_FORMAT] * values.shape[1]), np.ones(values.shape[1], bool)
+    lo = [NUMBER_FORMAT % v for v in values.min(axis=0).tolist()]
+    hi = [NUMBER_FORMAT % v for v in values.max(axis=0).tolist()]
+    one_sign = np.all(np.signbit(values) == np.signbit(values[:1]), axis=0)
+    varying = np.array([a != b for a, b in zip(lo, hi)]) | ~one_sign
+    return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, values[0].tolist())), varying
+
+
 def dumps(motion: Motion) -> str:
     """BVH text of ``motion`` in its skeleton's channel layout."""
     sk = motion.skeleton
@@ -445,8 +462,8 @@ def dumps(motion: Motion) -> str:
     out.append(f"Frames: {motion.num_frames}")
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
     if values.shape[1]:
-        line = " ".join([NUMBER_FORMAT] * values.shape[1])
-        out.extend(line % tuple(row) for row in values.tolist())
+        line, varying = _line_template(values)
+        out.extend(line % tuple(row) for row in values[:, varying].tolist())
     else:
         out.extend("" for _ in range(motion.num_frames))
     return "\n".join(out) + "\n"

@@ -1,0 +1,71 @@
+"""``keyfill plot``: animation curves of one or more motion files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, say
+
+
+@click.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Picture to write: .png, .svg or .pdf.")
+@click.option("--joints", multiple=True, metavar="NAMES",
+              help="Joints whose channels to show, comma-separated or repeated (default: all channels when "
+                   "there are at most 12, else the first joint that moves).")
+@click.option("--channels", multiple=True, metavar="NAMES",
+              help="Panels to show: JOINT.CHANNEL names (Hips.Zrotation, Hips.y with --positions, a lamp "
+                   "variable) or a channel for every chosen joint (Zrotation, Xposition, y).")
+@click.option("--frames", metavar="A:B", help="Frames A to B-1 (Python slice; 10:, :30 and -50: work too).")
+@click.option("--positions", is_flag=True, help="Plot world positions JOINT.x/.y/.z (forward kinematics) "
+                                                "instead of the file's channels.")
+@click.option("--labels", metavar="NAMES",
+              help="Legend names for the files, comma-separated, in order (default: the file names).")
+@keys_options
+@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when a FILE is '-').")
+@click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
+def plot(files, output, joints, channels, frames, positions, labels, keys_text, key_every, in_fmt, as_json):
+    """Draw the animation curves of FILES, overlaid, one panel per variable.
+
+    Each panel is one animation variable over the frames: a BVH channel as
+    the file stores it (rotations as Euler angles in degrees in the joint's
+    own order, positions in the file's units), a world position with
+    --positions, or, for the hopping lamp, one of its six variables. Every
+    file gets its own colour and a legend entry; keys (recorded in the file,
+    or given with --keys / --key-every) are open circles on the curves.
+
+    \b
+    Examples:
+      keyfill plot examples/lamp/truth.usda -o lamp.png
+      keyfill plot truth.usda cubic.usda arnn.usda --labels truth,cubic,arnn -o compare.svg
+      keyfill plot walk.bvh --joints Hips,LowerLeg_L --channels Xrotation -o knee.pdf
+      keyfill plot walk.bvh --positions --joints Hand_L --frames 0:120 -o hand.png
+    """
+    from keyfill import io
+    from keyfill.cli.common import resolve_keys
+    from keyfill.errors import DataError, UsageError
+    from keyfill.viz import PLOT_SUFFIXES, check_suffix
+    from keyfill.viz.curves import plot as draw
+
+    check_suffix(output, PLOT_SUFFIXES)
+    names = [Path(f).stem if f != "-" else "stdin" for f in files]
+    if labels is not None:
+        names = [t.strip() for t in labels.split(",")]
+        if len(names) != len(files):
+            raise UsageError(f"--labels gives {len(names)} names for {len(files)} files")
+    motions = []
+    for f in files:
+        motion = io.load(f, in_fmt)
+        if motion.num_frames == 0:
+            raise DataError(f"{f}: the motion has no frames")
+        if keys_text is not None or key_every is not None:
+            motion = motion.replace(keys=resolve_keys(motion, keys_text, key_every, min_keys=1))
+        motions.append(motion)
+    info = draw(motions, names, output, joints=joints, channels=channels, frames=frames, positions=positions)
+    if as_json:
+        emit_json(info.as_dict())
+    else:
+        say(f"wrote {output}: {len(info.panels)} panels ({', '.join(info.panels)}) of {len(files)} file(s)")

@@ -1,0 +1,366 @@
+"""Animation curves: one panel per animation variable, files overlaid, keys circled.
+
+What a panel shows (Zhang & van de Panne 2018, Figures 5 and 8-13):
+
+* a BVH channel, named ``JOINT.CHANNEL`` (``Hips.Zrotation``): rotation
+  channels as Euler angles in degrees in the joint's own order (made
+  continuous over time, as the BVH writer does), position channels in the
+  file's units. Position channels that never leave the joint's rest OFFSET
+  carry no animation and are left out;
+* with ``positions=True``, world positions ``JOINT.x``, ``JOINT.y``, ``JOINT.z``
+  from forward kinematics, in the file's units;
+* for the hopping lamp (:mod:`keyfill.sim.lamp`), its six animation
+  variables by their own names, angles in degrees.
+
+The x axis is the frame number in the file (a ``--frames`` range keeps the
+original numbering); keys (``Motion.keys``) are open circles on each file's curve.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from keyfill import rotations as R
+from keyfill.errors import DataError, UsageError
+from keyfill.motion import POSITION_CHANNELS, Motion
+from keyfill.viz import PLOT_SUFFIXES, check_suffix, frame_range, lamp_module, unit_label
+
+#: with more candidate panels than this and no --joints/--channels, only the
+#: first moving joint is shown (a human has 60-130 channels)
+MAX_DEFAULT_PANELS = 12
+#: refuse figures with more panels than this (unreadable and slow)
+MAX_PANELS = 64
+
+
+@dataclass(frozen=True)
+class Curves:
+    """The animation variables of one motion.
+
+    Attributes:
+        names: ``P`` panel names (``"Hips.Zrotation"``, ``"Hips.x"``, or a lamp variable).
+        units: ``P`` y-axis units (``"deg"``, ``"cm"``, ...).
+        joints: per variable, the joint it belongs to (``None`` for lamp variables).
+        kinds: per variable, the name without the joint (``"Zrotation"``, ``"x"``).
+        values: ``(F, P)`` values over the frames.
+        animated: ``(P,)`` bool; False for position channels that stay at the rest offset.
+    """
+
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    joints: tuple[str | None, ...]
+    kinds: tuple[str, ...]
+    values: np.ndarray
+    animated: np.ndarray
+
+
+def channel_curves(motion: Motion) -> Curves:
+    """Every BVH channel of ``motion`` over time, in the skeleton's channel order."""
+    sk = motion.skeleton
+    F, J = motion.num_frames, sk.num_joints
+    orders = sk.euler_orders
+    angles = np.zeros((F, J, 3))
+    for order in sorted(set(orders)):
+        js = [j for j in range(J) if orders[j] == order and any(c.endswith("rotation") for c in sk.channels[j])]
+        if js:
+            angles[:, js] = R.quat_to_euler(motion.rotations[:, js], order)
+    length = unit_label(sk.meters_per_unit)
+    scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
+    names, units, joints, kinds, columns, animated = [], [], [], [], [], []
+    for j, chans in enumerate(sk.channels):
+        n_rot = sum(c.endswith("rotation") for c in chans)
+        a = angles[:, j]
+        if n_rot == 3:
+            a = R.euler_continuous_np(a)
+        elif n_rot:
+            a = np.unwrap(a, axis=0)
+        for c in chans:
+            axis = "XYZ".index(c[0])
+            if c in POSITION_CHANNELS:
+                v = motion.positions[:, j, axis]
+                moving = bool(np.abs(v - sk.offsets[j, axis]).max(initial=0.0) > 1e-6 * scale)
+                columns.append(v)
+                units.append(length)
+                animated.append(moving)
+            else:
+                columns.append(np.rad2deg(a[:, orders[j].index(c[0])]))
+                units.append("deg")
+                animated.append(True)
+            names.append(f"{sk.names[j]}.{c}")
+            joints.append(sk.names[j])
+            kinds.append(c)
+    values = np.stack(columns, axis=1) if columns else np.zeros((F, 0))
+    return Curves(tuple(names), tuple(units), tuple(joints), tuple(kinds), values, np.array(animated, dtype=bool))
+
+
+def position_curves(motion: Motion) -> Curves:
+    """World positions ``JOINT.x/.y/.z`` of every joint, in the file's units."""
+    sk = motion.skeleton
+    world = motion.world_positions()
+    length = unit_label(sk.meters_per_unit)
+    names = tuple(f"{n}.{a}" for n in sk.names for a in "xyz")
+    return Curves(
+        names=names,
+        units=(length,) * len(names),
+        joints=tuple(n for n in sk.names for _ in "xyz"),
+        kinds=tuple(a for _ in sk.names for a in "xyz"),
+        values=world.reshape(motion.num_frames, -1),
+        animated=np.ones(len(names), dtype=bool),
+    )
+
+
+def lamp_curves(motion: Motion) -> Curves | None:
+    """The hopping lamp's six animation variables (angles in degrees), or None for other motions."""
+    lamp = lamp_module()
+    if lamp is None or not lamp.is_lamp(motion.skeleton):
+        return None
+    values = np.asarray(lamp.to_variables(motion), dtype=np.float64).reshape(motion.num_frames, -1)
+    names = tuple(v.name for v in lamp.VARIABLES)
+    units = tuple("deg" if v.unit == "rad" else v.unit for v in lamp.VARIABLES)
+    if len(names) != values.shape[1]:
+        raise DataError(f"the lamp encoder gives {values.shape[1]} values for {len(names)} variables")
+    for p, v in enumerate(lamp.VARIABLES):
+        if v.unit == "rad":
+            values[:, p] = np.rad2deg(values[:, p])
+    return Curves(
+        names=names,
+        units=units,
+        joints=(None,) * len(names),
+        kinds=names,
+        values=values,
+        animated=np.ones(len(names), dtype=bool),
+    )
+
+
+def curves_of(motion: Motion, positions: bool = False, lamp: bool = True) -> Curves:
+    """The curves ``plot`` shows for ``motion``: lamp variables, channels or world positions."""
+    if positions:
+        return position_curves(motion)
+    if lamp:
+        c = lamp_curves(motion)
+        if c is not None:
+            return c
+    return channel_curves(motion)
+
+
+def _split_list(items: Sequence[str] | None) -> list[str]:
+    """``["a,b", "c"]`` -> ``["a", "b", "c"]`` (options may repeat and hold commas)."""
+    out: list[str] = []
+    for item in items or ():
+        out.extend(t.strip() for t in item.split(",") if t.strip())
+    return out
+
+
+def select_panels(curves: Curves, motion: Motion, joints=None, channels=None) -> list[int]:
+    """Indices into ``curves`` of the panels to draw, in file order.
+
+    ``joints``: joint names (UsageError listing the skeleton's joints for an
+    unknown one). ``channels``: panel names or their last part (``Zrotation``,
+    ``x``), case-insensitive (UsageError listing the valid ones). Without
+    either, all variables, or only the first moving joint's when there are
+    more than :data:`MAX_DEFAULT_PANELS`.
+    """
+    joints, channels = _split_list(joints), _split_list(channels)
+    cand = [i for i in range(len(curves.names)) if curves.animated[i]]
+    if joints:
+        for name in joints:
+            motion.skeleton.index(name)  # UsageError that lists the joints
+        cand = [i for i in cand if curves.joints[i] in joints]
+        if not cand:
+            raise UsageError(f"joint {', '.join(joints)} has no animated channels; try --positions")
+    if channels:
+        full = {curves.names[i].lower() for i in cand}
+        kinds = {curves.kinds[i].lower() for i in cand}
+        for item in channels:
+            if item.lower() not in full | kinds:
+                raise UsageError(f"unknown channel {item!r}; {_valid_channels(curves, cand)}")
+        wanted = {c.lower() for c in channels}
+        cand = [i for i in cand if curves.names[i].lower() in wanted or curves.kinds[i].lower() in wanted]
+    elif not joints and len(cand) > MAX_DEFAULT_PANELS:
+        first = _first_moving_joint(curves, cand)
+        cand = [i for i in cand if curves.joints[i] == first]
+    if len(cand) > MAX_PANELS:
+        raise UsageError(f"{len(cand)} panels is too many for one figure (at most {MAX_PANELS}); "
+                         "choose fewer with --joints or --channels")
+    return cand
+
+
+def _valid_channels(curves: Curves, cand: list[int]) -> str:
+    kinds = list(dict.fromkeys(curves.kinds[i] for i in cand))
+    if len(cand) <= 30:
+        return f"valid: {', '.join(curves.names[i] for i in cand)} (or one of {', '.join(kinds)} for every joint)"
+    joints = list(dict.fromkeys(curves.joints[i] for i in cand))
+    return f"valid: {', '.join(kinds)}, or JOINT.CHANNEL with a joint among {', '.join(joints)}"
+
+
+def _first_moving_joint(curves: Curves, cand: list[int]) -> str:
+    """The first joint (in file order) with a variable that changes over time."""
+    v = curves.values
+    for i in cand:
+        if len(v) and np.ptp(v[:, i]) > 1e-9:
+            return curves.joints[i]
+    return curves.joints[cand[0]]
+
+
+@dataclass(frozen=True)
+class PlotInfo:
+    """What :func:`plot` drew (for ``--json``)."""
+
+    output: str
+    panels: tuple[str, ...]
+    labels: tuple[str, ...]
+    frames: tuple[int, int]
+
+    def as_dict(self) -> dict:
+        return {"output": self.output, "panels": list(self.panels), "files": list(self.labels),
+                "frames": list(self.frames)}
+
+
+def plot(
+    motions: Sequence[Motion],
+    labels: Sequence[str],
+    output: str | Path,
+    *,
+    joints: Sequence[str] | None = None,
+    channels: Sequence[str] | None = None,
+    frames: str | None = None,
+    positions: bool = False,
+) -> PlotInfo:
+    """Draw the animation curves of ``motions`` overlaid and write ``output`` (.png, .svg, .pdf).
+
+    Panels come from the first motion (see :func:`select_panels`); every other
+    motion must have the same variables. Lamps show their six variables
+    unless ``joints`` or ``positions`` ask for channels or world positions. ``frames`` is ``"A:B"`` (see
+    :func:`keyfill.viz.frame_range`). The file is written atomically.
+    """
+    from keyfill.io import atomic_output
+    from keyfill.viz import style
+
+    fmt = check_suffix(str(output), PLOT_SUFFIXES).lstrip(".")
+    if len(labels) != len(motions):
+        raise UsageError(f"{len(labels)} labels for {len(motions)} files")
+    lamp = lamp_module()
+    use_lamp = (not joints and not positions and lamp is not None
+                and all(lamp.is_lamp(m.skeleton) for m in motions))
+    series = []  # (label, x (F,), values (F, P), key positions)
+    panels: list[int] = []
+    names: tuple[str, ...] = ()
+    units: tuple[str, ...] = ()
+    for n, (motion, label) in enumerate(zip(motions, labels)):
+        idx = frame_range(frames, motion.num_frames, label)
+        cut = motion.frames(slice(int(idx[0]), int(idx[-1]) + 1))
+        curves = curves_of(cut, positions=positions, lamp=use_lamp)
+        if n == 0:
+            panels = select_panels(curves, cut, joints, channels)
+            names = tuple(curves.names[i] for i in panels)
+            curves_joints = [curves.joints[i] for i in panels]
+            units = tuple(curves.units[i] for i in panels)
+            cols = panels
+        else:
+            lookup = {name: i for i, name in enumerate(curves.names)}
+            missing = [name for name in names if name not in lookup]
+            if missing:
+                raise DataError(f"{label}: has no {missing[0]} (it is in {labels[0]}); plot files of one skeleton")
+            cols = [lookup[name] for name in names]
+        keys = cut.keys.frames if cut.keys is not None else np.zeros(0, dtype=np.int64)
+        series.append((label, idx, curves.values[:, cols], keys))
+
+    P = len(names)
+    cells = _layout(curves_joints)
+    nrows = max(r for r, _ in cells) + 1
+    ncols = max(c for _, c in cells) + 1
+    with style.style():
+        fig, axes = _figure(style, nrows, ncols)
+        used = set(cells)
+        for r in range(nrows):
+            for c in range(ncols):
+                if (r, c) not in used:
+                    axes[r, c].set_axis_off()
+        for p in range(P):
+            row, col = cells[p]
+            ax = axes[row, col]
+            for n, (label, x, values, keys) in enumerate(series):
+                color = style.FILE_COLORS[n % len(style.FILE_COLORS)]
+                ax.plot(x, values[:, p], color=color, lw=1.3, zorder=2 + n)
+                if len(keys):
+                    ax.plot(x[keys], values[keys, p], ls="none", marker="o", ms=5.5, mew=1.3, mfc="none",
+                            mec=color, zorder=10 + n)
+            _flat_limits(ax, [values[:, p] for _, _, values, _ in series], units[p])
+            ax.set_title(names[p], loc="left", color=style.TEXT_COLOR)
+            ax.set_ylabel(units[p])
+            ax.grid(True, color="#e5e5e5", lw=0.6)
+            ax.margins(x=0.01, y=0.1)
+            if (row + 1, col) not in used:
+                ax.tick_params(labelbottom=True)
+        fig.supxlabel("frame", fontsize=8, y=0.02 / fig.get_figheight() * 8)
+        handles = _legend_handles(series, style)
+        fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 1.0), ncols=min(len(handles), 6),
+                   frameon=False)
+        with atomic_output(output) as tmp:
+            style.save_figure(fig, tmp, fmt)
+    first = [int(s[1][0]) for s in series]
+    last = [int(s[1][-1]) for s in series]
+    return PlotInfo(str(output), names, tuple(labels), (min(first), max(last)))
+
+
+#: fixed figure layout in inches (a layout engine would cost half the drawing time)
+_PANEL_HEIGHT, _ROW_GAP, _TOP, _BOTTOM = 1.05, 0.42, 0.42, 0.55
+_PANEL_WIDTH = {1: 6.4, 2: 4.7, 3: 3.7}
+_LEFT, _RIGHT, _COLUMN_GAP = 0.75, 0.2, 0.85
+
+
+def _figure(style, nrows: int, ncols: int):
+    """A figure with ``nrows`` x ``ncols`` panels sharing the x axis, laid out in fixed inches."""
+    width = _LEFT + ncols * _PANEL_WIDTH[ncols] + (ncols - 1) * _COLUMN_GAP + _RIGHT
+    height = _TOP + nrows * _PANEL_HEIGHT + (nrows - 1) * _ROW_GAP + _BOTTOM
+    fig = style.new_figure(width, height)
+    axes = fig.subplots(nrows, ncols, sharex=True, squeeze=False, gridspec_kw={
+        "left": _LEFT / width, "right": 1 - _RIGHT / width,
+        "top": 1 - _TOP / height, "bottom": _BOTTOM / height,
+        "hspace": _ROW_GAP / _PANEL_HEIGHT, "wspace": _COLUMN_GAP / _PANEL_WIDTH[ncols],
+    })
+    return fig, axes
+
+
+def _layout(joints: list[str | None]) -> list[tuple[int, int]]:
+    """(row, column) of each panel: one column per joint for up to 4 joints of up to
+    8 panels each, else panels down the columns (1 column up to 6 panels, 2 up to 16, else 3)."""
+    groups = list(dict.fromkeys(joints))
+    sizes = [joints.count(g) for g in groups]
+    if 1 < len(groups) <= 4 and max(sizes) <= 8 and None not in groups:
+        seen = {g: 0 for g in groups}
+        cells = []
+        for g in joints:
+            cells.append((seen[g], groups.index(g)))
+            seen[g] += 1
+        return cells
+    P = len(joints)
+    ncols = 1 if P <= 6 else 2 if P <= 16 else 3
+    nrows = -(-P // ncols)
+    return [(p % nrows, p // nrows) for p in range(P)]
+
+
+def _flat_limits(ax, curves: list[np.ndarray], unit: str) -> None:
+    """Give a panel whose curves are constant up to float noise (1e-4 degrees, or a relative
+    1e-6) a y range of +-1 around them, instead of magnifying the noise."""
+    v = np.concatenate(curves)
+    tol = 1e-4 if unit == "deg" else 1e-6 * max(1.0, float(np.abs(v).max()))
+    if np.ptp(v) <= tol:
+        mid = float(np.round(v.mean(), 3))
+        ax.set_ylim(mid - 1.0, mid + 1.0)
+
+
+def _legend_handles(series, style) -> list:
+    from matplotlib.lines import Line2D
+
+    handles = [
+        Line2D([], [], color=style.FILE_COLORS[n % len(style.FILE_COLORS)], lw=1.6, label=label)
+        for n, (label, *_rest) in enumerate(series)
+    ]
+    if any(len(s[3]) for s in series):
+        handles.append(Line2D([], [], ls="none", marker="o", ms=5.5, mew=1.3, mfc="none", mec="#555555",
+                              label="keys"))
+    return handles

@@ -1,0 +1,592 @@
+"""Stick figures of motions: animated GIF, filmstrip PNG, or a still with joint trails.
+
+Geometry: world joint positions (and End Sites) from forward kinematics,
+seen by a fixed orthographic camera. A bone joins a joint to its parent unless
+the joint's own translation is animated (a root-motion joint such as Bandai's
+``Hips`` under a static ``joint_Root`` is not tied to its parent by a bone).
+Left limbs (names with ``Left``, ``_L``, ``L_``, ...) are drawn lighter than the
+rest, so crossing legs stay readable in a side view. The hopping lamp
+(:mod:`keyfill.sim.lamp`) also gets its base plate and lampshade.
+
+Views, with the up axis from ``Skeleton.up_axis`` and the horizontal axis ``h``
+the ground axis along which the motion travels farther (positive towards where
+it goes, so travel runs left to right in the side view):
+
+* ``side``: ``h`` to the right, up upwards;
+* ``front``: the other ground axis to the right (the camera faces a character
+  that walks along ``h``);
+* ``top``: from above, ``h`` to the right;
+* ``3d``: turned 35 degrees from the side view towards the front, 22 degrees from above.
+
+The framing is fixed for the whole output, from the bounding box of every
+frame (and the ground below it), so poses never jump. The ground is a line
+for planar motions (the hopping lamp) and a grid otherwise. Keys
+(``Motion.keys``) are ghosted poses in pink: in animations and filmstrips the
+keys just before and after the current frame, in a trail still all keys.
+A trail ("motion curve", Ciccone et al. 2019) is a joint's world path with a
+dot per frame, so spacing shows timing, and the keys circled.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from keyfill.errors import DataError, UsageError
+from keyfill.motion import Motion
+from keyfill.rotations import quat_rotate
+from keyfill.viz import PREVIEW_SUFFIXES, check_suffix, frame_range, lamp_module
+
+VIEWS = ("side", "front", "top", "3d")
+#: (azimuth, elevation) in degrees of each view, relative to the side view
+_ANGLES = {"side": (0.0, 0.0), "front": (90.0, 0.0), "top": (0.0, 90.0), "3d": (35.0, 22.0)}
+#: default picture sizes in pixels: the long side of a GIF and a still, the height of a filmstrip frame
+GIF_SIDE, STILL_SIDE, STRIP_HEIGHT = 480, 720, 300
+#: frames in a filmstrip without --step, and per filmstrip row
+STRIP_FRAMES, STRIP_COLUMNS = 8, 8
+#: most frames a GIF may have (Pillow holds them all in memory)
+MAX_GIF_FRAMES = 5000
+
+
+# --- geometry ----------------------------------------------------------------
+
+
+def limb_side(name: str) -> int:
+    """-1 for a left-side joint name, +1 for right, 0 otherwise.
+
+    Recognises ``LeftArm``, ``mixamorig:LeftHand``, ``UpperArm_L``, ``l_knee``,
+    ``LHipJoint`` (CMU) and the same for right.
+    """
+    base = re.split(r"[:|]", name)[-1]
+    low = base.lower()
+    for word, side in (("left", -1), ("right", 1)):
+        if word in low:
+            return side
+    tokens = [t for t in re.split(r"[^A-Za-z0-9]+", base) if t]
+    if any(t in ("L", "l") for t in tokens) or re.match(r"L[A-Z]", base):
+        return -1
+    if any(t in ("R", "r") for t in tokens) or re.match(r"R[A-Z]", base):
+        return 1
+    return 0
+
+
+@dataclass(frozen=True)
+class Figure3D:
+    """The drawable points of one motion.
+
+    Attributes:
+        points: ``(F, P, 3)`` world positions of the joints, then the End Sites.
+        bones: ``(B, 2)`` point indices (parent end, child end).
+        sides: ``(B,)`` -1/0/+1 limb side of each bone.
+        used: ``(P,)`` bool, the point belongs to a bone (or is a lone joint).
+    """
+
+    points: np.ndarray
+    bones: np.ndarray
+    sides: np.ndarray
+    used: np.ndarray
+
+
+def figure_points(motion: Motion) -> Figure3D:
+    """Bones and world points of ``motion`` (see the module docstring for which bones)."""
+    sk = motion.skeleton
+    world_rot, world_pos = motion.world()
+    J = sk.num_joints
+    ends = [quat_rotate(world_rot[:, j], np.broadcast_to(off, (motion.num_frames, 3))) + world_pos[:, j]
+            for j, off in sk.end_sites]
+    points = np.concatenate([world_pos] + [e[:, None] for e in ends], axis=1) if ends else world_pos
+    scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
+    tiny = 1e-6 * scale
+    bones, sides = [], []
+    for j in range(J):
+        p = int(sk.parents[j])
+        if p < 0:
+            continue
+        animated = np.ptp(motion.positions[:, j], axis=0).max() > tiny
+        if animated or np.linalg.norm(sk.offsets[j]) <= tiny:
+            continue
+        bones.append((p, j))
+        sides.append(limb_side(sk.names[j]))
+    for e, (j, off) in enumerate(sk.end_sites):
+        if np.linalg.norm(off) > tiny:
+            bones.append((j, J + e))
+            sides.append(limb_side(sk.names[j]))
+    lamp = lamp_module()
+    if lamp is not None and lamp.is_lamp(sk) and sk.end_sites:
+        points, extra = _lamp_outline(lamp.DIMENSIONS, world_rot, points)
+        bones = [b for b in bones if b != (3, J)] + extra
+        sides += [0] * (len(bones) - len(sides))
+    bones_arr = np.array(bones, dtype=np.int64).reshape(-1, 2)
+    used = np.zeros(points.shape[1], dtype=bool)
+    used[bones_arr.reshape(-1)] = True
+    if not used.any():
+        used[:J] = True
+    return Figure3D(points, bones_arr, np.array(sides, dtype=np.int64), used)
+
+
+def _lamp_outline(dims, world_rot: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """Points and bones that make the lamp's stick figure look like the lamp.
+
+    Adds the base plate (``dims.base_length`` along the base's own X axis
+    through the base joint) and the lampshade (a triangle from the head joint
+    to the head's tip, ``dims.head_width`` wide there) to ``points`` (F, 5, 3):
+    the joints base, leg, neck, head and the head's End Site.
+    """
+    F = len(points)
+    x = np.zeros((F, 3))
+    x[:, 0] = 1.0
+    plate = quat_rotate(world_rot[:, 0], x * dims.base_length / 2)
+    shade = quat_rotate(world_rot[:, 3], x * dims.head_width / 2)
+    base, tip = points[:, 0], points[:, 4]
+    extra = np.stack([base - plate, base + plate, tip - shade, tip + shade], axis=1)
+    P = points.shape[1]
+    bones = [(P, P + 1), (3, P + 2), (3, P + 3), (P + 2, P + 3)]
+    return np.concatenate([points, extra], axis=1), bones
+
+
+@dataclass(frozen=True)
+class Camera:
+    """An orthographic camera: screen x = ``points @ right``, screen y = ``points @ up``."""
+
+    right: np.ndarray
+    up: np.ndarray
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``(..., 3)`` world points -> ``(..., 2)`` screen coordinates (world units)."""
+        return np.stack([points @ self.right, points @ self.up], axis=-1)
+
+
+def _up_index(up_axis: str) -> int:
+    return "XYZ".index(up_axis)
+
+
+def travel_axis(points: np.ndarray, used: np.ndarray, up_axis: str) -> np.ndarray:
+    """Unit ground vector along which the figure travels farther, pointing where it goes.
+
+    ``points`` (F, P, 3). Decided by the path of the centroid of the drawn
+    points; ties go to the axis of larger overall extent, then to the first axis.
+    """
+    u = _up_index(up_axis)
+    ground = [a for a in range(3) if a != u]
+    centroid = points[:, used].mean(axis=1)
+    travel = np.ptp(centroid, axis=0)
+    extent = np.ptp(points[:, used].reshape(-1, 3), axis=0)
+    tol = 1e-6 * max(1.0, float(extent.max()))
+    a, b = ground
+    if abs(travel[a] - travel[b]) > tol:
+        h = a if travel[a] > travel[b] else b
+    elif abs(extent[a] - extent[b]) > tol:
+        h = a if extent[a] > extent[b] else b
+    else:
+        h = a
+    axis = np.zeros(3)
+    axis[h] = 1.0 if centroid[-1, h] - centroid[0, h] >= -tol else -1.0
+    return axis
+
+
+def make_camera(view: str, h: np.ndarray, up_axis: str) -> Camera:
+    """The camera of ``view`` (one of :data:`VIEWS`) around travel axis ``h``."""
+    if view not in _ANGLES:
+        raise UsageError(f"unknown view {view!r}; expected one of {', '.join(VIEWS)}")
+    u = np.zeros(3)
+    u[_up_index(up_axis)] = 1.0
+    d = np.cross(u, h)
+    az, el = (math.radians(x) for x in _ANGLES[view])
+    right = math.cos(az) * h + math.sin(az) * d
+    away = np.cross(u, right)
+    up = math.cos(el) * u + math.sin(el) * away
+    return Camera(_clean(right), _clean(up))
+
+
+def _clean(v: np.ndarray) -> np.ndarray:
+    """Round away float noise such as cos(90 deg) = 6e-17 (keeps axis views exact)."""
+    return np.where(np.abs(v) < 1e-12, 0.0, v)
+
+
+def nice_step(span: float, count: int = 8) -> float:
+    """A round grid spacing (1, 2 or 5 times a power of ten) giving about ``count`` lines over ``span``."""
+    raw = max(span, 1e-12) / count
+    power = 10.0 ** math.floor(math.log10(raw))
+    for m in (1, 2, 5, 10):
+        if m * power >= raw:
+            return m * power
+    return 10 * power
+
+
+def ground_segments(points: np.ndarray, up_axis: str, h: np.ndarray, planar: bool) -> tuple[np.ndarray, float]:
+    """3D segments ``(S, 2, 3)`` of the ground under ``points`` (F, P, 3), and the ground height.
+
+    The ground is at height 0 when the lowest point is close to it, else at
+    the lowest point. A line along ``h`` for planar motions, else a grid.
+    """
+    u = _up_index(up_axis)
+    flat = points.reshape(-1, 3)
+    lo, hi = float(flat[:, u].min()), float(flat[:, u].max())
+    height = max(hi - lo, 1e-9)
+    level = 0.0 if -0.02 * height <= lo <= 0.25 * height else lo
+    g = [a for a in range(3) if a != u]
+    mins, maxs = flat[:, g].min(axis=0), flat[:, g].max(axis=0)
+    span = max(float((maxs - mins).max()), height)
+    margin = 0.15 * span
+    mins, maxs = mins - margin, maxs + margin
+    if planar:
+        hi_ = int(np.argmax(np.abs(h)))
+        a, b = g.index(hi_), 1 - g.index(hi_)
+        depth = float(flat[:, g[b]].mean())
+        seg = np.zeros((1, 2, 3))
+        seg[0, :, u] = level
+        seg[0, :, g[a]] = (mins[a], maxs[a])
+        seg[0, :, g[b]] = depth
+        return seg, level
+    step = nice_step(span, 10)
+    segs = []
+    for k in range(2):
+        lines = np.arange(math.ceil(mins[k] / step), math.floor(maxs[k] / step) + 1) * step
+        for x in lines:
+            s = np.zeros((2, 3))
+            s[:, u] = level
+            s[:, g[k]] = x
+            s[:, g[1 - k]] = (mins[1 - k], maxs[1 - k])
+            segs.append(s)
+    return np.array(segs).reshape(-1, 2, 3), level
+
+
+def is_planar(points: np.ndarray, used: np.ndarray) -> bool:
+    """All drawn points lie in one vertical plane through a world axis (the lamp)."""
+    flat = points[:, used].reshape(-1, 3)
+    extent = np.ptp(flat, axis=0)
+    return bool(extent.min() <= 1e-6 * max(1.0, float(extent.max())))
+
+
+# --- rendering -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PreviewInfo:
+    """What :func:`preview` wrote (for ``--json``)."""
+
+    output: str
+    kind: str  # "gif", "filmstrip" or "still"
+    view: str
+    frames: tuple[int, ...]  # frame numbers shown (file numbering)
+    size: tuple[int, int]  # pixels (of one frame for a filmstrip)
+    fps: float | None  # GIF playback rate
+
+    def as_dict(self) -> dict:
+        return {"output": self.output, "kind": self.kind, "view": self.view, "frames": list(self.frames),
+                "size": list(self.size), "fps": self.fps}
+
+
+class StickRenderer:
+    """Draws the poses of one or more motions at chosen frames into RGB images.
+
+    One Agg figure is built once. Its static layer (ground, trails, legend) is
+    drawn once and cached; each frame restores it and draws only the poses,
+    the ghosted keys, the trails' current points and the frame label.
+
+    Args:
+        motions: the motions, already cut to the frames to show; the first
+            one's ``keys`` are the ones ghosted.
+        labels: legend names (shown when there are several motions).
+        view: one of :data:`VIEWS`.
+        size: ``(width, height)`` pixels, or None to fit the motion.
+        default_side: without ``size``: the long side in pixels, or (negative)
+            minus the height.
+        trail: joint names whose world paths to draw.
+        first_frame: file frame number of frame 0 (for the labels).
+        legend_keys: add a pink "keys" entry to the legend.
+    """
+
+    def __init__(self, motions: Sequence[Motion], labels: Sequence[str], view: str, size: tuple[int, int] | None,
+                 default_side: int, trail: Sequence[str] = (), first_frame: int = 0, legend_keys: bool = False):
+        from keyfill.viz import style
+
+        self.style = style
+        self.first_frame = first_frame
+        self.figs = [figure_points(m) for m in motions]
+        first = self.figs[0]
+        up_axis = motions[0].skeleton.up_axis
+        h = travel_axis(first.points, first.used, up_axis)
+        self.camera = make_camera(view, h, up_axis)
+        drawn = np.concatenate([f.points[:, f.used].reshape(-1, 3) for f in self.figs])
+        planar = all(is_planar(f.points, f.used) for f in self.figs)
+        ground, level = ground_segments(drawn[None], up_axis, h, planar)
+        # Framing: every drawn point of every frame, and its foot on the ground.
+        feet = drawn.copy()
+        feet[:, _up_index(up_axis)] = level
+        xy = self.camera.project(np.concatenate([drawn, feet]))
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        span = max(float((hi - lo).max()), 1e-9)
+        lo, hi = lo - 0.06 * span, hi + 0.06 * span
+        hi[1] += 0.08 * span  # room for the frame label
+        self.size = size or _default_size((hi[0] - lo[0]) / (hi[1] - lo[1]), default_side)
+        lo, hi = _fit(lo, hi, self.size[0] / self.size[1])
+        self.keys = motions[0].keys.frames if motions[0].keys is not None else np.zeros(0, dtype=np.int64)
+        trails = [(n, m.skeleton.index(name)) for n, m in enumerate(motions) for name in trail]
+        legend = [(label, style.FILE_COLORS[n % len(style.FILE_COLORS)]) for n, label in enumerate(labels)]
+        legend = legend if len(motions) > 1 else []
+        if legend_keys and len(self.keys):
+            legend.append(("keys", style.KEY_COLOR))
+        with style.style():
+            self._build(lo, hi, ground, trails, [m.keys for m in motions], legend)
+
+    def _build(self, lo, hi, ground, trails, keys, legend):
+        from matplotlib.collections import LineCollection
+        from matplotlib.transforms import offset_copy
+
+        st = self.style
+        W, H = self.size
+        s = math.sqrt(min(W, H) / 360.0)  # line and font scale
+        lw = 2.4 * s
+        fig = st.new_figure(W / 100, H / 100, dpi=100)
+        ax = fig.add_axes((0, 0, 1, 1))
+        ax.set_axis_off()
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        self.fig, self.ax = fig, ax
+        ax.add_collection(LineCollection(self.camera.project(ground), colors=st.GROUND_COLOR, linewidths=0.8 * s,
+                                         zorder=0))
+        self.ghost = ax.add_collection(LineCollection([], colors=st.KEY_COLOR, alpha=0.35, linewidths=0.85 * lw,
+                                                      capstyle="round", joinstyle="round", zorder=3, animated=True))
+        self.poses, self.colors = [], []
+        for n, f in enumerate(self.figs):
+            color = st.FILE_COLORS[n % len(st.FILE_COLORS)]
+            if len(f.bones):
+                colors = [st.lighten(color, 0.45) if side < 0 else color for side in f.sides]
+                artist = ax.add_collection(LineCollection([], colors=colors, linewidths=lw, capstyle="round",
+                                                          joinstyle="round", zorder=5, animated=True))
+            else:  # no bones (a single joint): dots
+                colors = color
+                artist = ax.plot([], [], ls="none", marker="o", ms=1.5 * lw, color=color, zorder=5,
+                                 animated=True)[0]
+            self.poses.append(artist)
+            self.colors.append(colors)
+        self.trail_dots = []
+        for n, j in trails:
+            color = st.FILE_COLORS[n % len(st.FILE_COLORS)]
+            path = self.camera.project(self.figs[n].points[:, j])
+            ax.plot(path[:, 0], path[:, 1], color=color, lw=1.1 * s, alpha=0.8, zorder=2)
+            ax.plot(path[:, 0], path[:, 1], ls="none", marker="o", ms=2.2 * s, color=color, zorder=2)
+            if keys[n] is not None and len(keys[n]):
+                ax.plot(path[keys[n].frames, 0], path[keys[n].frames, 1], ls="none", marker="o", ms=6.5 * s,
+                        mfc="none", mec=st.KEY_COLOR, mew=1.4 * s, zorder=6)
+            dot = ax.plot([], [], ls="none", marker="o", ms=4.5 * s, color=color, mec="white", mew=0.8 * s,
+                          zorder=7, animated=True)[0]
+            self.trail_dots.append((dot, path))
+        font = 8 * s
+        for i, (text, color) in enumerate(legend):
+            where = offset_copy(ax.transAxes, fig=fig, x=0, y=-1.5 * font * i, units="points")
+            ax.text(0.985, 0.975, text, transform=where, ha="right", va="top", color=color, fontsize=font)
+        self.text = ax.text(0.015, 0.975, "", transform=ax.transAxes, ha="left", va="top", color=st.TEXT_COLOR,
+                            fontsize=font, animated=True)
+        fig.canvas.draw()
+        self.background = fig.canvas.copy_from_bbox(fig.bbox)
+
+    def _screen(self, n: int, t: int) -> np.ndarray:
+        """Screen segments ``(B, 2, 2)`` of motion ``n``'s pose at frame ``t`` (or its points without bones)."""
+        f = self.figs[n]
+        xy = self.camera.project(f.points[min(t, len(f.points) - 1)])
+        return xy[f.bones] if len(f.bones) else xy[f.used]
+
+    def render(self, t: int | None, ghosts: Sequence[int] = (), label: str | None = None):
+        """The picture at frame ``t`` (None: no pose) as a PIL RGB image.
+
+        ``ghosts``: frames whose poses of the first motion are drawn ghosted;
+        ``label``: text for the top-left corner (pink at a key).
+        """
+        from PIL import Image
+
+        st = self.style
+        at_key = t is not None and t in self.keys
+        canvas = self.fig.canvas
+        canvas.restore_region(self.background)
+        with st.style():
+            if len(self.figs[0].bones):
+                self.ghost.set_segments([seg for g in ghosts for seg in self._screen(0, int(g))])
+                self.ax.draw_artist(self.ghost)
+            if t is not None:
+                for n, artist in enumerate(self.poses):
+                    xy = self._screen(n, t)
+                    if len(self.figs[n].bones):
+                        artist.set_segments(xy)
+                        artist.set_color(st.KEY_COLOR if n == 0 and at_key else self.colors[n])
+                    else:
+                        artist.set_data(xy[:, 0], xy[:, 1])
+                    self.ax.draw_artist(artist)
+                for dot, path in self.trail_dots:
+                    p = path[min(t, len(path) - 1)]
+                    dot.set_data([p[0]], [p[1]])
+                    self.ax.draw_artist(dot)
+            if label:
+                self.text.set_text(label)
+                self.text.set_color(st.KEY_COLOR if at_key else st.TEXT_COLOR)
+                self.ax.draw_artist(self.text)
+        rgba = np.asarray(canvas.buffer_rgba())
+        return Image.fromarray(np.ascontiguousarray(rgba[..., :3]))
+
+    def palette_colors(self) -> list[tuple[int, int, int]]:
+        """The flat colours of the pictures (white, text, ground, files, keys, ghosts) as 0-255 RGB."""
+        from matplotlib.colors import to_rgb
+
+        st = self.style
+        key = np.array(to_rgb(st.KEY_COLOR))
+        flat = [(1.0, 1.0, 1.0), to_rgb(st.TEXT_COLOR), to_rgb(st.GROUND_COLOR), tuple(key),
+                tuple(0.35 * key + 0.65), (0.843, 0.843, 0.843)]
+        for colors in self.colors:
+            flat += [to_rgb(c) for c in ([colors] if isinstance(colors, str) else colors)]
+        return [tuple(int(round(255 * v)) for v in c) for c in dict.fromkeys(flat)]
+
+    def frame_label(self, t: int) -> str:
+        """``"frame 12"`` in the file's numbering, ``"frame 12  key"`` at a key."""
+        f = self.first_frame + t
+        return f"frame {f}  key" if t in self.keys else f"frame {f}"
+
+    def bracketing_keys(self, t: int) -> list[int]:
+        """The last key before ``t`` and the first after it (those that exist)."""
+        before = self.keys[self.keys < t]
+        after = self.keys[self.keys > t]
+        return [int(k) for k in (before[-1:].tolist() + after[:1].tolist())]
+
+
+def _default_size(aspect: float, side: int) -> tuple[int, int]:
+    """A size whose long side is ``side`` (or, for side < 0, whose height is -side) for ``aspect`` = w/h."""
+    if side < 0:
+        h = -side
+        w = min(max(h * aspect, h * 0.5), h * 2.0)
+    elif aspect >= 1:
+        w, h = side, side / min(aspect, 3.0)
+    else:
+        w, h = side * max(aspect, 1 / 3.0), side
+    return int(round(w / 2)) * 2, int(round(h / 2)) * 2
+
+
+def _fit(lo: np.ndarray, hi: np.ndarray, aspect: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grow the box ``lo``-``hi`` about its centre to width / height = ``aspect`` (equal axis scales)."""
+    c = (lo + hi) / 2
+    w, h = hi - lo
+    if w / h < aspect:
+        w = h * aspect
+    else:
+        h = w / aspect
+    return c - np.array([w, h]) / 2, c + np.array([w, h]) / 2
+
+
+def preview(
+    motions: Sequence[Motion],
+    labels: Sequence[str],
+    output: str | Path,
+    *,
+    view: str = "side",
+    frames: str | None = None,
+    step: int | None = None,
+    trail: Sequence[str] = (),
+    fps: float | None = None,
+    size: tuple[int, int] | None = None,
+    progress=None,
+) -> PreviewInfo:
+    """Render stick figures of ``motions`` (overlaid, each in its colour) to ``output``.
+
+    * ``.gif``: an animation of every ``step``-th frame at ``fps`` (default:
+      the first motion's rate);
+    * ``.png`` without ``trail``: a filmstrip of evenly spaced frames (every
+      ``step``-th, or 8 frames), ``size`` being the size of one frame;
+    * ``.png`` with ``trail``: one still with the trails of those joints over
+      all frames and the ghosted key poses (first and last frame when the
+      first motion has no keys).
+
+    ``frames`` is ``"A:B"`` (see :func:`keyfill.viz.frame_range`), ``size``
+    ``(width, height)`` pixels. ``progress`` wraps the frame loop (e.g. a
+    tqdm factory). The output is written atomically.
+    """
+    from keyfill.io import atomic_output
+    from keyfill.viz import gif
+
+    suffix = check_suffix(str(output), PREVIEW_SUFFIXES)
+    if view not in VIEWS:
+        raise UsageError(f"unknown view {view!r}; expected one of {', '.join(VIEWS)}")
+    if step is not None and step < 1:
+        raise UsageError(f"--step must be at least 1, got {step}")
+    if fps is not None and not (fps > 0 and math.isfinite(fps)):
+        raise UsageError(f"--fps must be positive, got {fps}")
+    if size is not None and not all(16 <= v <= 8192 for v in size):
+        raise UsageError(f"--size {size[0]}x{size[1]}: each side must be 16 to 8192 pixels")
+    if len(labels) != len(motions):
+        raise UsageError(f"{len(labels)} labels for {len(motions)} files")
+    first = motions[0].skeleton
+    for m, label in zip(motions[1:], labels[1:]):
+        if m.skeleton.up_axis != first.up_axis:
+            raise DataError(f"{label}: its up axis is {m.skeleton.up_axis}, that of {labels[0]} is {first.up_axis}")
+    cut = []
+    shown_first = None
+    for m, label in zip(motions, labels):
+        idx = frame_range(frames, m.num_frames, label)
+        shown_first = int(idx[0]) if shown_first is None else shown_first
+        cut.append(m.frames(slice(int(idx[0]), int(idx[-1]) + 1)))
+    for name in trail:
+        for m in cut:
+            m.skeleton.index(name)  # UsageError listing the joints
+    length = max(m.num_frames for m in cut)
+    if suffix == ".gif":
+        kind = "gif"
+    else:
+        kind = "still" if trail else "filmstrip"
+    side = {"gif": GIF_SIDE, "still": STILL_SIDE, "filmstrip": -STRIP_HEIGHT}[kind]
+    r = StickRenderer(cut, labels, view, size, side, trail, first_frame=shown_first, legend_keys=kind == "still")
+    wrap = progress or (lambda it, **kw: it)
+
+    with atomic_output(output) as tmp:
+        if kind == "gif":
+            rate = fps or cut[0].fps
+            stride = gif.gif_step(rate, step or 1)
+            ts = list(range(0, length, stride))
+            if len(ts) > MAX_GIF_FRAMES:
+                raise UsageError(f"{len(ts)} GIF frames is too many (at most {MAX_GIF_FRAMES}); "
+                                 "use --step or --frames")
+            samples = sorted({ts[0], ts[len(ts) // 2], ts[-1]} | {int(k) for k in r.keys[:1]})
+            palette = gif.Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in samples],
+                                  required=r.palette_colors())
+            images = [palette.apply(r.render(t, r.bracketing_keys(t), r.frame_label(t)))
+                      for t in wrap(ts, desc="frames", unit="frame")]
+            gif.write_gif(images, tmp, gif.delays_ms(len(images), rate, stride))
+            shown, out_fps = ts, rate / stride
+        elif kind == "filmstrip":
+            if step is not None:
+                shown = list(range(0, length, step))
+            else:
+                shown = sorted(set(np.round(np.linspace(0, length - 1, min(STRIP_FRAMES, length))).astype(int).tolist()))
+            cells = [r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in wrap(shown, desc="frames")]
+            _montage(cells, STRIP_COLUMNS, r.palette_colors()).save(tmp, format="PNG", optimize=True)
+            out_fps = None
+        else:
+            ghosts = r.keys.tolist() if len(r.keys) else sorted({0, cut[0].num_frames - 1})
+            last = shown_first + max(m.num_frames for m in cut) - 1
+            image = r.render(None, ghosts, f"{', '.join(trail)} path, frames {shown_first}-{last}")
+            gif.Palette([image], 256, r.palette_colors()).apply(image).save(tmp, format="PNG", optimize=True)
+            shown, out_fps = ghosts, None
+    return PreviewInfo(str(output), kind, view, tuple(shown_first + int(t) for t in shown), r.size, out_fps)
+
+
+def _montage(cells, columns: int, colors):
+    """Cells (PIL images of one size) in rows of ``columns``, 4 px apart, each framed in light grey,
+    as a palette image that keeps ``colors`` exact."""
+    from PIL import Image, ImageDraw
+
+    w, h = cells[0].size
+    gap = 4
+    cols = min(columns, len(cells))
+    rows = -(-len(cells) // cols)
+    sheet = Image.new("RGB", (cols * w + (cols + 1) * gap, rows * h + (rows + 1) * gap), "white")
+    draw = ImageDraw.Draw(sheet)
+    for i, cell in enumerate(cells):
+        x = gap + (i % cols) * (w + gap)
+        y = gap + (i // cols) * (h + gap)
+        sheet.paste(cell, (x, y))
+        draw.rectangle((x - 1, y - 1, x + w, y + h), outline=(215, 215, 215))
+    from keyfill.viz import gif
+
+    return gif.Palette([sheet], 256, colors).apply(sheet)

@@ -1,0 +1,73 @@
+"""Colours, fonts and deterministic saving shared by keyfill's pictures.
+
+Figures are plain :class:`matplotlib.figure.Figure` objects on an Agg canvas
+(no ``pyplot``, no global backend). Saved files carry no date, software
+version or random ids, so the same input gives the same bytes.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from pathlib import Path
+
+import matplotlib
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+#: one colour per input file, in order (matplotlib's "tab10" without its pink,
+#: which is reserved for keys)
+FILE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf", "#bcbd22", "#7f7f7f", "#d62728")
+#: keys: ghosted key poses and key markers in previews (pink, as in Zhou et al. 2020)
+KEY_COLOR = "#e7298a"
+GROUND_COLOR = "#b0b0b0"
+TEXT_COLOR = "#333333"
+
+#: rc settings for every picture: a font that ships with matplotlib (same
+#: glyphs on every machine) and a fixed SVG id salt (no random ids)
+RC = {
+    "font.family": "DejaVu Sans",
+    "font.size": 9,
+    "svg.hashsalt": "keyfill",
+    "svg.fonttype": "path",
+    "pdf.fonttype": 42,
+    "path.simplify": True,
+    "axes.titlesize": 9,
+    "axes.labelsize": 8,
+    "xtick.labelsize": 8,
+    "ytick.labelsize": 8,
+    "legend.fontsize": 8,
+}
+
+#: metadata that each format would otherwise fill with dates and versions
+_NO_METADATA = {
+    "png": {"Software": None},
+    "svg": {"Date": None, "Creator": None},
+    "pdf": {"CreationDate": None, "ModDate": None, "Producer": None, "Creator": None},
+}
+
+
+@contextmanager
+def style():
+    """Apply :data:`RC` for the duration of a drawing (never globally)."""
+    with matplotlib.rc_context(RC):
+        yield
+
+
+def new_figure(width_in: float, height_in: float, dpi: float = 100) -> Figure:
+    """A figure of the given size in inches on its own Agg canvas."""
+    fig = Figure(figsize=(width_in, height_in), dpi=dpi)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_figure(fig: Figure, path: Path, fmt: str) -> None:
+    """Save ``fig`` as ``fmt`` (png, svg or pdf) to ``path`` without dates or versions."""
+    fig.savefig(path, format=fmt, metadata=_NO_METADATA[fmt], facecolor="white")
+
+
+def lighten(color: str, amount: float) -> tuple[float, float, float]:
+    """``color`` mixed with white (``amount`` 0: unchanged, 1: white)."""
+    from matplotlib.colors import to_rgb
+
+    r, g, b = to_rgb(color)
+    return (r + (1 - r) * amount, g + (1 - g) * amount, b + (1 - b) * amount)

@@ -217,8 +217,13 @@ def _sample_times(attrs) -> list[float]:
     return sorted(times)
 
 
-def read(path: str | Path, label=None) -> Motion:
-    """Read a UsdSkel animation into a :class:`Motion`; ``label`` names the file in errors."""
+def read(path: str | Path, label=None, curves: bool = True) -> Motion:
+    """Read a UsdSkel animation into a :class:`Motion`; ``label`` names the file in errors.
+
+    A keyfill curves file (:mod:`keyfill.edit.curvefile`) bakes its Bezier
+    curves at every frame unless ``curves=False`` (then its stored
+    SkelAnimation is read like any other).
+    """
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     label = label if label is not None else path
     try:
@@ -293,7 +298,13 @@ def read(path: str | Path, label=None) -> Motion:
         if np.any(np.abs(frames - np.round(frames)) > 1e-6):
             raise DataError(f"{label}: animation samples at fractional time codes cannot be keys")
         keys = Keys(np.round(frames).astype(np.int64))
-    return Motion(skeleton, fps, rot, pos, keys=keys)
+    motion = Motion(skeleton, fps, rot, pos, keys=keys)
+    if curves:
+        from keyfill.edit import curvefile
+
+        if curvefile.curves_prim(stage) is not None:
+            return curvefile.from_stage(stage, motion, label).bake()
+    return motion
 
 
 def _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label) -> Skeleton:

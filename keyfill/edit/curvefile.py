@@ -1,0 +1,269 @@
+"""Curve files: Bezier animation curves as ``pxr.Ts`` splines in a USD file.
+
+Layout (``.usda``, ``.usdc`` or ``.usd``)::
+
+    /Root                      SkelRoot (defaultPrim)
+    /Root/Skeleton             UsdSkel Skeleton, as keyfill.io.usd writes it (joint names,
+                               BVH channel layouts, End Sites and the keys in customData)
+    /Root/Skeleton/Animation   SkelAnimation: the curves baked at every frame, so that any
+                               UsdSkel viewer plays the motion
+    /Root/Curves               Scope; customData keyfill = {layout = "keyfill.curves", version = 1}
+        double <Joint>_<Channel>.spline = { bezier, <knots> }   one attribute per control
+
+Each control attribute (for example ``Hips_Zrotation``) carries
+``customData keyfill = {joint = "Hips", channel = "Zrotation"}`` and a
+spline of Bezier knots at the key times (time codes are frames;
+``timeCodesPerSecond`` is the frame rate). A knot's pre/post tangent
+*width* is the tangent's extent in frames and its *slope* the value change
+per frame, so the Bezier control points are ``(t - preWidth, v - preWidth *
+preSlope)`` and ``(t + postWidth, v + postWidth * postSlope)``; knot
+customData ``broken`` says whether the two slopes may differ. Rotation
+channels are Euler angles in **degrees** in the joint's declared order (the
+Skeleton's channel layout), translations are in the stage's units
+(``metersPerUnit``). Every control has a knot at every key (global key
+poses); extrapolation is held.
+
+Reading also accepts Hermite splines (widths a third of the segment) and
+linear segments (turned into the equivalent Bezier); held segments, dual
+values, loops and other extrapolations are refused with a clear message.
+``attr.Get(time)`` on the saved file equals :meth:`Curves.evaluate` (in
+degrees for rotations) to rounding: both solve the same cubic.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from keyfill.edit.curves import Control, Curves
+from keyfill.errors import FormatError
+from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
+
+LAYOUT = "keyfill.curves"
+VERSION = 1
+CURVES_PRIM = "Curves"
+_CUSTOM = "keyfill"
+
+
+def _attr_name(skeleton, control: Control, used: set[str]) -> str:
+    from keyfill.io.usd import _identifier
+
+    base = f"{_identifier(skeleton.names[control.joint])}_{control.channel}"
+    name, n = base, 1
+    while name in used:
+        name, n = f"{base}_{n}", n + 1
+    used.add(name)
+    return name
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence the C++ warnings pxr prints while writing splines.
+
+    usd-core 26.11 warns "TsSpline inner looping is deprecated" for every
+    spline written to text, and about the crate upgrade for splines in
+    ``.usdc``; both are expected here and would clutter the CLI's stderr.
+    """
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def write(curves: Curves, path: str | Path) -> None:
+    """Write ``curves`` to a USD file (format from the suffix); see the module docstring.
+
+    Not atomic by itself: callers write through :func:`keyfill.io.atomic_output`.
+    """
+    from pxr import Sdf, Ts, Usd, UsdGeom
+
+    from keyfill.io import usd
+
+    usd.write(curves.bake(), path)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    layer.Reload(force=True)
+    stage = Usd.Stage.Open(layer)
+    root = stage.GetDefaultPrim()
+    scope = UsdGeom.Scope.Define(stage, root.GetPath().AppendChild(CURVES_PRIM)).GetPrim()
+    scope.SetCustomDataByKey(_CUSTOM, {"layout": LAYOUT, "version": VERSION})
+    sk = curves.skeleton
+    used: set[str] = set()
+    deg = np.degrees(1.0)
+    for i, c in enumerate(curves.controls):
+        unit = deg if c.is_rotation else 1.0
+        attr = scope.CreateAttribute(_attr_name(sk, c, used), Sdf.ValueTypeNames.Double, custom=True)
+        attr.SetCustomDataByKey(_CUSTOM, {"joint": sk.names[c.joint], "channel": c.channel})
+        spline = Ts.Spline()
+        spline.SetCurveType(Ts.CurveTypeBezier)
+        for k, t in enumerate(curves.times):
+            knot = Ts.Knot()
+            knot.SetTime(float(t))
+            knot.SetValue(float(curves.values[k, i] * unit))
+            knot.SetNextInterpolation(Ts.InterpCurve)
+            for side, tan in (("Pre", curves.in_tan[k, i]), ("Post", curves.out_tan[k, i])):
+                width, height = float(tan[0]), float(tan[1] * unit)
+                getattr(knot, f"Set{side}TanWidth")(width)
+                getattr(knot, f"Set{side}TanSlope")(height / width if width > 0 else 0.0)
+            knot.SetCustomDataByKey("broken", bool(curves.broken[k, i]))
+            spline.SetKnot(knot)
+        attr.SetSpline(spline)
+    with _quiet_stderr():
+        layer.Save()
+
+
+def save(curves: Curves, path: str | Path) -> None:
+    """Write ``curves`` atomically: a curves file for USD suffixes, the baked motion for ``.bvh``."""
+    from keyfill import io
+
+    if io.format_of(path) == "bvh":
+        io.save(curves.bake(), path)
+        return
+    with io.atomic_output(path) as tmp:
+        write(curves, tmp)
+
+
+def curves_prim(stage):
+    """The stage's keyfill Curves prim (marked by its layout customData), or None."""
+    root = stage.GetDefaultPrim() or stage.GetPseudoRoot()
+    for prim in root.GetChildren():
+        data = prim.GetCustomDataByKey(_CUSTOM)
+        if isinstance(data, dict) and data.get("layout") == LAYOUT:
+            return prim
+    return None
+
+
+def from_stage(stage, motion: Motion, label) -> Curves:
+    """The :class:`Curves` of an open stage; ``motion`` is its UsdSkel part (skeleton, fps, frames)."""
+    from pxr import Ts
+
+    prim = curves_prim(stage)
+    if prim is None:
+        raise FormatError("not a keyfill curves file (no Curves prim); make one with keyfill convert IN OUT.usda --curves --keys ...", label)
+    version = prim.GetCustomDataByKey(_CUSTOM).get("version", 0)
+    if version > VERSION:
+        raise FormatError(f"curves layout version {version} is newer than this keyfill reads ({VERSION})", label)
+    sk = motion.skeleton
+    controls, splines, names = [], [], []
+    for attr in prim.GetAttributes():
+        data = attr.GetCustomDataByKey(_CUSTOM) or {}
+        if not attr.HasSpline():
+            continue
+        where = f"{attr.GetName()}"
+        joint, channel = data.get("joint"), data.get("channel")
+        if joint not in sk.names:
+            raise FormatError(f"curve {where} names joint {joint!r}, which is not in the Skeleton", label)
+        if channel not in POSITION_CHANNELS + ROTATION_CHANNELS:
+            raise FormatError(f"curve {where} has channel {channel!r}; expected one like Zrotation or Xposition", label)
+        ctl = Control(sk.index(joint), channel)
+        if channel not in sk.channels[ctl.joint]:
+            raise FormatError(f"curve {where}: joint {joint} has no {channel} channel in the Skeleton's layout", label)
+        if ctl in controls:
+            raise FormatError(f"two curves animate {joint}.{channel}", label)
+        controls.append(ctl)
+        splines.append(attr.GetSpline())
+        names.append(where)
+    if not controls:
+        raise FormatError("the Curves prim holds no spline attributes", label)
+    # keep the skeleton's joint and channel order whatever the attribute order
+    order = sorted(range(len(controls)), key=lambda i: (controls[i].joint, sk.channels[controls[i].joint].index(controls[i].channel)))
+    controls = [controls[i] for i in order]
+    splines = [splines[i] for i in order]
+    names = [names[i] for i in order]
+
+    times = None
+    C = len(controls)
+    per_control = []
+    for name, ctl, spline in zip(names, controls, splines):
+        knots = list(spline.GetKnots().values())
+        t = np.array([k.GetTime() for k in knots], dtype=np.float64)
+        if times is None:
+            times = t
+        elif len(t) != len(times) or not np.allclose(t, times, rtol=0, atol=1e-9):
+            raise FormatError(
+                f"curve {name} has knots at {_short(t)} but {names[0]} at {_short(times)}; "
+                "keyfill curves need every control keyed at the same times",
+                label,
+            )
+        if spline.HasLoops():
+            raise FormatError(f"curve {name} loops; keyfill curves do not", label)
+        for extrap in (spline.GetPreExtrapolation(), spline.GetPostExtrapolation()):
+            if extrap.mode != Ts.ExtrapHeld:
+                raise FormatError(f"curve {name} extrapolates with {extrap.mode}; keyfill curves hold their end values", label)
+        per_control.append((spline.GetCurveType(), knots))
+    K = len(times)
+    if K < 2:
+        raise FormatError(f"the curves have {K} knot(s); at least 2 keys are needed", label)
+    seg = np.diff(times)
+    values = np.empty((K, C))
+    in_tan = np.empty((K, C, 2))
+    out_tan = np.empty((K, C, 2))
+    broken = np.zeros((K, C), dtype=bool)
+    rad = np.radians(1.0)
+    for i, (ctl, (curve_type, knots)) in enumerate(zip(controls, per_control)):
+        unit = rad if ctl.is_rotation else 1.0
+        for k, knot in enumerate(knots):
+            if knot.IsDualValued():
+                raise FormatError(f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label)
+            values[k, i] = float(knot.GetValue()) * unit
+            pre = np.array([knot.GetPreTanWidth(), knot.GetPreTanSlope()], dtype=np.float64)
+            post = np.array([knot.GetPostTanWidth(), knot.GetPostTanSlope()], dtype=np.float64)
+            if curve_type == Ts.CurveTypeHermite:
+                pre[0] = seg[k - 1] / 3 if k > 0 else seg[0] / 3
+                post[0] = seg[k] / 3 if k < K - 1 else seg[-1] / 3
+            in_tan[k, i] = pre[0], pre[0] * pre[1] * unit
+            out_tan[k, i] = post[0], post[0] * post[1] * unit
+            flag = knot.GetCustomDataByKey("broken")
+            broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9, atol=1e-12)
+        for k, knot in enumerate(knots[:-1]):
+            interp = knot.GetNextInterpolation()
+            if interp == Ts.InterpLinear:
+                rise = (values[k + 1, i] - values[k, i]) / 3
+                out_tan[k, i] = seg[k] / 3, rise
+                in_tan[k + 1, i] = seg[k] / 3, rise
+                broken[k, i] = broken[k + 1, i] = True
+            elif interp != Ts.InterpCurve:
+                raise FormatError(f"curve {names[i]} holds its value after {times[k]:g}; keyfill curves are Bezier", label)
+    try:
+        return Curves(
+            skeleton=sk,
+            fps=motion.fps,
+            num_frames=max(motion.num_frames, int(np.floor(times[-1])) + 1),
+            controls=tuple(controls),
+            times=times,
+            values=values,
+            in_tan=in_tan,
+            out_tan=out_tan,
+            broken=broken,
+        )
+    except Exception as e:  # DataError from validation: name the file
+        from keyfill.errors import DataError
+
+        if isinstance(e, DataError):
+            raise FormatError(str(e), label) from None
+        raise
+
+
+def read(path: str | Path, label=None) -> Curves:
+    """Read a keyfill curves file written by :func:`write` (or following its layout)."""
+    from pxr import Usd
+
+    from keyfill.io import usd
+
+    label = path if label is None else label
+    motion = usd.read(path, label=label, curves=False)
+    stage = Usd.Stage.Open(str(path))
+    return from_stage(stage, motion, label)
+
+
+def _short(t: np.ndarray) -> str:
+    text = ", ".join(f"{x:g}" for x in t[:6])
+    return text + (", ..." if len(t) > 6 else "")

@@ -393,41 +393,39 @@ class StickRenderer:
         xy = self.camera.project(f.points[min(t, len(f.points) - 1)])
         return xy[f.bones] if len(f.bones) else xy[f.used]
 
-    def render(self, t: int | None, ghosts: Sequence[int] = (), label: str | None = None):
-        """The picture at frame ``t`` (None: no pose) as a PIL RGB image.
+    def render(self, t: int | None, ghosts: Sequence[int] = (), label: str | None = None) -> np.ndarray:
+        """The picture at frame ``t`` (None: no pose) as an ``(H, W, 4)`` uint8 RGBA array.
 
         ``ghosts``: frames whose poses of the first motion are drawn ghosted;
-        ``label``: text for the top-left corner (pink at a key).
+        ``label``: text for the top-left corner (pink at a key). The artists'
+        fonts and styles were fixed when they were made, so no rc context is
+        needed here.
         """
-        from PIL import Image
-
         st = self.style
         at_key = t is not None and t in self.keys
         canvas = self.fig.canvas
         canvas.restore_region(self.background)
-        with st.style():
-            if len(self.figs[0].bones):
-                self.ghost.set_segments([seg for g in ghosts for seg in self._screen(0, int(g))])
-                self.ax.draw_artist(self.ghost)
-            if t is not None:
-                for n, artist in enumerate(self.poses):
-                    xy = self._screen(n, t)
-                    if len(self.figs[n].bones):
-                        artist.set_segments(xy)
-                        artist.set_color(st.KEY_COLOR if n == 0 and at_key else self.colors[n])
-                    else:
-                        artist.set_data(xy[:, 0], xy[:, 1])
-                    self.ax.draw_artist(artist)
-                for dot, path in self.trail_dots:
-                    p = path[min(t, len(path) - 1)]
-                    dot.set_data([p[0]], [p[1]])
-                    self.ax.draw_artist(dot)
-            if label:
-                self.text.set_text(label)
-                self.text.set_color(st.KEY_COLOR if at_key else st.TEXT_COLOR)
-                self.ax.draw_artist(self.text)
-        rgba = np.asarray(canvas.buffer_rgba())
-        return Image.fromarray(np.ascontiguousarray(rgba[..., :3]))
+        if len(self.figs[0].bones):
+            self.ghost.set_segments([seg for g in ghosts for seg in self._screen(0, int(g))])
+            self.ax.draw_artist(self.ghost)
+        if t is not None:
+            for n, artist in enumerate(self.poses):
+                xy = self._screen(n, t)
+                if len(self.figs[n].bones):
+                    artist.set_segments(xy)
+                    artist.set_color(st.KEY_COLOR if n == 0 and at_key else self.colors[n])
+                else:
+                    artist.set_data(xy[:, 0], xy[:, 1])
+                self.ax.draw_artist(artist)
+            for dot, path in self.trail_dots:
+                p = path[min(t, len(path) - 1)]
+                dot.set_data([p[0]], [p[1]])
+                self.ax.draw_artist(dot)
+        if label:
+            self.text.set_text(label)
+            self.text.set_color(st.KEY_COLOR if at_key else st.TEXT_COLOR)
+            self.ax.draw_artist(self.text)
+        return np.array(canvas.buffer_rgba())
 
     def palette_colors(self) -> list[tuple[int, int, int]]:
         """The flat colours of the pictures (white, text, ground, files, keys, ghosts) as 0-255 RGB."""
@@ -503,6 +501,8 @@ def preview(
     ``(width, height)`` pixels. ``progress`` wraps the frame loop (e.g. a
     tqdm factory). The output is written atomically.
     """
+    from PIL import Image
+
     from keyfill.io import atomic_output
     from keyfill.viz import gif
 
@@ -559,7 +559,8 @@ def preview(
                 shown = list(range(0, length, step))
             else:
                 shown = sorted(set(np.round(np.linspace(0, length - 1, min(STRIP_FRAMES, length))).astype(int).tolist()))
-            cells = [r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in wrap(shown, desc="frames")]
+            cells = [Image.fromarray(r.render(t, r.bracketing_keys(t), r.frame_label(t))[..., :3])
+                     for t in wrap(shown, desc="frames")]
             _montage(cells, STRIP_COLUMNS, r.palette_colors()).save(tmp, format="PNG", optimize=True)
             out_fps = None
         else:

@@ -26,10 +26,10 @@ TEXT_COLOR = "#333333"
 #: glyphs on every machine) and a fixed SVG id salt (no random ids)
 RC = {
     "font.family": "DejaVu Sans",
+    "figure.facecolor": "white",
     "font.size": 9,
     "svg.hashsalt": "keyfill",
     "svg.fonttype": "path",
-    "pdf.fonttype": 42,
     "path.simplify": True,
     "axes.titlesize": 9,
     "axes.labelsize": 8,
@@ -40,7 +40,6 @@ RC = {
 
 #: metadata that each format would otherwise fill with dates and versions
 _NO_METADATA = {
-    "png": {"Software": None},
     "svg": {"Date": None, "Creator": None},
     "pdf": {"CreationDate": None, "ModDate": None, "Producer": None, "Creator": None},
 }
@@ -48,8 +47,11 @@ _NO_METADATA = {
 
 @contextmanager
 def style():
-    """Apply :data:`RC` for the duration of a drawing (never globally)."""
-    with matplotlib.rc_context(RC):
+    """matplotlib's default style plus :data:`RC` for the duration of a drawing (never
+    globally): a user's matplotlibrc does not change keyfill's pictures."""
+    import matplotlib.style
+
+    with matplotlib.style.context("default"), matplotlib.rc_context(RC):
         yield
 
 
@@ -61,7 +63,19 @@ def new_figure(width_in: float, height_in: float, dpi: float = 100) -> Figure:
 
 
 def save_figure(fig: Figure, path: Path, fmt: str) -> None:
-    """Save ``fig`` as ``fmt`` (png, svg or pdf) to ``path`` without dates or versions."""
+    """Save ``fig`` as ``fmt`` (png, svg or pdf) to ``path`` without dates or versions.
+
+    PNGs are written by Pillow from the Agg buffer as RGB (the background is
+    opaque white, so an alpha channel would only add bytes).
+    """
+    if fmt == "png":
+        import numpy as np
+        from PIL import Image
+
+        fig.canvas.draw()
+        rgba = np.asarray(fig.canvas.buffer_rgba())
+        Image.fromarray(np.ascontiguousarray(rgba[..., :3])).save(path, format="PNG")
+        return
     fig.savefig(path, format=fmt, metadata=_NO_METADATA[fmt], facecolor="white")
 
 

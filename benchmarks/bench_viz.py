@@ -1,0 +1,198 @@
+"""Speed of ``keyfill preview`` (a 300-frame GIF) and ``keyfill plot`` (10,000 frames).
+
+Goals (issue 7): a 300-frame, 22-joint GIF in under 10 s; a plot of 10,000
+frames in under 3 s, on this machine, process start included.
+
+Inputs (Bandai-Namco dataset-1, read from ``data/bandai1/`` or unpacked there
+from ``../shared/data/corpora/``, see ``bench_bvh_io.py``; skipped without it):
+
+* GIF: the first 300 frames of ``dataset-1_walk_not-confident_001.bvh``
+  (22 joints, 30 fps), written once to ``data/bench/walk300.bvh``;
+* plot: the first 10,000 frames of the clips concatenated
+  (``data/bench/bandai1_concat_10000f.bvh``, shared with ``bench_complete.py``).
+
+Measured, each the median of ``--repeat`` runs:
+
+* ``keyfill preview walk300.bvh -o OUT.gif`` (side and 3d view) and
+  ``keyfill plot concat.bvh -o OUT.png`` (default panels: the root's six
+  channels; also three files overlaid, and as SVG and PDF) as subprocesses,
+  process start and file reading included;
+* the same preview in-process, split into setup, drawing + palette mapping
+  and GIF encoding, against a peer in the same run: matplotlib's own animation route
+  (``FuncAnimation`` updating the same stick-figure line data every frame,
+  saved with ``PillowWriter``) for the same frames, size and camera.
+
+    .venv/bin/python benchmarks/bench_viz.py
+    .venv/bin/python benchmarks/bench_viz.py --repeat 7 --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from bench_bvh_io import BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, load_average, machine, median_time
+
+GIF_GOAL_S = 10.0
+PLOT_GOAL_S = 3.0
+GIF_FRAMES = 300
+PLOT_FRAMES = 10_000
+WALK_CLIP = "dataset-1_walk_not-confident_001.bvh"
+
+
+def keyfill_command() -> list[str]:
+    script = Path(sys.executable).with_name("keyfill")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "keyfill"]
+
+
+def walk300() -> Path:
+    """The first 300 frames of one Bandai walk, written once under data/bench/."""
+    from keyfill import io
+
+    path = BENCH_DIR / "walk300.bvh"
+    if not path.is_file():
+        clip = next((c for c in bandai1_clips() if c.name == WALK_CLIP), None)
+        if clip is None:
+            raise Skipped(f"{WALK_CLIP} is not in the corpus")
+        motion = io.load(clip)
+        if motion.num_frames < GIF_FRAMES:
+            raise Skipped(f"{WALK_CLIP} has {motion.num_frames} frames, fewer than {GIF_FRAMES}")
+        BENCH_DIR.mkdir(parents=True, exist_ok=True)
+        io.save(motion.frames(slice(0, GIF_FRAMES)), path)
+    return path
+
+
+def cli_time(args: list[str], repeat: int) -> float:
+    def once():
+        subprocess.run(keyfill_command() + ["-q"] + args, check=True, capture_output=True)
+
+    return median_time(once, repeat)[0]
+
+
+def matplotlib_animation_peer(motion, size, out: Path) -> float:
+    """Seconds for matplotlib's FuncAnimation + PillowWriter to write the same stick-figure GIF."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.collections import LineCollection
+
+    from keyfill.viz import stick, style
+
+    r = stick.StickRenderer([motion], ["walk"], "side", size, stick.GIF_SIDE)  # same camera and limits
+    fig = style.new_figure(size[0] / 100, size[1] / 100, dpi=100)
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.set_axis_off()
+    ax.set_xlim(r.ax.get_xlim())
+    ax.set_ylim(r.ax.get_ylim())
+    lines = ax.add_collection(LineCollection([], colors=r.colors[0], linewidths=3.0, capstyle="round"))
+    text = ax.text(0.015, 0.975, "", transform=ax.transAxes, va="top")
+
+    def update(t):
+        lines.set_segments(r._screen(0, t))
+        text.set_text(f"frame {t}")
+        return lines, text
+
+    start = time.perf_counter()
+    FuncAnimation(fig, update, frames=motion.num_frames, blit=False).save(out, writer=PillowWriter(fps=motion.fps))
+    return time.perf_counter() - start
+
+
+def gif_split(motion, out: Path, repeat: int) -> dict:
+    """Median seconds of the three stages of a GIF preview, done by hand with the library's parts."""
+    from keyfill.viz import gif, stick
+
+    def setup():
+        return stick.StickRenderer([motion], ["walk"], "side", None, stick.GIF_SIDE)
+
+    def frames(r):
+        palette = gif.Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in (0, 150, 299)],
+                              required=r.palette_colors())
+        return [palette.apply(r.render(t, r.bracketing_keys(t), r.frame_label(t))) for t in range(motion.num_frames)]
+
+    t_setup, r = median_time(setup, repeat)
+    t_frames, images = median_time(lambda: frames(r), repeat)
+    t_write, _ = median_time(lambda: gif.write_gif(images, out, gif.delays_ms(len(images), motion.fps)), repeat)
+    per = 1000 / motion.num_frames
+    return {
+        "  setup: FK, camera, figure, static layer": {"seconds": t_setup},
+        "  300 frames: draw + exact palette mapping": {"seconds": t_frames, "ms_per_frame": t_frames * per},
+        "  GIF encoding (Pillow, changed rectangles)": {"seconds": t_write, "ms_per_frame": t_write * per},
+    }
+
+
+def run(repeat: int) -> dict:
+    from keyfill import io
+    from keyfill.viz import stick
+
+    walk = walk300()
+    concat = concatenated_bvh(frames=PLOT_FRAMES)
+    rows: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for view in ("side", "3d"):
+            out = tmp / f"walk_{view}.gif"
+            t = cli_time(["preview", str(walk), "-o", str(out), "--view", view, "--key-every", "30"], repeat)
+            rows[f"preview GIF {view} (CLI)"] = {"seconds": t, "goal_s": GIF_GOAL_S, "bytes": out.stat().st_size}
+        out = tmp / "plot.png"
+        t = cli_time(["plot", str(concat), "-o", str(out), "--key-every", "100"], repeat)
+        rows["plot PNG, 6 panels (CLI)"] = {"seconds": t, "goal_s": PLOT_GOAL_S, "bytes": out.stat().st_size}
+        for ext in ("svg", "pdf"):
+            out = tmp / f"plot.{ext}"
+            t = cli_time(["plot", str(concat), "-o", str(out)], repeat)
+            rows[f"plot {ext.upper()}, 6 panels (CLI)"] = {"seconds": t, "goal_s": PLOT_GOAL_S,
+                                                           "bytes": out.stat().st_size}
+        out = tmp / "plot3.png"
+        t = cli_time(["plot", str(concat), str(concat), str(concat), "--joints", "Hips", "-o", str(out)], repeat)
+        rows["plot PNG, 3 files x 6 panels (CLI)"] = {"seconds": t, "goal_s": PLOT_GOAL_S,
+                                                      "bytes": out.stat().st_size}
+        t = cli_time(["info", str(walk)], repeat)
+        rows["start-up + read (keyfill info, CLI)"] = {"seconds": t}
+
+        motion = io.load(walk)
+        info = stick.preview([motion], ["walk"], tmp / "lib.gif")
+        size = info.size
+        t_lib, _ = median_time(lambda: stick.preview([motion], ["walk"], tmp / "lib.gif"), repeat)
+        rows["preview GIF side (library)"] = {"seconds": t_lib, "size": list(size)}
+        peer = sorted(matplotlib_animation_peer(motion, size, tmp / "peer.gif") for _ in range(max(1, repeat // 2)))
+        t_peer = peer[len(peer) // 2]
+        rows["matplotlib FuncAnimation + PillowWriter (peer)"] = {
+            "seconds": t_peer, "bytes": (tmp / "peer.gif").stat().st_size, "keyfill_speedup": t_peer / t_lib,
+        }
+        rows["preview GIF side (library)"]["bytes"] = (tmp / "lib.gif").stat().st_size
+        rows.update(gif_split(motion, tmp / "split.gif", repeat))
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeat", type=int, default=5, help="runs per measurement (median reported)")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    args = parser.parse_args()
+    load_before = load_average()
+    try:
+        rows = run(args.repeat)
+    except Skipped as e:
+        print(f"skipped: {e}")
+        return 0
+    result = {"machine": machine(), "load_average_before": load_before, "load_average_after": load_average(),
+              "repeat": args.repeat, "results": rows}
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"machine: {result['machine']}")
+    print(f"load average before/after: {load_before} / {result['load_average_after']}; medians of {args.repeat} runs")
+    for name, row in rows.items():
+        goal = f"  goal < {row['goal_s']:.0f} s: {'met' if row['seconds'] < row['goal_s'] else 'MISSED'}" \
+            if "goal_s" in row else ""
+        extra = f"  ({row['bytes'] / 1000:.0f} kB)" if "bytes" in row else ""
+        speed = f"  keyfill is {row['keyfill_speedup']:.1f}x faster" if "keyfill_speedup" in row else ""
+        per = f"  ({row['ms_per_frame']:.1f} ms/frame)" if "ms_per_frame" in row else ""
+        print(f"  {name:<48} {row['seconds']:7.2f} s{per}{extra}{goal}{speed}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

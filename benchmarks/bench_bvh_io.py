@@ -12,7 +12,8 @@ Measured, each the median of ``--repeat`` runs in this one process:
 * keyfill read: ``keyfill.io.bvh.read`` (hierarchy, value-count checks,
   numbers, Euler -> quaternions: a complete ``Motion``);
 * bvhio: ``bvhio.readAsBvh`` (its fastest reader: per-joint Euler values);
-* bvh: ``bvh.Bvh(text)`` then the frames as a float array (``--no-bvh`` skips it);
+* bvh: ``bvh.Bvh(text)`` then the frames as a float array (optional: left out
+  with ``--no-bvh`` or when the package is not installed);
 * numpy floor: ``np.loadtxt`` of the motion lines (numbers only, no checks);
 * keyfill write: ``keyfill.io.bvh.write`` (``dumps`` + file write) of the motion
   read above; bvhio write: ``bvhio.writeBvh`` of its container.
@@ -170,8 +171,12 @@ def run(repeat: int, with_bvh: bool, out_dir: Path) -> dict:
     if len(container.Root.Keyframes) != motion.num_frames:
         raise AssertionError("bvhio read another number of frames")
     row("bvhio readAsBvh", t, size)
-    if with_bvh:
+    try:
         import bvh as bvh_pkg
+    except ImportError:
+        with_bvh = False
+        print("bench_bvh_io: the 'bvh' package is not installed; its row is left out", file=sys.stderr)
+    if with_bvh:
 
         def bvh_read():
             mocap = bvh_pkg.Bvh(path.read_text())

@@ -1,0 +1,413 @@
+"""The LaFAN1 in-betweening benchmark (Harvey et al. 2020), applicable to any BVH corpus.
+
+The protocol, as the reference code runs it:
+
+1. Clips are split by file name into a training and a test set.
+2. Windows: training statistics from windows of 50 frames at offset 20; test
+   windows of 65 frames at offset 40 (see :meth:`Corpus.windows`).
+3. Each window is normalised (:func:`align_windows`): the root's mean
+   horizontal (XZ for Y-up) position over the window is subtracted, and the
+   window is turned about the up axis so that the root's facing direction on
+   frame 9, its local facing axis (``+Y`` in the reference) projected on the
+   ground, points along +X.
+4. Statistics (:func:`statistics`): mean and standard deviation of every global
+   joint coordinate over the training windows; the constant bone offsets.
+5. For a transition length ``n``, frames 0-9 (context) and ``10 + n`` (target)
+   are given; a method fills frames ``10 .. 9 + n``. Global positions come from
+   forward kinematics of the root position and the constant offsets.
+6. Scores (:mod:`keyfill.learn.metrics`) over the transition frames only: L2Q,
+   L2P (positions normalised by the training statistics) and NPSS.
+
+Baselines: zero-velocity (frame 9 repeated), interpolation (LERP of the root,
+shortest-path SLERP of local quaternions with weights
+``linspace(0, 1, n + 2)[1:-1]``) and keyfill's cubic spline through all the
+given frames.
+
+A method is a function ``(skeleton, quats (B, T, J, 4), root (B, T, 3), keys)
+-> (quats, root)`` over windows of ``T = 11 + n`` frames whose unknown frames are
+NaN (so a method cannot see them); it returns all ``T`` frames.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from keyfill import rotations as R
+from keyfill.errors import DataError, UsageError
+from keyfill.kinematics import fk
+from keyfill.learn import metrics
+from keyfill.learn.corpus import Corpus, load_corpus
+from keyfill.motion import Keys, Motion, Skeleton
+
+N_PAST = 10  #: context frames
+N_FUTURE = 10  #: frames after the transition in the reference's windows (only the first is given)
+STATS_WINDOW, STATS_OFFSET = 50, 20
+TEST_WINDOW, TEST_OFFSET = 65, 40
+LENGTHS = (5, 15, 30, 45)
+LAFAN1_TEST_PATTERNS = ("*subject5*",)  #: LaFAN1's test split: subject 5
+
+Method = Callable[[Skeleton, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+_AXES = {"X": 0, "Y": 1, "Z": 2}
+
+
+def axis_vector(text: str) -> np.ndarray:
+    """``"+Y"``, ``"-z"``, ``"X"`` -> a unit vector ``(3,)``."""
+    t = text.strip().upper()
+    sign = -1.0 if t.startswith("-") else 1.0
+    name = t.lstrip("+-")
+    if name not in _AXES:
+        raise UsageError(f"a facing axis is X, Y or Z with an optional sign (e.g. +Y, -Z), not {text!r}")
+    v = np.zeros(3)
+    v[_AXES[name]] = sign
+    return v
+
+
+def horizontal_axes(up_axis: str) -> tuple[int, int]:
+    """The two ground-plane coordinates for an up axis (``"Y"`` -> ``(0, 2)``)."""
+    return (0, 2) if up_axis == "Y" else (0, 1)
+
+
+def facing_rotation(root_quats: np.ndarray, facing_axis: np.ndarray, up_axis: str = "Y") -> np.ndarray:
+    """The rotations about the up axis that take +X to the ground projection of the facing axis.
+
+    ``root_quats (..., 4)`` -> ``(..., 4)`` unit quaternions (the inverse turns a
+    pose to face +X), computed as the reference's ``quat_between``.
+    """
+    fwd = R.quat_rotate(root_quats, np.broadcast_to(facing_axis, root_quats.shape[:-1] + (3,)))
+    fwd = fwd.copy()
+    fwd[..., _AXES[up_axis]] = 0.0
+    norm = np.linalg.norm(fwd, axis=-1, keepdims=True)
+    fwd = fwd / np.where(norm > 0, norm, 1.0)
+    x = np.array([1.0, 0.0, 0.0])
+    q = np.concatenate([1.0 + fwd[..., :1], np.cross(np.broadcast_to(x, fwd.shape), fwd)], axis=-1)
+    # Facing exactly -X: half a turn about the up axis.
+    half = np.zeros(4)
+    half[1 + _AXES[up_axis]] = 1.0
+    q = np.where(np.linalg.norm(q, axis=-1, keepdims=True) < 1e-9, half, q)
+    return R.quat_normalize(q)
+
+
+def align_windows(
+    quats: np.ndarray,
+    root: np.ndarray,
+    facing_axis: np.ndarray | str = "+Y",
+    up_axis: str = "Y",
+    frame: int = N_PAST - 1,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centre each window on the ground and turn it to face +X on ``frame``.
+
+    Args:
+        quats: ``(W, T, J, 4)`` local quaternions.
+        root: ``(W, T, 3)`` root positions.
+        facing_axis: the root's local axis that points forward (``"+Y"`` as the reference).
+        up_axis: ``"Y"`` or ``"Z"``.
+        frame: the frame whose facing direction is aligned.
+
+    Returns:
+        New ``(quats, root)``: only the root rotation and position change.
+    """
+    if isinstance(facing_axis, str):
+        facing_axis = axis_vector(facing_axis)
+    root = np.array(root, dtype=np.float64)
+    h = list(horizontal_axes(up_axis))
+    root[..., h] -= root[..., h].mean(axis=1, keepdims=True)
+    turn = R.quat_conjugate(facing_rotation(quats[:, frame, 0], facing_axis, up_axis))[:, None]  # (W, 1, 4)
+    quats = np.array(quats, dtype=np.float64)
+    quats[:, :, 0] = R.quat_mul(turn, quats[:, :, 0])
+    root = R.quat_rotate(turn, root)
+    return quats, root
+
+
+def global_pose(quats: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
+    """Global ``(quats (..., J, 4), positions (..., J, 3))`` from local quats, root and constant offsets."""
+    pos = np.broadcast_to(offsets, root.shape[:-1] + offsets.shape).copy()
+    pos[..., 0, :] = root
+    return fk(quats, pos, parents)
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Training statistics of the protocol.
+
+    Attributes:
+        x_mean: ``(J * 3,)`` mean of every global joint coordinate.
+        x_std: ``(J * 3,)`` its standard deviation.
+    """
+
+    x_mean: np.ndarray
+    x_std: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"x_mean": self.x_mean.tolist(), "x_std": self.x_std.tolist()}
+
+
+def statistics(quats: np.ndarray, root: np.ndarray, skeleton: Skeleton) -> Statistics:
+    """Mean and standard deviation of global joint coordinates over aligned windows ``(W, T, ...)``."""
+    if len(quats) == 0:
+        raise DataError("no training windows for the statistics")
+    _, gpos = global_pose(quats, root, skeleton.offsets, skeleton.parents)
+    flat = gpos.reshape(-1, gpos.shape[-2] * 3)
+    return Statistics(flat.mean(axis=0), flat.std(axis=0))
+
+
+@dataclass(frozen=True, eq=False)
+class TestSet:
+    """Aligned test windows of one skeleton.
+
+    Attributes:
+        skeleton: names, parents and the constant ``offsets``.
+        quats: ``(W, T, J, 4)`` local quaternions.
+        root: ``(W, T, 3)`` root positions.
+        files: the clip file of each window.
+    """
+
+    skeleton: Skeleton
+    quats: np.ndarray
+    root: np.ndarray
+    files: tuple[str, ...] = ()
+
+
+# --- methods ---------------------------------------------------------------------------
+
+
+def zero_velocity(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys: np.ndarray):
+    """Hold the last context frame (``keys[-2]``) over the transition."""
+    last = keys[-2]
+    q, r = quats.copy(), root.copy()
+    q[:, last + 1 : keys[-1]] = quats[:, last : last + 1]
+    r[:, last + 1 : keys[-1]] = root[:, last : last + 1]
+    return q, r
+
+
+def interpolation(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys: np.ndarray):
+    """LERP the root and SLERP the local quaternions from the last context frame to the target."""
+    a, b = int(keys[-2]), int(keys[-1])
+    n = b - a - 1
+    w = np.linspace(0.0, 1.0, n + 2)[1:-1]  # (n,)
+    q, r = quats.copy(), root.copy()
+    r[:, a + 1 : b] = root[:, a : a + 1] + w[None, :, None] * (root[:, b : b + 1] - root[:, a : a + 1])
+    q0 = np.broadcast_to(quats[:, a : a + 1], (len(quats), n) + quats.shape[2:])
+    q1 = np.broadcast_to(quats[:, b : b + 1], q0.shape)
+    q[:, a + 1 : b] = R.quat_slerp(q0, q1, np.broadcast_to(w[None, :, None], q0.shape[:-1]))
+    return q, r
+
+
+def cubic(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys: np.ndarray):
+    """keyfill's C1 cubic spline through every given frame (:func:`keyfill.learn.baselines.cubic`)."""
+    from keyfill.learn.baselines import cubic as spline
+
+    q, r = quats.copy(), root.copy()
+    k = Keys(keys)
+    for i in range(len(quats)):
+        m = window_motion(skeleton, np.nan_to_num(quats[i]), np.nan_to_num(root[i]))
+        out = spline(m, k)
+        q[i], r[i] = out.rotations, out.positions[:, 0]
+    return q, r
+
+
+BASELINES: dict[str, Method] = {"zero-velocity": zero_velocity, "interpolation": interpolation, "cubic": cubic}
+#: method names accepted by :func:`resolve_method` -> baseline
+METHOD_NAMES = {"zero-velocity": "zero-velocity", "linear": "interpolation", "interpolation": "interpolation",
+                "cubic": "cubic"}
+
+
+def resolve_method(name_or_path: str, device: str = "cpu") -> tuple[str, Method]:
+    """``(label, method)`` for a baseline name or the path of a model file."""
+    if name_or_path in METHOD_NAMES:
+        label = METHOD_NAMES[name_or_path]
+        return label, BASELINES[label]
+    path = Path(name_or_path)
+    if not path.exists():
+        raise UsageError(
+            f"{name_or_path!r} is neither a method ({', '.join(sorted(METHOD_NAMES))}) nor a model file"
+        )
+    from keyfill.learn.transformer import load_model
+
+    return path.name, load_model(path, device).benchmark_method()
+
+
+def window_motion(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, fps: float = 30.0) -> Motion:
+    """A :class:`Motion` of one window: ``quats (T, J, 4)``, ``root (T, 3)``, constant offsets."""
+    pos = np.broadcast_to(skeleton.offsets, root.shape[:-1] + skeleton.offsets.shape).copy()
+    pos[:, 0] = root
+    return Motion(skeleton, fps, quats, pos)
+
+
+# --- scoring -----------------------------------------------------------------------------
+
+
+def evaluate(
+    methods: dict[str, Method],
+    test: TestSet,
+    stats: Statistics,
+    lengths: Sequence[int] = LENGTHS,
+    batch_size: int | None = None,
+) -> dict[str, dict[int, dict[str, float]]]:
+    """Score ``methods`` on ``test`` at each transition length.
+
+    Returns ``{method: {n: {"L2Q": ..., "L2P": ..., "NPSS": ...}}}``.
+
+    Raises:
+        UsageError: a length the test windows cannot hold (``n + 20`` frames
+        are needed, as in the reference, and at least one frame).
+    """
+    T = test.quats.shape[1]
+    for n in lengths:
+        if n < 1 or n + N_PAST + N_FUTURE > T:
+            raise UsageError(
+                f"transition length {n} does not fit: the protocol's test windows have {T} frames, "
+                f"which hold transitions of 1 to {T - N_PAST - N_FUTURE} frames (10 context + n + 10)"
+            )
+    if len(test.quats) == 0:
+        raise DataError("the test set has no windows")
+    skel = test.skeleton
+    out: dict[str, dict[int, dict[str, float]]] = {name: {} for name in methods}
+    for n in lengths:
+        T_n = N_PAST + n + 1
+        keys = np.append(np.arange(N_PAST), N_PAST + n)
+        gt_q, gt_r = test.quats[:, :T_n], test.root[:, :T_n]
+        given_q, given_r = gt_q.copy(), gt_r.copy()
+        given_q[:, N_PAST : N_PAST + n] = np.nan
+        given_r[:, N_PAST : N_PAST + n] = np.nan
+        trans = slice(N_PAST, N_PAST + n)
+        g_q, g_p = global_pose(gt_q[:, trans], gt_r[:, trans], skel.offsets, skel.parents)
+        for name, method in methods.items():
+            step = batch_size or len(gt_q)
+            parts = [method(skel, given_q[i : i + step], given_r[i : i + step], keys) for i in range(0, len(gt_q), step)]
+            p_q = np.concatenate([p[0] for p in parts])
+            p_r = np.concatenate([p[1] for p in parts])
+            if p_q.shape != gt_q.shape or p_r.shape != gt_r.shape:
+                raise ValueError(f"method {name!r} returned shapes {p_q.shape}, {p_r.shape}")
+            pr_q, pr_p = global_pose(p_q[:, trans], p_r[:, trans], skel.offsets, skel.parents)
+            out[name][n] = {
+                "L2Q": metrics.l2q(g_q, pr_q),
+                "L2P": metrics.l2p(g_p, pr_p, stats.x_mean, stats.x_std),
+                "NPSS": metrics.npss(g_q, pr_q),
+            }
+    return out
+
+
+# --- the protocol from BVH files ----------------------------------------------------
+
+
+def _matches(name: str, patterns: Sequence[str]) -> bool:
+    return any(fnmatch.fnmatch(name, p) for p in patterns)
+
+
+@dataclass
+class Protocol:
+    """The prepared LaFAN1 protocol: aligned test windows, training statistics, a summary."""
+
+    test: TestSet
+    stats: Statistics
+    info: dict = field(default_factory=dict)
+
+
+def split(corpus: Corpus, test_patterns: Sequence[str], train_patterns: Sequence[str] = ()) -> tuple[Corpus, Corpus]:
+    """``(train, test)`` clips by file-name patterns (test: any of ``test_patterns``).
+
+    Training clips are those matching ``train_patterns`` or, when none are
+    given, all clips that are not test clips.
+    """
+    names = [Path(f).name for f in corpus.files]
+    test_idx = [i for i, n in enumerate(names) if _matches(n, test_patterns)]
+    if train_patterns:
+        train_idx = [i for i, n in enumerate(names) if _matches(n, train_patterns)]
+        both = sorted(set(train_idx) & set(test_idx))
+        if both:
+            raise UsageError(f"{names[both[0]]} matches both a training and a test pattern")
+    else:
+        train_idx = [i for i in range(len(names)) if i not in set(test_idx)]
+    if not test_idx:
+        raise DataError(f"no clip matches the test pattern {', '.join(test_patterns)}")
+    if not train_idx:
+        raise DataError("no clips left for training statistics")
+    return corpus.subset(train_idx), corpus.subset(test_idx)
+
+
+def prepare(
+    corpus: Corpus,
+    test_patterns: Sequence[str],
+    train_patterns: Sequence[str] = (),
+    facing_axis: str = "+Y",
+) -> Protocol:
+    """Split ``corpus``, cut and align the windows, and compute the statistics."""
+    train, test = split(corpus, test_patterns, train_patterns)
+    up = corpus.skeleton.up_axis
+    tq, tr, _, t_skip = train.windows(STATS_WINDOW, STATS_OFFSET)
+    if len(tq) == 0:
+        raise DataError(f"no training clip is longer than {STATS_WINDOW} frames, the protocol's statistics window")
+    tq, tr = align_windows(tq, tr, facing_axis, up)
+    stats = statistics(tq, tr, corpus.skeleton)
+    q, r, clip_of, s_skip = test.windows(TEST_WINDOW, TEST_OFFSET)
+    if len(q) == 0:
+        raise DataError(f"no test clip is longer than {TEST_WINDOW} frames, the protocol's test window")
+    q, r = align_windows(q, r, facing_axis, up)
+    info = {
+        "train_clips": len(train),
+        "test_clips": len(test),
+        "train_windows": int(len(tq)),
+        "test_windows": int(len(q)),
+        "train_clips_too_short": t_skip,
+        "test_clips_too_short": s_skip,
+        "folded_root": corpus.folded,
+        "facing_axis": facing_axis,
+    }
+    files = tuple(test.files[c] for c in clip_of)
+    return Protocol(TestSet(corpus.skeleton, q, r, files), stats, info)
+
+
+def lafan1(
+    paths: Sequence[str | Path],
+    test_patterns: Sequence[str],
+    train_patterns: Sequence[str] = (),
+    fold: bool | None = None,
+    facing_axis: str = "+Y",
+    cache: bool = True,
+    progress=None,
+) -> Protocol:
+    """Prepare the LaFAN1 protocol from folders of BVH files (see :func:`prepare`)."""
+    corpus = load_corpus(paths, fold=fold, cache=cache, progress=progress)
+    return prepare(corpus, test_patterns, train_patterns, facing_axis)
+
+
+def format_table(results: dict[str, dict[int, dict[str, float]]], reference: str | None = "interpolation") -> str:
+    """The familiar table: one row per method, L2Q / L2P / NPSS at each transition length.
+
+    With ``reference`` among several methods, a second block gives every other
+    method's scores divided by the reference's.
+    """
+    lengths = sorted({n for r in results.values() for n in r})
+    names = list(results)
+    width = max(len(n) for n in names + ["relative to " + str(reference)])
+    cell = {"L2Q": 7, "L2P": 7, "NPSS": 8}
+    digits = {"L2Q": 4, "L2P": 4, "NPSS": 5}
+
+    def block(metric, values):
+        return " ".join(f"{v:{cell[metric]}.{digits[metric]}f}" for v in values)
+
+    def header(label, fill):
+        return f"{label:{width}} " + "  ".join(
+            " ".join(f"{fill(m, n):>{cell[m]}}" for n in lengths) for m in ("L2Q", "L2P", "NPSS"))
+
+    lines = [
+        f"{'':{width}} " + "  ".join(f"{m:<{(cell[m] + 1) * len(lengths) - 1}}" for m in ("L2Q", "L2P", "NPSS")),
+        header("transition length", lambda m, n: n) if width >= 17 else header("length", lambda m, n: n),
+    ]
+    for name in names:
+        lines.append(f"{name:{width}} " + "  ".join(block(m, [results[name][n][m] for n in lengths])
+                                                    for m in ("L2Q", "L2P", "NPSS")))
+    if reference in results and len(names) > 1:
+        lines.append(f"relative to {reference}")
+        for name in names:
+            if name != reference:
+                lines.append(f"{name:{width}} " + "  ".join(
+                    block(m, [results[name][n][m] / results[reference][n][m] for n in lengths])
+                    for m in ("L2Q", "L2P", "NPSS")))
+    return "\n".join(lines)

@@ -84,7 +84,7 @@ def test_bvhio_comparison_can_fail(tmp_path):
     """The check above is not vacuous: one changed channel value is caught."""
     motion = io.load(DATA / "bvhtoolbox_test_freebvh_mixamo.bvh")
     rot = motion.rotations.copy()
-    rot[5, 1] = [np.cos(0.05), 0, np.sin(0.05), 0]  # the first spine joint turned 0.1 rad at frame 5
+    rot[5, 1] = [np.cos(0.05), 0, np.sin(0.05), 0]  # frame 5: the first spine joint's rotation replaced by 0.1 rad about Y
     io.save(motion.replace(rotations=rot), tmp_path / "changed.bvh")
     theirs = bvhio_world_positions(tmp_path / "changed.bvh", motion.skeleton.names)
     dev = np.abs(theirs - motion.world_positions()).max(axis=(1, 2))
@@ -124,7 +124,7 @@ def test_blender_imports_keyfill_output_with_same_world_positions(blender, name,
 @pytest.mark.interop
 @pytest.mark.parametrize("suffix", [".bvh", ".usda"])
 def test_blender_comparison_can_fail(blender, suffix, tmp_path):
-    """A file whose Hips turn 0.1 rad more at frame 5 is caught at frame 5 only."""
+    """A file whose Hips rotation at frame 5 is replaced (0.1 rad about Y) is caught at frame 5 only."""
     motion = io.load(fixture("dataset-1_walk_normal_002.bvh"))
     rot = motion.rotations.copy()
     rot[5, 1] = [np.cos(0.05), 0, np.sin(0.05), 0]

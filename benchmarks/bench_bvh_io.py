@@ -116,14 +116,25 @@ def concatenated_bvh(min_bytes: int | None = None, frames: int | None = None) ->
     return path
 
 
+def median_times(fn, repeat: int) -> tuple[float, float, object]:
+    """Median wall and CPU time (seconds) of ``repeat`` calls of ``fn()``, and the last result.
+
+    On a shared machine the CPU time (this process's user + system time) is
+    the steadier figure; the wall time is the one a user waits.
+    """
+    walls, cpus, result = [], [], None
+    for _ in range(repeat):
+        start, cpu = time.perf_counter(), time.process_time()
+        result = fn()
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - cpu)
+    return statistics.median(walls), statistics.median(cpus), result
+
+
 def median_time(fn, repeat: int) -> tuple[float, object]:
     """Median wall time of ``repeat`` calls of ``fn()`` (seconds) and the last result."""
-    times, result = [], None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
+    wall, _, result = median_times(fn, repeat)
+    return wall, result
 
 
 def machine() -> str:
@@ -158,19 +169,19 @@ def run(repeat: int, with_bvh: bool, out_dir: Path) -> dict:
     raw = path.read_bytes()  # also warms the page cache
     rows: dict[str, dict] = {}
 
-    def row(name, seconds, nbytes, **extra):
-        rows[name] = {"seconds": seconds, "mb_per_s": nbytes / 1e6 / seconds, **extra}
+    def row(name, seconds, cpu, nbytes, **extra):
+        rows[name] = {"seconds": seconds, "cpu_seconds": cpu, "mb_per_s": nbytes / 1e6 / seconds, **extra}
 
-    t, motion = median_time(lambda: kbvh.read(path), repeat)
-    row("keyfill read", t, size)
-    t, values = median_time(lambda: numpy_floor(raw), repeat)
+    t, c, motion = median_times(lambda: kbvh.read(path), repeat)
+    row("keyfill read", t, c, size)
+    t, c, values = median_times(lambda: numpy_floor(raw), repeat)
     if values.shape != (motion.num_frames, motion.skeleton.num_channels):
         raise AssertionError(f"numpy floor parsed {values.shape}")
-    row("numpy loadtxt (floor)", t, size)
-    t, container = median_time(lambda: bvhio.readAsBvh(str(path)), repeat)
+    row("numpy loadtxt (floor)", t, c, size)
+    t, c, container = median_times(lambda: bvhio.readAsBvh(str(path)), repeat)
     if len(container.Root.Keyframes) != motion.num_frames:
         raise AssertionError("bvhio read another number of frames")
-    row("bvhio readAsBvh", t, size)
+    row("bvhio readAsBvh", t, c, size)
     try:
         import bvh as bvh_pkg
     except ImportError:
@@ -182,17 +193,17 @@ def run(repeat: int, with_bvh: bool, out_dir: Path) -> dict:
             mocap = bvh_pkg.Bvh(path.read_text())
             return np.asarray(mocap.frames, dtype=np.float64)
 
-        t, frames = median_time(bvh_read, repeat)
+        t, c, frames = median_times(bvh_read, repeat)
         if frames.shape != values.shape:
             raise AssertionError(f"bvh parsed {frames.shape}")
-        row("bvh Bvh() + floats", t, size)
+        row("bvh Bvh() + floats", t, c, size)
 
     out = out_dir / "keyfill_written.bvh"
-    t, _ = median_time(lambda: kbvh.write(motion, out), repeat)
-    row("keyfill write", t, out.stat().st_size, bytes=out.stat().st_size)
+    t, c, _ = median_times(lambda: kbvh.write(motion, out), repeat)
+    row("keyfill write", t, c, out.stat().st_size, bytes=out.stat().st_size)
     out_bvhio = out_dir / "bvhio_written.bvh"
-    t, _ = median_time(lambda: bvhio.writeBvh(str(out_bvhio), container), repeat)
-    row("bvhio writeBvh", t, out_bvhio.stat().st_size, bytes=out_bvhio.stat().st_size)
+    t, c, _ = median_times(lambda: bvhio.writeBvh(str(out_bvhio), container), repeat)
+    row("bvhio writeBvh", t, c, out_bvhio.stat().st_size, bytes=out_bvhio.stat().st_size)
 
     read = rows["keyfill read"]
     for r in rows.values():
@@ -235,9 +246,9 @@ def main(argv: list[str]) -> int:
         return 0
     print(f"{result['file']}: {result['bytes'] / 1e6:.1f} MB, {result['frames']} frames, "
           f"{result['joints']} joints, {result['channels']} channels; median of {args.repeat}")
-    print(f"{'':24s} {'seconds':>8s} {'MB/s':>7s} {'x keyfill read':>15s}")
+    print(f"{'':24s} {'seconds':>8s} {'cpu s':>7s} {'MB/s':>7s} {'x keyfill read':>15s}")
     for name, r in result["rows"].items():
-        print(f"{name:24s} {r['seconds']:8.3f} {r['mb_per_s']:7.1f} {r['x_keyfill_read']:15.2f}")
+        print(f"{name:24s} {r['seconds']:8.3f} {r['cpu_seconds']:7.3f} {r['mb_per_s']:7.1f} {r['x_keyfill_read']:15.2f}")
     for name, g in result["goals"].items():
         print(f"goal {name}: {g['value']:.1f} (goal >= {g['goal']:g}) {'met' if g['met'] else 'MISSED'}")
     print(f"machine: {result['machine']}; load average before {load_before}, after {result['load_average']['after']}")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import tempfile
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_bvh_io import Skipped, concatenated_bvh, load_average, machine, median_time
+from bench_bvh_io import Skipped, concatenated_bvh, load_average, machine, median_times
 
 GOAL_SECONDS = 1.0
 FRAMES = 10_000
@@ -40,13 +41,16 @@ def keyfill_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "keyfill"]
 
 
-def timed_run(cmd: list[str]) -> float:
+def timed_run(cmd: list[str]) -> tuple[float, float]:
+    """Wall time and CPU time (user + system of the child) of running ``cmd``, in seconds."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     seconds = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed (exit {proc.returncode}): {proc.stderr.strip()}")
-    return seconds
+    return seconds, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def run(repeat: int, out_dir: Path) -> dict:
@@ -58,8 +62,8 @@ def run(repeat: int, out_dir: Path) -> dict:
     dst = out_dir / "completed.bvh"
     cmd = keyfill_command() + ["complete", str(src), "-o", str(dst), "--method", "cubic", "--key-every", str(KEY_EVERY)]
 
-    e2e = [timed_run(cmd) for _ in range(repeat)]
-    startup = [timed_run(keyfill_command() + ["complete", "--help"]) for _ in range(repeat)]
+    e2e, e2e_cpu = zip(*[timed_run(cmd) for _ in range(repeat)])
+    startup, startup_cpu = zip(*[timed_run(keyfill_command() + ["complete", "--help"]) for _ in range(repeat)])
 
     # The result is real: every frame is there and the key frames are the input's.
     motion = io.load(src)
@@ -70,10 +74,10 @@ def run(repeat: int, out_dir: Path) -> dict:
     if written.num_frames != motion.num_frames or key_error > 1e-6 * height:
         raise AssertionError(f"the completed file is wrong: {written.num_frames} frames, key error {key_error}")
 
-    t_read, motion = median_time(lambda: io.load(src), repeat)
-    t_compute, result = median_time(lambda: complete(motion, keys, "cubic"), repeat)
+    t_read, c_read, motion = median_times(lambda: io.load(src), repeat)
+    t_compute, c_compute, result = median_times(lambda: complete(motion, keys, "cubic"), repeat)
     lib_out = out_dir / "library.bvh"
-    t_write, _ = median_time(lambda: io.save(result.motion, lib_out), repeat)
+    t_write, c_write, _ = median_times(lambda: io.save(result.motion, lib_out), repeat)
     t_e2e, t_startup = float(np.median(e2e)), float(np.median(startup))
     return {
         "command": " ".join(["keyfill"] + cmd[len(keyfill_command()):]),
@@ -82,13 +86,20 @@ def run(repeat: int, out_dir: Path) -> dict:
         "output_bytes": dst.stat().st_size,
         "repeat": repeat,
         "end_to_end_seconds": t_e2e,
-        "end_to_end_runs": e2e,
+        "end_to_end_runs": list(e2e),
+        "end_to_end_cpu_seconds": float(np.median(e2e_cpu)),
         "split_seconds": {
             "start-up (keyfill complete --help)": t_startup,
             "read (io.load)": t_read,
             "compute (complete, cubic)": t_compute,
             "write (io.save)": t_write,
             "rest (end to end minus the above)": t_e2e - t_startup - t_read - t_compute - t_write,
+        },
+        "split_cpu_seconds": {
+            "start-up (keyfill complete --help)": float(np.median(startup_cpu)),
+            "read (io.load)": c_read,
+            "compute (complete, cubic)": c_compute,
+            "write (io.save)": c_write,
         },
         "goal": {"seconds": GOAL_SECONDS, "met": t_e2e < GOAL_SECONDS},
     }
@@ -115,10 +126,12 @@ def main(argv: list[str]) -> int:
     print(f"{result['command']}")
     print(f"input: {inp['frames']} frames, {inp['joints']} joints, {inp['bytes'] / 1e6:.1f} MB, {inp['keys']} keys; "
           f"output {result['output_bytes'] / 1e6:.1f} MB; median of {args.repeat}")
-    print(f"end to end: {result['end_to_end_seconds']:.3f} s "
+    print(f"end to end: {result['end_to_end_seconds']:.3f} s, CPU {result['end_to_end_cpu_seconds']:.3f} s "
           f"(runs: {', '.join(f'{t:.3f}' for t in result['end_to_end_runs'])})")
+    print(f"  {'':36s} {'wall s':>7s} {'cpu s':>7s}")
     for name, seconds in result["split_seconds"].items():
-        print(f"  {name:36s} {seconds:6.3f} s")
+        cpu = result["split_cpu_seconds"].get(name)
+        print(f"  {name:36s} {seconds:7.3f} {'' if cpu is None else f'{cpu:7.3f}'}")
     goal = result["goal"]
     print(f"goal: under {goal['seconds']:g} s: {'met' if goal['met'] else 'MISSED'}")
     print(f"machine: {result['machine']}; load average before {load_before}, after {result['load_average']['after']}")

@@ -307,7 +307,7 @@ def plot(
 
 
 #: fixed figure layout in inches (a layout engine would cost half the drawing time)
-_PANEL_HEIGHT, _ROW_GAP, _TOP, _BOTTOM = 1.05, 0.42, 0.42, 0.55
+_PANEL_HEIGHT, _ROW_GAP, _TOP, _BOTTOM = 1.05, 0.42, 0.5, 0.55
 _PANEL_WIDTH = {1: 6.4, 2: 4.7, 3: 3.7}
 _LEFT, _RIGHT, _COLUMN_GAP = 0.75, 0.2, 0.85
 
@@ -326,11 +326,11 @@ def _figure(style, nrows: int, ncols: int):
 
 
 def _layout(joints: list[str | None]) -> list[tuple[int, int]]:
-    """(row, column) of each panel: one column per joint for up to 4 joints of up to
-    8 panels each, else panels down the columns (1 column up to 6 panels, 2 up to 16, else 3)."""
+    """(row, column) of each panel: one column per joint for 2 to 4 joints of up to 8 panels
+    (some with 2 or more), else panels down the columns (1 column up to 6 panels, 2 up to 16, else 3)."""
     groups = list(dict.fromkeys(joints))
     sizes = [joints.count(g) for g in groups]
-    if 1 < len(groups) <= 4 and max(sizes) <= 8 and None not in groups:
+    if 1 < len(groups) <= 4 and 2 <= max(sizes) <= 8 and None not in groups:
         seen = {g: 0 for g in groups}
         cells = []
         for g in joints:

@@ -19,8 +19,9 @@ it goes, so travel runs left to right in the side view):
 * ``3d``: turned 35 degrees from the side view towards the front, 22 degrees from above.
 
 The framing is fixed for the whole output, from the bounding box of every
-frame (and the ground below it), so poses never jump. The ground is a line
-for planar motions (the hopping lamp) and a grid otherwise. Keys
+frame (and the ground below it), so poses never jump. The ground is a grid,
+or a line in the side and front views and for planar figures (the hopping
+lamp). Keys
 (``Motion.keys``) are ghosted poses in pink: in animations and filmstrips the
 keys just before and after the current frame, in a trail still all keys.
 A trail ("motion curve", Ciccone et al. 2019) is a joint's world path with a
@@ -218,41 +219,41 @@ def nice_step(span: float, count: int = 8) -> float:
     return 10 * power
 
 
-def ground_segments(points: np.ndarray, up_axis: str, h: np.ndarray, planar: bool) -> tuple[np.ndarray, float]:
-    """3D segments ``(S, 2, 3)`` of the ground under ``points`` (F, P, 3), and the ground height.
+def ground_segments(points: np.ndarray, up_axis: str, along: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """3D segments ``(S, 2, 3)`` of the ground under ``points`` (N, 3), and the ground height.
 
     The ground is at height 0 when the lowest point is close to it, else at
-    the lowest point. A line along ``h`` for planar motions, else a grid.
+    the lowest point. It is a line in the ground direction ``along`` (a unit
+    vector) through the middle of the points, or a grid of round spacing when
+    ``along`` is None; either reaches 15% of the motion's size beyond it.
     """
     u = _up_index(up_axis)
-    flat = points.reshape(-1, 3)
-    lo, hi = float(flat[:, u].min()), float(flat[:, u].max())
+    lo, hi = float(points[:, u].min()), float(points[:, u].max())
     height = max(hi - lo, 1e-9)
     level = 0.0 if -0.02 * height <= lo <= 0.25 * height else lo
     g = [a for a in range(3) if a != u]
-    mins, maxs = flat[:, g].min(axis=0), flat[:, g].max(axis=0)
+    mins, maxs = points[:, g].min(axis=0), points[:, g].max(axis=0)
     span = max(float((maxs - mins).max()), height)
     margin = 0.15 * span
-    mins, maxs = mins - margin, maxs + margin
-    if planar:
-        hi_ = int(np.argmax(np.abs(h)))
-        a, b = g.index(hi_), 1 - g.index(hi_)
-        depth = float(flat[:, g[b]].mean())
-        seg = np.zeros((1, 2, 3))
-        seg[0, :, u] = level
-        seg[0, :, g[a]] = (mins[a], maxs[a])
-        seg[0, :, g[b]] = depth
-        return seg, level
-    step = nice_step(span, 10)
+    if along is not None:
+        center = points.mean(axis=0)
+        center[u] = level
+        proj = (points - center) @ along
+        ends = [center + (proj.min() - margin) * along, center + (proj.max() + margin) * along]
+        return np.array(ends)[None], level
+    # A grid at least two thirds of the motion's size wide on both axes (a walk
+    # along one axis still stands on a floor, not a strip).
+    mid, half = (mins + maxs) / 2, np.maximum((maxs - mins) / 2, span / 3) + margin
+    mins, maxs = mid - half, mid + half
+    step = nice_step(span, 6)
     segs = []
     for k in range(2):
-        lines = np.arange(math.ceil(mins[k] / step), math.floor(maxs[k] / step) + 1) * step
-        for x in lines:
-            s = np.zeros((2, 3))
-            s[:, u] = level
-            s[:, g[k]] = x
-            s[:, g[1 - k]] = (mins[1 - k], maxs[1 - k])
-            segs.append(s)
+        for x in np.arange(math.ceil(mins[k] / step), math.floor(maxs[k] / step) + 1) * step:
+            seg = np.zeros((2, 3))
+            seg[:, u] = level
+            seg[:, g[k]] = x
+            seg[:, g[1 - k]] = (mins[1 - k], maxs[1 - k])
+            segs.append(seg)
     return np.array(segs).reshape(-1, 2, 3), level
 
 
@@ -314,8 +315,18 @@ class StickRenderer:
         h = travel_axis(first.points, first.used, up_axis)
         self.camera = make_camera(view, h, up_axis)
         drawn = np.concatenate([f.points[:, f.used].reshape(-1, 3) for f in self.figs])
-        planar = all(is_planar(f.points, f.used) for f in self.figs)
-        ground, level = ground_segments(drawn[None], up_axis, h, planar)
+        # The ground: a line where a grid would collapse to one (level views) or for
+        # planar figures (the lamp), else a grid.
+        u = np.zeros(3)
+        u[_up_index(up_axis)] = 1.0
+        if abs(self.camera.up @ u) > 1 - 1e-9:
+            along = self.camera.right
+        elif all(is_planar(f.points, f.used) for f in self.figs):
+            along = h
+        else:
+            along = None
+        ground, level = ground_segments(drawn, up_axis, along)
+        self.ground, self.ground_is_grid = ground, along is None
         # Framing: every drawn point of every frame, and its foot on the ground.
         feet = drawn.copy()
         feet[:, _up_index(up_axis)] = level
@@ -349,7 +360,8 @@ class StickRenderer:
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         self.fig, self.ax = fig, ax
-        ax.add_collection(LineCollection(self.camera.project(ground), colors=st.GROUND_COLOR, linewidths=0.8 * s,
+        ground_color = st.GRID_COLOR if self.ground_is_grid else st.GROUND_COLOR
+        ax.add_collection(LineCollection(self.camera.project(ground), colors=ground_color, linewidths=max(0.8 * s, 0.75),
                                          zorder=0))
         self.ghost = ax.add_collection(LineCollection([], colors=st.KEY_COLOR, alpha=0.35, linewidths=0.85 * lw,
                                                       capstyle="round", joinstyle="round", zorder=3, animated=True))
@@ -433,7 +445,7 @@ class StickRenderer:
 
         st = self.style
         key = np.array(to_rgb(st.KEY_COLOR))
-        flat = [(1.0, 1.0, 1.0), to_rgb(st.TEXT_COLOR), to_rgb(st.GROUND_COLOR), tuple(key),
+        flat = [(1.0, 1.0, 1.0), to_rgb(st.TEXT_COLOR), to_rgb(st.GROUND_COLOR), to_rgb(st.GRID_COLOR), tuple(key),
                 tuple(0.35 * key + 0.65), (0.843, 0.843, 0.843)]
         for colors in self.colors:
             flat += [to_rgb(c) for c in ([colors] if isinstance(colors, str) else colors)]

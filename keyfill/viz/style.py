@@ -20,6 +20,7 @@ FILE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf",
 #: keys: ghosted key poses and key markers in previews (pink, as in Zhou et al. 2020)
 KEY_COLOR = "#e7298a"
 GROUND_COLOR = "#b0b0b0"
+GRID_COLOR = "#d2d2d2"
 TEXT_COLOR = "#333333"
 
 #: rc settings for every picture: a font that ships with matplotlib (same

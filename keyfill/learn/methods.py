@@ -19,6 +19,7 @@ from keyfill.motion import Keys, Motion
 METHODS: dict[str, str] = {
     "linear": "keyfill.learn.methods:_linear",
     "cubic": "keyfill.learn.methods:_cubic",
+    "transformer": "keyfill.learn.transformer:complete_method",
 }
 #: methods that need no model file
 SPLINES = ("linear", "cubic")

@@ -1,0 +1,92 @@
+"""``keyfill evaluate``: score an in-betweening method or model with a benchmark protocol."""
+
+from __future__ import annotations
+
+import click
+
+from keyfill.cli.common import emit_json, progress, say
+from keyfill.errors import UsageError
+
+
+def _lengths(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(t) for t in text.replace(" ", "").split(",") if t)
+    except ValueError:
+        raise UsageError(f"--lengths takes transition lengths separated by commas, like 5,15,30; got {text!r}") from None
+    if not values:
+        raise UsageError("--lengths needs at least one transition length")
+    return values
+
+
+def _lafan1(method_or_model, data, test_pattern, train_pattern, lengths, fold_root, facing_axis, baselines, device):
+    """The LaFAN1 protocol: returns (results, summary)."""
+    from keyfill.learn import benchmark
+
+    label, method = benchmark.resolve_method(method_or_model, device)
+    methods = {label: method}
+    if baselines:
+        for name in ("zero-velocity", "interpolation"):
+            methods.setdefault(name, benchmark.BASELINES[name])
+    proto = benchmark.lafan1(
+        data,
+        test_pattern or benchmark.LAFAN1_TEST_PATTERNS,
+        train_pattern,
+        fold=fold_root,
+        facing_axis=facing_axis,
+        progress=lambda files: progress(files, desc="reading clips", unit="file"),
+    )
+    return benchmark.evaluate(methods, proto.test, proto.stats, lengths), proto.info
+
+
+#: protocol name -> function; a new protocol is one more entry and one library call.
+PROTOCOLS = {"lafan1": _lafan1}
+
+
+@click.command()
+@click.argument("method_or_model")
+@click.argument("data", nargs=-1, required=True, type=click.Path(exists=True))
+@click.option("--protocol", type=click.Choice(sorted(PROTOCOLS)), default="lafan1", show_default=True,
+              help="Benchmark protocol. lafan1: Harvey et al. 2020 (L2Q, L2P, NPSS).")
+@click.option("--test-pattern", multiple=True, metavar="GLOB",
+              help="Test clips: file names matching any of these shell patterns (repeatable). "
+                   "Default: *subject5*, LaFAN1's test subject.")
+@click.option("--train-pattern", multiple=True, metavar="GLOB",
+              help="Clips for the training statistics (repeatable). Default: every clip that is not a test clip.")
+@click.option("--lengths", default="5,15,30,45", show_default=True, metavar="LIST",
+              help="Transition lengths to score (at most 45 with the protocol's 65-frame test windows).")
+@click.option("--fold-root/--no-fold-root", default=None,
+              help="Fold a static top joint (like Bandai's joint_Root) into the hips. Default: when it is static.")
+@click.option("--facing-axis", default="+Y", show_default=True, metavar="AXIS",
+              help="The root joint's local axis that points forward (+Y as in the reference code).")
+@click.option("--baselines/--no-baselines", default=True, show_default=True,
+              help="Also score the zero-velocity and interpolation baselines.")
+@click.option("--device", default="cpu", show_default=True, help="Torch device for a model.")
+@click.option("--json", "as_json", is_flag=True, help="Print the scores as JSON on stdout.")
+def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengths, fold_root, facing_axis,
+             baselines, device, as_json):
+    """Score METHOD_OR_MODEL on the BVH clips in DATA (files or folders).
+
+    METHOD_OR_MODEL is zero-velocity, linear (the protocol's interpolation:
+    LERP of the root, SLERP of rotations), cubic, or the path of a model file
+    written by 'keyfill train'. Test and training clips are chosen by file
+    name; the table shows L2Q, L2P and NPSS over the transition frames, and the
+    scores relative to interpolation.
+
+    \b
+    Examples:
+      keyfill evaluate linear lafan1/ --lengths 5,15,30
+      keyfill evaluate model.safetensors bandai1/data --test-pattern '*_happy_*' \\
+          --test-pattern '*_tired_*' --fold-root
+      keyfill evaluate cubic bandai2/data --test-pattern '*_normal_*' --json
+    """
+    from keyfill.learn import benchmark
+
+    results, info = PROTOCOLS[protocol](method_or_model, data, test_pattern, train_pattern, _lengths(lengths),
+                                        fold_root, facing_axis, baselines, device)
+    if as_json:
+        emit_json({"protocol": protocol, "method": method_or_model, **info,
+                   "results": {m: {str(n): v for n, v in r.items()} for m, r in results.items()}})
+        return
+    say(f"{protocol}: {info['test_windows']} test windows from {info['test_clips']} clips, "
+        f"statistics from {info['train_windows']} windows of {info['train_clips']} clips")
+    click.echo(benchmark.format_table(results))

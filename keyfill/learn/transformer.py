@@ -1,0 +1,601 @@
+"""The motion-completion transformer (Duan et al. 2021, "Single-Shot Motion Completion with Transformer").
+
+Every missing frame is predicted in one forward pass (section 3 of the paper):
+
+1. Frames are *key* (given), *unknown* (to fill) or *ignored* (padding; no
+   loss): :func:`frame_kinds`. Unknown frames are pre-filled by LERP of the root
+   and SLERP of the local rotations between the nearest keys (:func:`prefill`).
+2. Each frame becomes a feature vector (:class:`Features`): in ``global``
+   coordinates (the paper's best variant) the normalised global positions and
+   the global quaternions of all joints; in ``local`` coordinates the
+   normalised root position and the local quaternions.
+3. A Conv1d (kernel 3) turns the sequence into tokens; the *mixture embedding*
+   (a learnable position embedding plus a learnable keyframe embedding chosen
+   by the frame's kind) is added; a BERT encoder (``torch.nn.TransformerEncoder``,
+   post-norm, GELU; 8 layers, d_model 256, FFN 512, 8 heads by default)
+   processes all frames; a Conv1d (kernel 3) maps back to features. With
+   ``residual`` (keyfill's default) that output is added to the pre-filled input,
+   so the network learns a correction of the interpolation; ``residual=False``
+   is the paper's plain output.
+4. Global predictions go back to local rotations by the simplest IK (each
+   joint's rotation relative to its parent) and the standard bone offsets; the
+   root position is the predicted one.
+
+Windows are put in a canonical frame before they reach the network
+(:func:`canonical_transform`): centred on the mean ground position of the
+root over the *key* frames and turned so that the root faces +X on the anchor
+key (the last key before the first unknown frame). Outputs are turned back.
+
+Losses (Eqs. 12-15): L1 reconstruction of positions (normalised) and
+quaternions over key and unknown frames, plus a kinematics loss: in global
+coordinates the IK loss (bone offsets recovered from predicted global
+positions and rotations against the true offsets), in local coordinates the FK
+loss (global positions by forward kinematics against the truth).
+
+A model file is one ``.safetensors`` file: the weights, and in its metadata a
+JSON description (architecture, the skeleton it serves: joint names, parents,
+offsets; the normalisation statistics). :func:`load_model` refuses anything
+else without executing code from it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from keyfill import rotations as R
+from keyfill.errors import ModelError
+from keyfill.kinematics import fk
+from keyfill.learn.baselines import segment_coordinates
+from keyfill.learn.benchmark import axis_vector, facing_rotation, horizontal_axes
+from keyfill.motion import Skeleton
+
+KEY, UNKNOWN, IGNORED = 0, 1, 2
+FORMAT = "keyfill-transformer"
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Architecture and representation of a :class:`MotionTransformer`.
+
+    Attributes:
+        coordinates: ``"global"`` or ``"local"`` features and prediction.
+        layers, d_model, heads, ffn, dropout: the BERT encoder.
+        max_frames: length of the learnable position embedding (longest window).
+        residual: add the network's output to the pre-filled input.
+        kinematics_weight: weight of the IK loss (global) or FK loss (local).
+        facing_axis: the root's local forward axis, for the canonical frame.
+    """
+
+    coordinates: str = "global"
+    layers: int = 8
+    d_model: int = 256
+    heads: int = 8
+    ffn: int = 512
+    dropout: float = 0.1
+    max_frames: int = 65
+    residual: bool = True
+    kinematics_weight: float = 0.01
+    facing_axis: str = "+Y"
+
+    def __post_init__(self):
+        if self.coordinates not in ("global", "local"):
+            raise ModelError(f"coordinates must be 'global' or 'local', not {self.coordinates!r}")
+        if self.d_model % self.heads:
+            raise ModelError(f"d_model {self.d_model} is not a multiple of heads {self.heads}")
+        axis_vector(self.facing_axis)
+
+
+# --- key layouts ----------------------------------------------------------------
+
+
+def frame_kinds(num_frames: int, keys) -> np.ndarray:
+    """``(T,)`` int: KEY at key frames, UNKNOWN between the first and last key, IGNORED outside."""
+    keys = np.asarray(keys, dtype=np.int64)
+    kinds = np.full(num_frames, IGNORED, dtype=np.int64)
+    if len(keys):
+        kinds[keys[0] : keys[-1] + 1] = UNKNOWN
+        kinds[keys] = KEY
+    return kinds
+
+
+def anchor_frame(keys) -> int:
+    """The key whose facing defines the canonical frame: the last key before the first unknown frame."""
+    keys = np.asarray(keys)
+    gaps = np.flatnonzero(np.diff(keys) > 1)
+    return int(keys[gaps[0]] if len(gaps) else keys[0])
+
+
+def prefill(quats, root, keys):
+    """LERP the root and SLERP local quaternions between the nearest keys (numpy or torch).
+
+    ``quats (..., T, J, 4)``, ``root (..., T, 3)``; frames outside the keys hold
+    the nearest key. Only key frames are read.
+    """
+    T = quats.shape[-3]
+    k = np.asarray(keys, dtype=np.int64)
+    s, u = segment_coordinates(T, k)
+    a, b = k[s], k[s + 1]
+    xp = R._xp(quats)
+    uu = u if xp is np else xp.as_tensor(u, dtype=quats.dtype, device=quats.device)
+    r = root[..., a, :] + uu[:, None] * (root[..., b, :] - root[..., a, :])
+    q0, q1 = quats[..., a, :, :], quats[..., b, :, :]
+    q = R.quat_slerp(q0, q1, uu[:, None] + 0 * q0[..., 0])
+    if xp is np:
+        q[..., k, :, :] = quats[..., k, :, :]
+        r[..., k, :] = root[..., k, :]
+    else:
+        q = q.clone()
+        r = r.clone()
+        q[..., k, :, :] = quats[..., k, :, :]
+        r[..., k, :] = root[..., k, :]
+    return q, r
+
+
+def canonical_transform(quats: np.ndarray, root: np.ndarray, keys, facing_axis: str, up_axis: str = "Y"):
+    """``(turn (B, 4), shift (B, 3))`` that put windows in the model's canonical frame.
+
+    ``shift`` is the mean ground position of the root over the key frames,
+    ``turn`` rotates about the up axis so that the root faces +X on the anchor
+    key. Canonical root = ``turn * (root - shift)``, root rotation = ``turn * q``.
+    """
+    keys = np.asarray(keys)
+    shift = np.zeros(root.shape[:1] + (3,))
+    h = list(horizontal_axes(up_axis))
+    shift[:, h] = root[:, keys][..., h].mean(axis=1)
+    turn = R.quat_conjugate(facing_rotation(quats[:, anchor_frame(keys), 0], axis_vector(facing_axis), up_axis))
+    return turn, shift
+
+
+def apply_transform(quats: np.ndarray, root: np.ndarray, turn: np.ndarray, shift: np.ndarray, inverse=False):
+    """Apply (or undo) a :func:`canonical_transform` to ``quats (B, T, J, 4)``, ``root (B, T, 3)``."""
+    q = np.array(quats, dtype=np.float64)
+    t = turn[:, None]
+    if inverse:
+        t = R.quat_conjugate(t)
+        q[:, :, 0] = R.quat_mul(t, q[:, :, 0])
+        return q, R.quat_rotate(t, root) + shift[:, None]
+    q[:, :, 0] = R.quat_mul(t, q[:, :, 0])
+    return q, R.quat_rotate(t, root - shift[:, None])
+
+
+# --- features ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Features:
+    """Frames <-> feature vectors for one skeleton and coordinate system (torch).
+
+    Attributes:
+        coordinates: ``"global"``: ``J * 3`` normalised global positions, then
+            ``J * 4`` global quaternions; ``"local"``: 3 normalised root
+            coordinates, then ``J * 4`` local quaternions.
+        parents: ``(J,)`` parent indices.
+        offsets: ``(J, 3)`` constant bone offsets (file units).
+        pos_mean, pos_std: ``(J * 3,)`` statistics of global joint positions
+            in the canonical frame (the local features use the first three).
+    """
+
+    coordinates: str
+    parents: np.ndarray
+    offsets: np.ndarray
+    pos_mean: np.ndarray
+    pos_std: np.ndarray
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.parents)
+
+    @property
+    def size(self) -> int:
+        J = self.num_joints
+        return J * 7 if self.coordinates == "global" else 3 + J * 4
+
+    def _stats(self, like):
+        import torch
+
+        mean = torch.as_tensor(self.pos_mean, dtype=like.dtype, device=like.device)
+        std = torch.as_tensor(self.pos_std, dtype=like.dtype, device=like.device)
+        if self.coordinates == "local":
+            return mean[:3], std[:3]
+        return mean, std
+
+    def global_pose(self, quats, root):
+        """Global ``(quats, positions)`` from local quats ``(..., J, 4)`` and root ``(..., 3)`` (torch)."""
+        import torch
+
+        off = torch.as_tensor(self.offsets, dtype=quats.dtype, device=quats.device)
+        pos = torch.cat([root[..., None, :], off[1:].expand(root.shape[:-1] + off[1:].shape)], dim=-2)
+        return fk(quats, pos, self.parents)
+
+    def encode(self, quats, root):
+        """``(B, T, size)`` features of local quats ``(B, T, J, 4)`` and root ``(B, T, 3)``."""
+        import torch
+
+        B, T = root.shape[:2]
+        mean, std = self._stats(root)
+        if self.coordinates == "global":
+            gq, gp = self.global_pose(quats, root)
+            return torch.cat([(gp.reshape(B, T, -1) - mean) / std, gq.reshape(B, T, -1)], dim=-1)
+        return torch.cat([(root - mean) / std, quats.reshape(B, T, -1)], dim=-1)
+
+    def split(self, x):
+        """Features -> ``(positions or root (B, T, J*3 or 3), quats (B, T, J, 4) normalised)``."""
+        J = self.num_joints
+        n = J * 3 if self.coordinates == "global" else 3
+        mean, std = self._stats(x)
+        pos = x[..., :n] * std + mean
+        q = x[..., n:].reshape(x.shape[:-1] + (J, 4))
+        return pos, R.quat_normalize(q)
+
+    def decode(self, x):
+        """Features -> local ``(quats (B, T, J, 4), root (B, T, 3))`` (global: simplest IK)."""
+        import torch
+
+        pos, q = self.split(x)
+        if self.coordinates == "local":
+            return q, pos
+        par = list(int(p) for p in self.parents)
+        local = [q[..., 0, :]] + [R.quat_mul(R.quat_conjugate(q[..., par[j], :]), q[..., j, :]) for j in range(1, len(par))]
+        return torch.stack(local, dim=-2), pos[..., :3]
+
+
+# --- the network -------------------------------------------------------------------------
+
+
+def _torch_module():
+    import torch
+    from torch import nn
+
+    class MotionTransformer(nn.Module):
+        """Conv1d -> + mixture embedding -> BERT encoder -> Conv1d (section 3.1)."""
+
+        def __init__(self, features: int, cfg: ModelConfig):
+            super().__init__()
+            self.cfg = cfg
+            self.input = nn.Conv1d(features, cfg.d_model, kernel_size=3, padding=1)
+            self.position = nn.Embedding(cfg.max_frames, cfg.d_model)
+            self.keyframe = nn.Embedding(3, cfg.d_model)
+            layer = nn.TransformerEncoderLayer(
+                cfg.d_model, cfg.heads, cfg.ffn, cfg.dropout, activation="gelu", batch_first=True
+            )
+            self.encoder = nn.TransformerEncoder(layer, cfg.layers, enable_nested_tensor=False)
+            self.output = nn.Conv1d(cfg.d_model, features, kernel_size=3, padding=1)
+            if cfg.residual:  # start as the interpolation it corrects
+                nn.init.zeros_(self.output.weight)
+                nn.init.zeros_(self.output.bias)
+
+        def embed(self, kinds):
+            """The mixture embedding ``(B, T, d_model)`` of frame kinds ``(B, T)``."""
+            T = kinds.shape[-1]
+            pos = torch.arange(T, device=kinds.device)
+            return self.position(pos) + self.keyframe(kinds)
+
+        def forward(self, x, kinds):
+            """``x (B, T, F)`` pre-filled features, ``kinds (B, T)`` -> ``(B, T, F)`` completed features."""
+            T = x.shape[1]
+            if T > self.cfg.max_frames:
+                raise ModelError(f"{T} frames do not fit this model's {self.cfg.max_frames}-frame window")
+            h = self.input(x.transpose(1, 2)).transpose(1, 2) + self.embed(kinds)
+            h = self.encoder(h)
+            y = self.output(h.transpose(1, 2)).transpose(1, 2)
+            return x + y if self.cfg.residual else y
+
+    return MotionTransformer
+
+
+def build_network(features: int, cfg: ModelConfig):
+    """A fresh :class:`MotionTransformer` torch module (weights from torch's current generator)."""
+    return _torch_module()(features, cfg)
+
+
+# --- losses ----------------------------------------------------------------------
+
+
+def losses(feat: Features, pred, target, gt_quats, gt_root, kinds, cfg: ModelConfig) -> dict:
+    """The training losses (Eqs. 12-15) over key and unknown frames (torch).
+
+    Args:
+        pred, target: ``(B, T, F)`` predicted and true features.
+        gt_quats, gt_root: the true local pose ``(B, T, J, 4)``, ``(B, T, 3)``.
+        kinds: ``(B, T)`` frame kinds; IGNORED frames carry no loss.
+
+    Returns ``{"total", "position", "rotation", "kinematics"}`` (scalars).
+    """
+    import torch
+
+    w = (kinds != IGNORED).to(pred.dtype)  # (B, T)
+    norm = w.sum().clamp(min=1)
+    p_pos, p_q = feat.split(pred)
+    t_pos, t_q = feat.split(target)
+    std = feat._stats(pred)[1]
+    pos_l = ((p_pos - t_pos).abs() / std).mean(-1)
+    rot_l = (p_q - t_q).abs().mean((-1, -2))
+    scale = float(np.mean(feat.pos_std))
+    if feat.coordinates == "global":
+        # IK loss: bone offsets recovered from the predicted global pose (Eq. 14).
+        J = feat.num_joints
+        gp = p_pos.reshape(p_pos.shape[:-1] + (J, 3))
+        par = torch.as_tensor(feat.parents[1:], device=pred.device)
+        local = R.quat_rotate(R.quat_conjugate(p_q[..., par, :]), gp[..., 1:, :] - gp[..., par, :])
+        off = torch.as_tensor(feat.offsets[1:], dtype=pred.dtype, device=pred.device)
+        kin_l = (local - off).abs().mean((-1, -2)) / scale
+    else:
+        # FK loss: global positions of the predicted local pose (Eq. 13).
+        _, gp = feat.global_pose(p_q, p_pos)
+        _, tp = feat.global_pose(gt_quats, gt_root)
+        kin_l = (gp - tp).abs().mean((-1, -2)) / scale
+    out = {
+        "position": (pos_l * w).sum() / norm,
+        "rotation": (rot_l * w).sum() / norm,
+        "kinematics": (kin_l * w).sum() / norm,
+    }
+    out["total"] = out["position"] + out["rotation"] + cfg.kinematics_weight * out["kinematics"]
+    return out
+
+
+# --- a trained model -----------------------------------------------------------------
+
+
+@dataclass
+class CompletionModel:
+    """A trained transformer with everything needed to use it.
+
+    Attributes:
+        config: the architecture.
+        skeleton: the skeleton it serves (names, parents, constant offsets).
+        features: the feature encoding (with normalisation statistics).
+        network: the torch module.
+        folded: whether its corpus folded a static top joint into the hips.
+        info: training summary (epochs, data, final validation scores).
+    """
+
+    config: ModelConfig
+    skeleton: Skeleton
+    features: Features
+    network: object
+    folded: bool = False
+    info: dict = field(default_factory=dict)
+
+    def to(self, device: str) -> "CompletionModel":
+        self.network.to(device)
+        return self
+
+    @property
+    def device(self):
+        return next(self.network.parameters()).device
+
+    def complete_windows(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+        """Fill windows whose key frames are ``keys`` (numpy in, numpy out).
+
+        Args:
+            quats: ``(B, T, J, 4)`` local quaternions (only key frames are read).
+            root: ``(B, T, 3)`` root positions.
+            keys: ``(K,)`` increasing frame indices shared by the windows.
+
+        Returns:
+            ``(quats, root)`` of all ``T`` frames; frames outside the keys hold
+            the nearest key.
+        """
+        import torch
+
+        keys = np.asarray(keys, dtype=np.int64)
+        T = quats.shape[1]
+        kinds = frame_kinds(T, keys)
+        q = np.nan_to_num(np.asarray(quats, dtype=np.float64))
+        r = np.nan_to_num(np.asarray(root, dtype=np.float64))
+        up = self.skeleton.up_axis
+        turn, shift = canonical_transform(q, r, keys, self.config.facing_axis, up)
+        q, r = apply_transform(q, r, turn, shift)
+        q, r = prefill(q, r, keys)
+        dev = self.device
+        with torch.inference_mode():
+            tq = torch.as_tensor(q, dtype=torch.float32, device=dev)
+            tr = torch.as_tensor(r, dtype=torch.float32, device=dev)
+            x = self.features.encode(tq, tr)
+            k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
+            y = self.network(x, k)
+            pq, pr = self.features.decode(y)
+        pq = pq.double().cpu().numpy()
+        pr = pr.double().cpu().numpy()
+        outside = kinds == IGNORED
+        pq[:, outside], pr[:, outside] = q[:, outside], r[:, outside]
+        pq, pr = apply_transform(pq, pr, turn, shift, inverse=True)
+        return R.quat_normalize(pq), pr
+
+    def benchmark_method(self):
+        """This model as a method of :func:`keyfill.learn.benchmark.evaluate`."""
+
+        def method(skeleton: Skeleton, quats, root, keys):
+            diff = self.skeleton.difference(skeleton, atol=1e-2 * float(np.abs(skeleton.offsets).max()))
+            if diff is not None:
+                raise ModelError(f"the model serves another skeleton: {diff}")
+            return self.complete_windows(quats, root, keys)
+
+        return method
+
+    # --- files ---
+
+    def metadata(self) -> dict:
+        s = self.skeleton
+        return {
+            "format": FORMAT,
+            "version": FORMAT_VERSION,
+            "config": dataclasses.asdict(self.config),
+            "skeleton": {
+                "names": list(s.names),
+                "parents": [int(p) for p in s.parents],
+                "offsets": s.offsets.tolist(),
+                "channels": [list(c) for c in s.channels],
+                "up_axis": s.up_axis,
+                "meters_per_unit": s.meters_per_unit,
+            },
+            "folded_root": self.folded,
+            "statistics": {"pos_mean": self.features.pos_mean.tolist(), "pos_std": self.features.pos_std.tolist()},
+            "info": self.info,
+        }
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the model as one ``.safetensors`` file (atomically)."""
+        from safetensors.torch import save_file
+
+        from keyfill.io import atomic_output
+
+        state = {k: v.detach().cpu().contiguous() for k, v in self.network.state_dict().items()}
+        with atomic_output(path) as tmp:
+            save_file(state, str(tmp), metadata={"keyfill": json.dumps(self.metadata())})
+
+
+def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: bool, info=None) -> CompletionModel:
+    """A freshly initialised :class:`CompletionModel` (weights from torch's current generator)."""
+    std = np.where(np.asarray(pos_std) > 1e-6, pos_std, 1.0)
+    feat = Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
+                    np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
+    return CompletionModel(cfg, skeleton, feat, build_network(feat.size, cfg), folded, dict(info or {}))
+
+
+def read_metadata(path: str | os.PathLike) -> dict:
+    """The keyfill description stored in a model file, or a :class:`ModelError`."""
+    from safetensors import safe_open
+
+    p = Path(path)
+    if p.is_dir():
+        raise ModelError(f"{p}: is a folder; a transformer model is one .safetensors file")
+    if not p.is_file():
+        raise ModelError(f"{p}: no such model file")
+    try:
+        with safe_open(str(p), framework="pt") as f:
+            meta = f.metadata() or {}
+    except Exception as e:  # safetensors raises its own error types for damaged files
+        raise ModelError(f"{p}: not a keyfill model (not a readable safetensors file: {e})") from None
+    if "keyfill" not in meta:
+        raise ModelError(f"{p}: a safetensors file, but not a keyfill model (no keyfill metadata)")
+    try:
+        desc = json.loads(meta["keyfill"])
+    except json.JSONDecodeError:
+        raise ModelError(f"{p}: damaged keyfill metadata") from None
+    if desc.get("format") != FORMAT:
+        raise ModelError(f"{p}: a keyfill model of kind {desc.get('format')!r}, not a transformer")
+    if desc.get("version") != FORMAT_VERSION:
+        raise ModelError(f"{p}: transformer model version {desc.get('version')}; this keyfill reads version {FORMAT_VERSION}")
+    return desc
+
+
+def load_model(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
+    """Read a model written by :meth:`CompletionModel.save` (no code is executed)."""
+    import torch
+    from safetensors.torch import load_file
+
+    desc = read_metadata(path)
+    try:
+        cfg = ModelConfig(**desc["config"])
+        s = desc["skeleton"]
+        skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
+                        channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
+                        meters_per_unit=s["meters_per_unit"])
+        st = desc["statistics"]
+        model = new_model(skel, cfg, st["pos_mean"], st["pos_std"], bool(desc["folded_root"]), desc.get("info"))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ModelError(f"{path}: damaged keyfill model description ({e})") from None
+    try:
+        state = load_file(str(path), device="cpu")
+        model.network.load_state_dict(state)
+    except Exception as e:
+        raise ModelError(f"{path}: damaged model weights ({e})") from None
+    model.network.eval()
+    return model.to(device)
+
+
+# --- keyfill complete --------------------------------------------------------------
+
+
+def spans(keys, max_frames: int) -> list[tuple[int, int]]:
+    """Split the key range into spans ``(first key, last key)`` of at most ``max_frames`` frames.
+
+    Consecutive spans share their boundary key. Raises a :class:`UsageError`
+    when two consecutive keys are too far apart for the model.
+    """
+    from keyfill.errors import UsageError
+
+    keys = [int(k) for k in keys]
+    for a, b in zip(keys, keys[1:]):
+        if b - a + 1 > max_frames:
+            raise UsageError(
+                f"keys {a} and {b} are {b - a} frames apart; this model fills gaps of at most {max_frames - 2} frames"
+            )
+    out, start = [], 0
+    while start < len(keys) - 1:
+        end = start + 1
+        while end + 1 < len(keys) and keys[end + 1] - keys[start] + 1 <= max_frames:
+            end += 1
+        out.append((keys[start], keys[end]))
+        start = end
+    return out
+
+
+def complete_motion(model: CompletionModel, motion, keys) -> tuple[object, dict]:
+    """Fill every frame of ``motion`` between its ``keys`` with ``model``.
+
+    Reads only the key frames. Frames before the first key and after the last
+    hold that key. Long key ranges are cut into spans that fit the model's
+    window (:func:`spans`). Returns ``(motion, info)``; keys are *not* yet
+    exact (see :func:`keyfill.learn.exact_keys.snap_to_keys`).
+    """
+    from keyfill.learn.baselines import linear
+    from keyfill.learn.corpus import bone_difference, fold_root
+    from keyfill.motion import Keys
+
+    k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
+    lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
+    q, p = lin.rotations, lin.positions
+    skel = motion.skeleton
+    if model.folded:
+        if len(skel.children(0)) != 1:
+            raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
+                             f"{len(skel.children(0))} children")
+        q, p = fold_root(q, p, skel.parents)
+    here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
+    diff = bone_difference(model.skeleton, here)
+    if diff is not None:
+        raise ModelError(f"the model serves another skeleton: {diff}")
+    q = R.quat_continuous_np(q, axis=0)
+    out_q, out_r = q.copy(), p[:, 0].copy()
+    parts = spans(k, model.config.max_frames)
+    for a, b in parts:
+        inside = k[(k >= a) & (k <= b)] - a
+        wq, wr = model.complete_windows(q[None, a : b + 1], out_r[None, a : b + 1], inside)
+        out_q[a + 1 : b], out_r[a + 1 : b] = wq[0, 1:-1], wr[0, 1:-1]
+    pos = p.copy()
+    pos[:, 0] = out_r
+    if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
+        c = skel.children(0)[0]
+        top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
+        inv = R.quat_conjugate(top_q)
+        out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
+        pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
+        out_q[:, 0], pos[:, 0] = top_q, top_p
+    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
+    return result, {"spans": len(parts), "max_frames": model.config.max_frames}
+
+
+def complete_method(motion, keys, options):
+    """``keyfill complete --method transformer``: see :func:`complete_motion`."""
+    from keyfill.errors import UsageError
+    from keyfill.learn.exact_keys import snap_to_keys
+    from keyfill.learn.methods import Completion
+
+    if options.model is None:
+        raise UsageError("the transformer method needs --model FILE (train one with 'keyfill train transformer')")
+    model = load_model(options.model, options.device)
+    filled, info = complete_motion(model, motion, keys)
+    info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
+    if options.exact_keys:
+        filled, report = snap_to_keys(filled, motion, keys)
+        info.update(report)
+    return Completion(filled, info)

@@ -1,0 +1,150 @@
+"""The LaFAN1 protocol: alignment, baselines, splits, errors, the CLI, and the golden run from BVH files."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from keyfill import rotations as R
+from keyfill.cli.main import main
+from keyfill.errors import DataError, UsageError
+from keyfill.learn import benchmark as B
+from keyfill.learn.corpus import load_corpus
+from synthetic_corpus import write_corpus
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+EXPECTED = SHARED / "golden" / "bandai1_lafan_protocol_expected.json"
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("KEYFILL_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture
+def walkers(tmp_path):
+    folder = tmp_path / "walkers"
+    write_corpus(folder, styles=("happy", "tired", "calm", "proud"), clips_per_style=3, frames=(80, 140))
+    return folder
+
+
+def test_alignment_centres_and_turns_to_face_x():
+    rng = np.random.default_rng(0)
+    W, T, J = 4, 20, 3
+    q = R.quat_normalize(rng.normal(size=(W, T, J, 4)))
+    root = rng.normal(size=(W, T, 3)) * 50
+    aq, ar = B.align_windows(q, root, "+Y")
+    np.testing.assert_allclose(ar[..., [0, 2]].mean(axis=1), 0.0, atol=1e-9)
+    fwd = R.quat_rotate(aq[:, 9, 0], np.array([0.0, 1.0, 0.0]))
+    assert np.all(fwd[:, 0] > 0)
+    np.testing.assert_allclose(fwd[:, 2], 0.0, atol=1e-9)
+    np.testing.assert_array_equal(aq[:, :, 1:], q[:, :, 1:])  # only the root changes
+    # heights and distances to the root are kept
+    np.testing.assert_allclose(ar[..., 1], root[..., 1], atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(ar, axis=1), axis=-1),
+                               np.linalg.norm(np.diff(root, axis=1), axis=-1), atol=1e-9)
+
+
+def test_baselines_fill_only_the_transition():
+    rng = np.random.default_rng(1)
+    q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 16, 3, 4))), axis=1)
+    r = rng.normal(size=(2, 16, 3))
+    keys = np.append(np.arange(10), 15)
+    zq, zr = B.zero_velocity(None, q, r, keys)
+    np.testing.assert_array_equal(zq[:, 10:15], np.repeat(q[:, 9:10], 5, axis=1))
+    np.testing.assert_array_equal(zr[:, :10], r[:, :10])
+    iq, ir = B.interpolation(None, q, r, keys)
+    np.testing.assert_allclose(ir[:, 12], r[:, 9] + 0.5 * (r[:, 15] - r[:, 9]))
+    np.testing.assert_allclose(iq[:, 12], R.quat_slerp(q[:, 9], q[:, 15], 0.5), atol=1e-12)
+
+
+def test_lengths_the_windows_cannot_hold_are_refused(walkers):
+    proto = B.lafan1([walkers], ["*_happy_*"], fold=True)
+    with pytest.raises(UsageError, match="transition length 46 does not fit: .*65 frames.*1 to 45"):
+        B.evaluate({"i": B.interpolation}, proto.test, proto.stats, (5, 46))
+
+
+def test_split_by_patterns(walkers):
+    c = load_corpus([walkers])
+    train, test = B.split(c, ["*_happy_*", "*_tired_*"])
+    assert len(test) == 6 and len(train) == 6
+    train, test = B.split(c, ["*_happy_*"], ["*_calm_*"])
+    assert {Path(f).name.split("_")[1] for f in train.files} == {"calm"}
+    with pytest.raises(UsageError, match="matches both"):
+        B.split(c, ["*_happy_*"], ["walk_*"])
+    with pytest.raises(DataError, match="no clip matches the test pattern"):
+        B.split(c, ["*_sad_*"])
+
+
+def test_protocol_needs_long_enough_clips(tmp_path):
+    write_corpus(tmp_path, styles=("a", "b"), clips_per_style=2, frames=(40, 60))
+    with pytest.raises(DataError, match="longer than 65 frames, the protocol's test window"):
+        B.lafan1([tmp_path], ["*_a_*"])
+
+
+def test_methods_never_see_the_transition(walkers):
+    proto = B.lafan1([walkers], ["*_happy_*"])
+    seen = []
+
+    def spy(skel, q, r, keys):
+        seen.append(bool(np.isnan(q[:, 10:-1]).all() and np.isfinite(q[:, keys]).all()))
+        return B.interpolation(skel, q, r, keys)
+
+    res = B.evaluate({"spy": spy, "interpolation": B.interpolation}, proto.test, proto.stats, (5, 30))
+    assert seen == [True, True]
+    assert res["spy"] == res["interpolation"]
+    # on smooth walks, interpolation beats holding the last frame
+    zero = B.evaluate({"z": B.zero_velocity}, proto.test, proto.stats, (5, 30))["z"]
+    assert all(zero[n]["L2P"] > res["interpolation"][n]["L2P"] for n in (5, 30))
+
+
+def test_table_lists_every_method_and_the_ratios():
+    res = {"interpolation": {5: {"L2Q": 0.2, "L2P": 1.0, "NPSS": 0.01}},
+           "cubic": {5: {"L2Q": 0.1, "L2P": 0.5, "NPSS": 0.02}}}
+    table = B.format_table(res)
+    assert "cubic" in table and "relative to interpolation" in table
+    last = table.splitlines()[-1].split()
+    assert last[0] == "cubic" and [float(v) for v in last[1:]] == [0.5, 0.5, 2.0]
+
+
+def test_cli_evaluate_json_matches_the_library(walkers, capsys):
+    code = main(["evaluate", "linear", str(walkers), "--test-pattern", "*_happy_*", "--test-pattern", "*_tired_*",
+                 "--lengths", "5,15", "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    proto = B.lafan1([walkers], ["*_happy_*", "*_tired_*"])
+    lib = B.evaluate({"interpolation": B.interpolation}, proto.test, proto.stats, (5, 15))
+    assert out["results"]["interpolation"]["15"]["L2P"] == pytest.approx(lib["interpolation"][15]["L2P"], rel=1e-12)
+    assert set(out["results"]) == {"interpolation", "zero-velocity"}
+    assert out["test_windows"] == len(proto.test.quats)
+
+
+def test_cli_evaluate_table_and_errors(walkers, capsys):
+    assert main(["evaluate", "cubic", str(walkers), "--test-pattern", "*_calm_*", "--lengths", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "cubic" in out and "zero-velocity" in out and "relative to interpolation" in out
+    assert main(["evaluate", "cubic", str(walkers), "--test-pattern", "*_calm_*", "--lengths", "50"]) == 2
+    assert "keyfill: error: transition length 50 does not fit" in capsys.readouterr().err
+    assert main(["evaluate", "nonsense", str(walkers)]) == 2
+    assert "neither a method" in capsys.readouterr().err
+    assert main(["evaluate", "linear", str(walkers)]) == 1  # default test split: LaFAN1's subject5
+    assert "no clip matches the test pattern *subject5*" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_golden_values_from_the_bandai1_files():
+    """The whole protocol from the Bandai-Namco dataset-1 BVH files reproduces the reference numbers."""
+    from keyfill.learn.corpus import locate
+
+    try:
+        folder = locate("bandai1")
+    except DataError as e:
+        pytest.skip(str(e))
+    proto = B.lafan1([folder], ["*_happy_*", "*_tired_*"], fold=True, facing_axis="+Y", cache=False)
+    assert proto.info["test_windows"] == 66 and proto.info["train_windows"] == 1102
+    res = B.evaluate({"zerov": B.zero_velocity, "interp": B.interpolation}, proto.test, proto.stats)
+    names = {"quat": "L2Q", "pos": "L2P", "npss": "NPSS"}
+    for key, value in json.loads(EXPECTED.read_text()).items():
+        method, metric, _, n = key.replace("@", "_").split("_")
+        assert res[method][int(n)][names[metric]] == pytest.approx(value, rel=1e-4), key

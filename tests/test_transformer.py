@@ -1,0 +1,281 @@
+"""The motion-completion transformer: layouts, embeddings, training, completion, model files."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from keyfill import io
+from keyfill import rotations as R
+from keyfill.cli.main import main
+from keyfill.errors import ModelError, UsageError
+from keyfill.learn import transformer as T
+from keyfill.learn.corpus import load_corpus
+from keyfill.learn.train_transformer import TrainConfig, learning_rate, make_batch, sample_layout, train
+from synthetic_corpus import walker_motion, walker_skeleton, write_corpus
+
+TINY = T.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0, max_frames=65)
+TINY_TRAINING = TrainConfig(epochs=2, batch_size=16, lr=2e-3, warmup_epochs=0.2, decay_every=1, window=65,
+                            window_offset=10, val_fraction=0.2, val_lengths=(5, 15))
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Small models train fastest on one thread (and much faster on a busy machine)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def corpus_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("walkers")
+    write_corpus(folder, styles=("happy", "tired", "calm"), clips_per_style=4, frames=(90, 140), seed=3)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def corpus(corpus_dir):
+    return load_corpus([corpus_dir], cache=False)
+
+
+@pytest.fixture(scope="module")
+def trained(corpus, tmp_path_factory):
+    out = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    model = train(corpus, out, TINY, TINY_TRAINING, seed=0)
+    return out, model
+
+
+# --- layouts, masks and embeddings ------------------------------------------------
+
+
+def test_frame_kinds_of_the_three_layouts():
+    K, U, I = T.KEY, T.UNKNOWN, T.IGNORED
+    inbetween = T.frame_kinds(18, np.append(np.arange(10), 15))
+    assert inbetween.tolist() == [K] * 10 + [U] * 5 + [K] + [I] * 2
+    infill = T.frame_kinds(9, [0, 4, 8])
+    assert infill.tolist() == [K, U, U, U, K, U, U, U, K]
+    blend = T.frame_kinds(8, [0, 1, 5, 6, 7])
+    assert blend.tolist() == [K, K, U, U, U, K, K, K]
+    assert T.frame_kinds(6, [2, 4]).tolist() == [I, I, K, U, K, I]
+    assert T.anchor_frame(np.append(np.arange(10), 15)) == 9 and T.anchor_frame([0, 4, 8]) == 0
+
+
+def test_mixture_embedding_selects_position_and_kind_rows():
+    torch.manual_seed(0)
+    net = T.build_network(10, TINY)
+    kinds = torch.as_tensor(np.stack([T.frame_kinds(12, [0, 1, 2, 9]), T.frame_kinds(12, [0, 5, 10])]))
+    emb = net.embed(kinds)
+    for b in range(2):
+        for t in range(12):
+            want = net.position.weight[t] + net.keyframe.weight[kinds[b, t]]
+            assert torch.equal(emb[b, t], want)
+    assert not torch.equal(net.keyframe.weight[T.KEY], net.keyframe.weight[T.UNKNOWN])
+
+
+def test_sampled_layouts_fit_the_window():
+    rng = np.random.default_rng(0)
+    seen = set()
+    for _ in range(300):
+        name, frames, keys = sample_layout(rng, {"inbetween": 1, "infill": 1, "blend": 1}, 65)
+        seen.add(name)
+        assert frames <= 65 and keys[0] == 0 and keys[-1] < frames and np.all(np.diff(keys) > 0)
+        if name == "inbetween":
+            assert keys[:10].tolist() == list(range(10)) and 5 <= keys[-1] - 10 <= 54
+    assert seen == {"inbetween", "infill", "blend"}
+
+
+def test_prefill_interpolates_between_keys_and_keeps_them():
+    rng = np.random.default_rng(2)
+    q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 11, 3, 4))), axis=1)
+    r = rng.normal(size=(2, 11, 3))
+    keys = [0, 4, 10]
+    pq, pr = T.prefill(q, r, keys)
+    np.testing.assert_array_equal(pq[:, keys], q[:, keys])
+    np.testing.assert_allclose(pr[:, 2], 0.5 * (r[:, 0] + r[:, 4]))
+    np.testing.assert_allclose(pq[:, 7], R.quat_slerp(q[:, 4], q[:, 10], 0.5), atol=1e-12)
+    tq, tr = T.prefill(torch.as_tensor(q), torch.as_tensor(r), keys)  # the torch twin agrees
+    np.testing.assert_allclose(tq.numpy(), pq, atol=1e-12)
+    np.testing.assert_allclose(tr.numpy(), pr, atol=1e-12)
+
+
+def test_canonical_frame_round_trip():
+    rng = np.random.default_rng(3)
+    q = R.quat_normalize(rng.normal(size=(3, 20, 4, 4)))
+    r = rng.normal(size=(3, 20, 3)) * 100
+    keys = np.array([0, 1, 2, 12, 19])
+    turn, shift = T.canonical_transform(q, r, keys, "+Y")
+    cq, cr = T.apply_transform(q, r, turn, shift)
+    np.testing.assert_allclose(cr[:, keys][..., [0, 2]].mean(1), 0, atol=1e-9)
+    bq, br = T.apply_transform(cq, cr, turn, shift, inverse=True)
+    np.testing.assert_allclose(br, r, atol=1e-9)
+    np.testing.assert_allclose(bq, q, atol=1e-12)
+
+
+def test_learning_rate_warms_up_then_steps_down():
+    cfg = TrainConfig(lr=1e-3, warmup_epochs=2, decay_every=4, decay=0.5)
+    assert learning_rate(cfg, 0.0) == 0.0 and learning_rate(cfg, 1.0) == pytest.approx(5e-4)
+    assert learning_rate(cfg, 3.0) == 1e-3 and learning_rate(cfg, 4.5) == 5e-4 and learning_rate(cfg, 8.0) == 2.5e-4
+
+
+# --- training -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("coordinates,residual,steps,factor", [
+    ("global", False, 30, 0.3), ("local", False, 30, 0.3), ("global", True, 60, 0.9)])
+def test_a_few_training_steps_reduce_the_loss(corpus, coordinates, residual, steps, factor):
+    cfg = T.ModelConfig(**{**TINY.__dict__, "coordinates": coordinates, "residual": residual})
+    q, r, _, _ = corpus.windows(65, 20)
+    torch.manual_seed(0)
+    model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    x, y, gq, gr, kinds = make_batch(model, q[:16], r[:16], np.append(np.arange(10), 40), 45)
+    opt = torch.optim.Adam(model.network.parameters(), lr=3e-3)
+    model.network.train()
+    history = []
+    for _ in range(steps + 1):
+        loss = T.losses(model.features, model.network(x, kinds), y, gq, gr, kinds, cfg)["total"]
+        history.append(float(loss.detach()))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert history[-1] < factor * history[0]
+
+
+def test_training_is_deterministic_and_resumable(corpus, tmp_path):
+    cfg = TrainConfig(**{**TINY_TRAINING.__dict__, "epochs": 2, "val_fraction": 0.0})
+    a = train(corpus, tmp_path / "a.safetensors", TINY, cfg, seed=5)
+    b = train(corpus, tmp_path / "b.safetensors", TINY, TrainConfig(**{**cfg.__dict__, "epochs": 1}), seed=5)
+    b = train(corpus, tmp_path / "b.safetensors", TINY, cfg, seed=5, resume=True)
+    for (k, va), vb in zip(a.network.state_dict().items(), b.network.state_dict().values()):
+        assert torch.equal(va, vb), k
+    assert (tmp_path / "a.safetensors").read_bytes() == (tmp_path / "b.safetensors").read_bytes()
+    log = [json.loads(line) for line in (tmp_path / "b.log.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in log] == [1, 2]
+    with pytest.raises(UsageError, match="--seed 5, now 6"):
+        train(corpus, tmp_path / "b.safetensors", TINY, cfg, seed=6, resume=True)
+
+
+def test_training_logs_validation_scores(trained):
+    out, model = trained
+    log = [json.loads(line) for line in out.with_suffix(".log.jsonl").read_text().splitlines()]
+    assert len(log) == 2 and {"val_L2P_5", "val_L2Q_15", "val_NPSS_15", "val_L2P_15_vs_interp"} <= set(log[-1])
+    assert model.info["validation_clips"] == 2
+    assert out.with_suffix(".ckpt").is_file()
+
+
+# --- using a model -------------------------------------------------------------------
+
+
+def test_one_model_serves_inbetweening_infilling_and_blending(trained, corpus):
+    _, model = trained
+    q, r = corpus.clip(0)
+    q, r = q[None, :60], r[None, :60]
+    for keys in (np.append(np.arange(10), 40), np.arange(0, 60, 6), np.r_[0:10, 45:60]):
+        pq, pr = model.complete_windows(q, r, keys)
+        assert pq.shape == q.shape and np.isfinite(pq).all() and np.isfinite(pr).all()
+        # keys come back close (not yet exact) and frames outside the keys hold the last key
+        assert np.abs(pr[0, keys] - r[0, keys]).max() < 5.0
+        np.testing.assert_allclose(pr[0, keys[-1] + 1:], np.broadcast_to(r[0, keys[-1]], pr[0, keys[-1] + 1:].shape),
+                                   atol=1e-9)
+
+
+def test_hidden_frames_do_not_change_the_prediction(trained, corpus):
+    _, model = trained
+    q, r = corpus.clip(1)
+    q, r = q[None, :40].copy(), r[None, :40].copy()
+    keys = np.append(np.arange(10), 30)
+    a = model.complete_windows(q, r, keys)
+    q[:, 10:30], r[:, 10:30] = np.nan, np.nan
+    b = model.complete_windows(q, r, keys)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_save_and_load_give_the_same_completion(trained, corpus):
+    out, model = trained
+    again = T.load_model(out)
+    q, r = corpus.clip(2)
+    keys = [0, 7, 19, 30]
+    np.testing.assert_array_equal(model.complete_windows(q[None, :31], r[None, :31], keys)[0],
+                                  again.complete_windows(q[None, :31], r[None, :31], keys)[0])
+    assert again.skeleton.names == corpus.skeleton.names and again.folded
+
+
+def test_spans_cut_long_key_ranges():
+    assert T.spans([0, 10, 30, 60, 90], 65) == [(0, 60), (60, 90)]
+    assert T.spans([0, 64], 65) == [(0, 64)]
+    with pytest.raises(UsageError, match="keys 0 and 70 are 70 frames apart; this model fills gaps of at most 63"):
+        T.spans([0, 70], 65)
+
+
+def test_cli_complete_makes_keys_exact(trained, tmp_path, capsys):
+    out, _ = trained
+    src = tmp_path / "walk.bvh"
+    io.save(walker_motion(walker_skeleton(), 100, np.random.default_rng(11)), src)
+    dst = tmp_path / "filled.bvh"
+    code = main(["complete", str(src), "-o", str(dst), "--method", "transformer", "--model", str(out),
+                 "--keys", "0,1,2,3,4,5,6,7,8,9,30,50,56,99", "--json"])
+    assert code == 0, capsys.readouterr().err
+    info = json.loads(capsys.readouterr().out)
+    assert info["method"] == "transformer" and info["spans"] == 2 and info["exact_keys"]
+    a, b = io.load(src), io.load(dst)
+    keys = info["keys"]
+    np.testing.assert_allclose(b.positions[keys], a.positions[keys], atol=1e-6)
+    np.testing.assert_allclose(np.abs(np.sum(b.rotations[keys] * a.rotations[keys], -1)), 1.0, atol=1e-9)
+    assert not np.allclose(b.positions[10:30], a.positions[10:30], atol=1e-3)  # really generated
+    np.testing.assert_array_equal(b.positions[:, 0], a.positions[:, 0])  # the static joint_Root stays
+
+
+def test_model_for_another_skeleton_is_refused(trained, tmp_path, capsys):
+    out, _ = trained
+    src = tmp_path / "other.bvh"
+    io.save(walker_motion(walker_skeleton(leg_length=60.0), 40, np.random.default_rng(1)), src)
+    code = main(["complete", str(src), "-o", str(tmp_path / "o.bvh"), "--method", "transformer",
+                 "--model", str(out), "--keys", "0,20,39"])
+    assert code == 1
+    assert "keyfill: error: the model serves another skeleton: joint 'Foot_L'" in capsys.readouterr().err
+    assert not (tmp_path / "o.bvh").exists()
+
+
+def test_damaged_or_foreign_files_are_refused(trained, tmp_path):
+    out, _ = trained
+    junk = tmp_path / "junk.safetensors"
+    junk.write_bytes(b"\x00" * 100)
+    with pytest.raises(ModelError, match="not a keyfill model"):
+        T.load_model(junk)
+    cut = tmp_path / "cut.safetensors"
+    cut.write_bytes(out.read_bytes()[: len(out.read_bytes()) // 2])
+    with pytest.raises(ModelError, match="damaged|not a keyfill model"):
+        T.load_model(cut)
+    from safetensors.torch import save_file
+
+    plain = tmp_path / "plain.safetensors"
+    save_file({"w": torch.zeros(2)}, str(plain))
+    with pytest.raises(ModelError, match="not a keyfill model \\(no keyfill metadata\\)"):
+        T.load_model(plain)
+    pickle = tmp_path / "model.pt"
+    torch.save({"x": 1}, pickle)
+    with pytest.raises(ModelError, match="not a keyfill model"):
+        T.load_model(pickle)
+
+
+def test_cli_train_transformer(corpus_dir, tmp_path, capsys):
+    config = tmp_path / "tiny.json"
+    config.write_text(json.dumps({"model": {k: v for k, v in TINY.__dict__.items()},
+                                  "training": {**TINY_TRAINING.__dict__, "epochs": 1}}))
+    out = tmp_path / "m.safetensors"
+    code = main(["-q", "train", "transformer", str(corpus_dir), "-o", str(out), "--config", str(config),
+                 "--exclude", "*_calm_*", "--json"])
+    assert code == 0, capsys.readouterr().err
+    info = json.loads(capsys.readouterr().out)
+    assert info["corpus_clips"] == 8 and info["epochs"] == 1 and out.is_file()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["train", "transformer", str(empty), "-o", str(tmp_path / "x.safetensors")]) == 1
+    assert "keyfill: error: no BVH files in" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"model": {"layers": 2, "colour": 3}}')
+    assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x.safetensors"), "--config", str(bad)]) == 2
+    assert "colour" in capsys.readouterr().err

@@ -20,6 +20,7 @@ METHODS: dict[str, str] = {
     "linear": "keyfill.learn.methods:_linear",
     "cubic": "keyfill.learn.methods:_cubic",
     "transformer": "keyfill.learn.transformer:complete_method",
+    "arnn": "keyfill.learn.arnn:complete",
 }
 #: methods that need no model file
 SPLINES = ("linear", "cubic")

@@ -1,0 +1,232 @@
+"""The hopping lamp's animation variables as network inputs and targets (ARNN, Zhang & van de Panne 2018).
+
+A lamp sequence is its ``(F, 6)`` animation variables (:mod:`keyfill.sim.lamp`:
+base_x, base_y, base_angle, leg_angle, neck_angle, head_angle; m and rad) and
+its key frames. The networks see it *encoded*:
+
+* ``base_x`` is taken relative to the first key's, so the same keys give the
+  same motion wherever the lamp stands (the paper uses absolute positions
+  rather than per-frame deltas; an offset fixed per sequence keeps that and
+  adds horizontal invariance);
+* every variable is standardised with the training set's mean and standard
+  deviation (:class:`Normalizer`, stored in the model file).
+
+A network predicts frames ``1 .. T-1`` of a sequence whose frame 0 is its
+first key and frame ``T-1`` its last. For the frame ``t`` in the interval
+``(T_K, T_{K+1}]`` it is given the keys ``X_K`` and ``X_{K+1}`` and
+``t_rel = (t - T_K) / (T_{K+1} - T_K)`` (:func:`conditioning`), so a key's own
+frame is predicted with ``t_rel = 1``. Sequences of different lengths are
+padded into one batch (:class:`Batch`) with a mask of real frames; keys may be
+any number >= 2 at any spacing. :func:`delete_keys` removes 0-2 interior keys
+of each sequence at random, the paper's augmentation (section 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from keyfill.errors import DataError
+
+NUM_VARIABLES = 6
+
+
+@dataclass(frozen=True, eq=False)
+class LampSequence:
+    """One lamp animation and its keys.
+
+    Attributes:
+        values: ``(F, 6)`` animation variables (m, rad), every frame.
+        keys: ``(K,)`` strictly increasing key frames, ``K >= 2``.
+        name: where it came from (for messages).
+    """
+
+    values: np.ndarray
+    keys: np.ndarray
+    name: str = ""
+
+    def __post_init__(self):
+        values = np.asarray(self.values, dtype=np.float64)
+        keys = np.asarray(self.keys, dtype=np.int64).reshape(-1)
+        if values.ndim != 2 or values.shape[1] != NUM_VARIABLES:
+            raise DataError(f"{self.name or 'a lamp sequence'}: variables must be (frames, 6), got {values.shape}")
+        if len(keys) < 2:
+            raise DataError(f"{self.name or 'a lamp sequence'}: at least 2 keys are needed, got {len(keys)}")
+        if np.any(np.diff(keys) <= 0) or keys[0] < 0 or keys[-1] >= len(values):
+            raise DataError(f"{self.name or 'a lamp sequence'}: keys {keys.tolist()} are not increasing frames "
+                            f"of its {len(values)} frames")
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "keys", keys)
+
+    @property
+    def span(self) -> np.ndarray:
+        """``(T, 6)`` the frames from the first to the last key."""
+        return self.values[self.keys[0]: self.keys[-1] + 1]
+
+
+def sequence_from_motion(motion, keys=None, name: str = "") -> LampSequence:
+    """A :class:`LampSequence` from a lamp :class:`~keyfill.motion.Motion` (keys: ``keys`` or ``motion.keys``)."""
+    from keyfill.sim.lamp import to_variables
+
+    keys = keys if keys is not None else motion.keys
+    if keys is None:
+        raise DataError(f"{name or 'the motion'} records no keys")
+    return LampSequence(to_variables(motion), np.asarray(keys.frames), name)
+
+
+def read_sequences(folder) -> list[LampSequence]:
+    """Every sequence of a ``keyfill simulate`` dataset folder, in run order."""
+    from keyfill.sim.dataset import read_dataset
+
+    return [sequence_from_motion(s.motion, name=s.id) for s in read_dataset(folder)]
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Per-variable standardisation ``z = (v - mean) / std`` of encoded variables.
+
+    Attributes:
+        mean, std: ``(6,)`` in the variables' units (``base_x`` relative to the first key).
+    """
+
+    mean: np.ndarray
+    std: np.ndarray
+
+    @classmethod
+    def fit(cls, sequences: list[LampSequence]) -> "Normalizer":
+        """Statistics over every frame from first to last key of ``sequences``."""
+        if not sequences:
+            raise DataError("no sequences to compute normalisation statistics from")
+        frames = np.concatenate([relative(s.span) for s in sequences])
+        std = frames.std(axis=0)
+        return cls(frames.mean(axis=0), np.where(std > 1e-6, std, 1.0))
+
+    def to_json(self) -> dict:
+        return {"mean": [float(v) for v in self.mean], "std": [float(v) for v in self.std]}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "Normalizer":
+        mean, std = np.asarray(data["mean"], dtype=np.float64), np.asarray(data["std"], dtype=np.float64)
+        if mean.shape != (NUM_VARIABLES,) or std.shape != (NUM_VARIABLES,) or not np.all(std > 0):
+            raise ValueError("normalisation statistics must be 6 means and 6 positive deviations")
+        return cls(mean, std)
+
+    def encode(self, span: np.ndarray) -> np.ndarray:
+        """``(T, 6)`` frames starting at the first key -> standardised, ``base_x`` relative to frame 0."""
+        return (relative(span) - self.mean) / self.std
+
+    def decode(self, z: np.ndarray, origin_x: float) -> np.ndarray:
+        """Inverse of :meth:`encode`, with frame 0's ``base_x`` equal to ``origin_x``."""
+        out = np.asarray(z, dtype=np.float64) * self.std + self.mean
+        out[..., 0] += origin_x
+        return out
+
+
+def relative(span: np.ndarray) -> np.ndarray:
+    """``span (T, 6)`` with ``base_x`` taken relative to frame 0's."""
+    out = np.array(span, dtype=np.float64)
+    out[:, 0] -= out[0, 0]
+    return out
+
+
+@dataclass
+class Batch:
+    """Padded, encoded sequences (torch tensors).
+
+    Attributes:
+        frames: ``(B, T, 6)`` float32 standardised frames (every frame for training data;
+            only key frames are meaningful for completion); zero beyond a sequence's length.
+        is_key: ``(B, T)`` bool, the frame is a key given to the network (frame 0 and the
+            last frame of each sequence always are).
+        valid: ``(B, T)`` bool, the frame belongs to the sequence.
+        lengths: ``(B,)`` int64 frames per sequence.
+    """
+
+    frames: "torch.Tensor"  # noqa: F821
+    is_key: "torch.Tensor"  # noqa: F821
+    valid: "torch.Tensor"  # noqa: F821
+    lengths: "torch.Tensor"  # noqa: F821
+
+    def __len__(self) -> int:
+        return self.frames.shape[0]
+
+    def select(self, index) -> "Batch":
+        """The sequences ``index`` (a tensor of indices), trimmed to their longest length."""
+        lengths = self.lengths[index]
+        T = int(lengths.max())
+        return Batch(self.frames[index, :T], self.is_key[index, :T], self.valid[index, :T], lengths)
+
+
+def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
+    """Encode and pad ``sequences`` (each cut to its first..last key) into one :class:`Batch`."""
+    import torch
+
+    if not sequences:
+        raise DataError("no sequences to batch")
+    T = max(int(s.keys[-1] - s.keys[0] + 1) for s in sequences)
+    B = len(sequences)
+    frames = np.zeros((B, T, NUM_VARIABLES), dtype=np.float32)
+    is_key = np.zeros((B, T), dtype=bool)
+    valid = np.zeros((B, T), dtype=bool)
+    for b, s in enumerate(sequences):
+        n = int(s.keys[-1] - s.keys[0] + 1)
+        frames[b, :n] = normalizer.encode(s.span)
+        is_key[b, s.keys - s.keys[0]] = True
+        valid[b, :n] = True
+    lengths = valid.sum(axis=1)
+    return Batch(torch.from_numpy(frames), torch.from_numpy(is_key), torch.from_numpy(valid),
+                 torch.from_numpy(lengths.astype(np.int64)))
+
+
+def conditioning(frames, is_key):
+    """The key inputs for frames ``1 .. T-1``.
+
+    Args:
+        frames: ``(B, T, 6)`` frames (only those at keys are read).
+        is_key: ``(B, T)`` bool keys; frame 0 must be a key.
+
+    Returns:
+        ``(x_prev (B, T-1, 6), x_next (B, T-1, 6), t_rel (B, T-1, 1), target_is_key (B, T-1))``:
+        for frame ``t`` in ``(T_K, T_{K+1}]``, the keys ``X_K`` and ``X_{K+1}`` and
+        ``(t - T_K) / (T_{K+1} - T_K)``. Past a sequence's last key (padding) the
+        last key is used for both and ``t_rel`` is 1.
+    """
+    import torch
+
+    B, T = is_key.shape
+    t = torch.arange(T).expand(B, T)
+    # last key at or before each frame; the key strictly before frame t is that of frame t-1
+    at_or_before = torch.cummax(torch.where(is_key, t, torch.full_like(t, -1)), dim=1).values
+    prev_idx = at_or_before[:, :-1]
+    # first key at or after each frame (T where none): a reversed running minimum
+    after = torch.where(is_key, t, torch.full_like(t, T))
+    at_or_after = torch.flip(torch.cummin(torch.flip(after, [1]), dim=1).values, [1])[:, 1:]
+    next_idx = torch.where(at_or_after >= T, prev_idx, at_or_after)
+    gather = lambda idx: torch.gather(frames, 1, idx[..., None].expand(B, T - 1, frames.shape[-1]))  # noqa: E731
+    span = (next_idx - prev_idx).clamp(min=1).to(frames.dtype)
+    t_rel = torch.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).to(frames.dtype) / span,
+                        torch.ones_like(span))
+    return gather(prev_idx), gather(next_idx), t_rel[..., None], is_key[:, 1:]
+
+
+def delete_keys(is_key, valid, generator, max_deleted: int = 2, min_deleted: int = 0):
+    """Remove ``min_deleted`` .. ``max_deleted`` interior keys of each sequence at random.
+
+    The count is uniform over that range (capped by the interior keys there
+    are), the keys uniform among the interior ones; the first and last key
+    always stay. Returns a new ``(B, T)`` bool mask.
+    """
+    import torch
+
+    B, T = is_key.shape
+    lengths = valid.sum(dim=1)
+    interior = is_key.clone()
+    interior[:, 0] = False
+    interior[torch.arange(B), lengths - 1] = False
+    count = torch.randint(min_deleted, max_deleted + 1, (B,), generator=generator)
+    count = torch.minimum(count, interior.sum(dim=1))
+    score = torch.rand((B, T), generator=generator)
+    score = torch.where(interior, score, torch.full_like(score, 2.0))
+    rank = torch.argsort(torch.argsort(score, dim=1), dim=1)
+    return is_key & ~(interior & (rank < count[:, None]))

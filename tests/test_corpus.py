@@ -115,3 +115,38 @@ def test_locate_explains_what_is_missing(tmp_path, monkeypatch):
         C.locate("bandai1")
     with pytest.raises(DataError, match="unknown corpus"):
         C.locate("lafan1")
+
+
+def test_mirror_pairs_by_name():
+    names = ["joint_Root", "Hips", "Leg_L", "Leg_R", "LeftArm", "RightArm", "l_eye", "r_eye", "Spine"]
+    assert C.mirror_pairs(names).tolist() == [0, 1, 3, 2, 5, 4, 7, 6, 8]
+    assert C.mirror_pairs(["Hips", "Leg_L"]) is None  # no partner
+    assert C.mirror_pairs(["Hips", "Spine"]) is None  # nothing to mirror
+
+
+def test_mirrored_walk_is_the_reflected_walk(tmp_path):
+    write_corpus(tmp_path, styles=("a",), clips_per_style=3)
+    c = C.load_corpus([tmp_path])
+    mirror = C.find_mirror(c.skeleton, c.quats)
+    assert mirror is not None
+    assert [c.skeleton.names[i] for i in mirror.perm[[4, 6]]] == ["Leg_R", "Leg_L"]
+    q, r = c.clip(0)
+    mq, mr = mirror(q, r)
+
+    def world(q, r):
+        pos = np.broadcast_to(c.skeleton.offsets, q.shape[:-1] + (3,)).copy()
+        pos[:, 0] = r
+        return fk(q, pos, c.skeleton.parents)[1]
+
+    p, mp = world(q, r), world(mq, mr)
+    np.testing.assert_allclose(mp[:, mirror.perm], p * [-1, 1, 1], atol=1e-9)
+    qq, rr = mirror(mq, mr)
+    np.testing.assert_allclose(np.abs(np.sum(qq * q, -1)), 1.0, atol=1e-12)
+    np.testing.assert_allclose(rr, r)
+
+
+def test_no_mirror_without_sides():
+    from keyfill.motion import Skeleton
+
+    s = Skeleton(["a", "b"], [-1, 0], [[0, 0, 0], [0, 1, 0]], [(), ()])
+    assert C.find_mirror(s, np.tile([1.0, 0, 0, 0], (5, 2, 1))) is None

@@ -9,7 +9,8 @@ One model learns every key layout at once: each batch draws a layout
 * ``blend``: a head and a tail of given frames (5-15 each) around a gap of 5-40.
 
 Windows (65 frames at offset 20 by default) come from the training clips of a
-:class:`~keyfill.learn.corpus.Corpus`; each is put in the model's canonical
+:class:`~keyfill.learn.corpus.Corpus`; half of them are mirrored left-right
+where the skeleton allows; each is put in the model's canonical
 frame for its layout, the unknown frames are pre-filled, and the losses of
 :func:`keyfill.learn.transformer.losses` are minimised with Adam. The learning
 rate warms up linearly over the first epochs, then decays by a constant factor
@@ -41,7 +42,7 @@ import numpy as np
 
 from keyfill.errors import DataError, ModelError, UsageError
 from keyfill.learn import benchmark
-from keyfill.learn.corpus import Corpus
+from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.transformer import (
     CompletionModel,
     ModelConfig,
@@ -72,6 +73,8 @@ class TrainConfig:
         val_fraction: share of the training clips held out for validation.
         val_lengths: transition lengths scored after each epoch.
         grad_clip: clip the gradient norm (0: off).
+        mirror: mirror half of the windows left-right, where the skeleton allows
+            (:func:`keyfill.learn.corpus.find_mirror`).
     """
 
     epochs: int = 40
@@ -87,6 +90,7 @@ class TrainConfig:
     val_fraction: float = 0.05
     val_lengths: tuple = (5, 15, 30, 45)
     grad_clip: float = 1.0
+    mirror: bool = True
 
     def __post_init__(self):
         bad = set(self.layouts) - set(LAYOUTS)
@@ -265,7 +269,11 @@ def train(
     aq, ar = benchmark.align_windows(data.quats, data.root, model_cfg.facing_axis, up)
     _, gpos = benchmark.global_pose(aq, ar, corpus.skeleton.offsets, corpus.skeleton.parents)
     flat = gpos.reshape(-1, gpos.shape[-2] * 3)
-    info = {"seed": seed, "corpus_clips": len(corpus), **data.info}
+    mirror = None
+    if cfg.mirror:
+        sample = np.random.default_rng([seed, 104729]).choice(len(corpus.quats), min(len(corpus.quats), 20000), replace=False)
+        mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
+    info = {"seed": seed, "corpus_clips": len(corpus), **data.info, "mirrored": mirror is not None}
     if data.validation is not None:
         info["validation_windows"] = data.validation.info["test_windows"]
 
@@ -296,7 +304,12 @@ def train(
                     g["lr"] = lr
                 _, T, keys = sample_layout(rng, cfg.layouts, cfg.window)
                 idx = order[step * cfg.batch_size : (step + 1) * cfg.batch_size]
-                x, y, gq, gr, kinds = make_batch(model, data.quats[idx], data.root[idx], keys, T)
+                wq, wr = data.quats[idx, :T], data.root[idx, :T]
+                if mirror is not None:
+                    flip = rng.random(len(idx)) < 0.5
+                    wq, wr = wq.astype(np.float64), wr.astype(np.float64)
+                    wq[flip], wr[flip] = mirror(wq[flip], wr[flip])
+                x, y, gq, gr, kinds = make_batch(model, wq, wr, keys, T)
                 out = losses(model.features, net(x, kinds), y, gq, gr, kinds, model_cfg)
                 opt.zero_grad(set_to_none=True)
                 out["total"].backward()

@@ -30,13 +30,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from bench_bvh_io import BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, load_average, machine, median_time
+from bench_bvh_io import (BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, load_average, machine, median_time,
+                          median_times)
 
 GIF_GOAL_S = 10.0
 PLOT_GOAL_S = 3.0
@@ -67,15 +70,21 @@ def walk300() -> Path:
     return path
 
 
-def cli_time(args: list[str], repeat: int) -> float:
-    def once():
+def cli_time(args: list[str], repeat: int) -> dict:
+    """Median wall and CPU seconds (user + system of the child) of ``keyfill -q ARGS``."""
+    walls, cpus = [], []
+    for _ in range(repeat):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
         subprocess.run(keyfill_command() + ["-q"] + args, check=True, capture_output=True)
+        walls.append(time.perf_counter() - start)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return {"seconds": statistics.median(walls), "cpu_seconds": statistics.median(cpus)}
 
-    return median_time(once, repeat)[0]
 
-
-def matplotlib_animation_peer(motion, size, out: Path) -> float:
-    """Seconds for matplotlib's FuncAnimation + PillowWriter to write the same stick-figure GIF."""
+def matplotlib_animation_peer(motion, size, out: Path) -> tuple[float, float]:
+    """Wall and CPU seconds for matplotlib's FuncAnimation + PillowWriter to write the same stick-figure GIF."""
     from matplotlib.animation import FuncAnimation, PillowWriter
     from matplotlib.collections import LineCollection
 
@@ -95,9 +104,9 @@ def matplotlib_animation_peer(motion, size, out: Path) -> float:
         text.set_text(f"frame {t}")
         return lines, text
 
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     FuncAnimation(fig, update, frames=motion.num_frames, blit=False).save(out, writer=PillowWriter(fps=motion.fps))
-    return time.perf_counter() - start
+    return time.perf_counter() - start, time.process_time() - cpu
 
 
 def gif_split(motion, out: Path, repeat: int) -> dict:
@@ -112,14 +121,17 @@ def gif_split(motion, out: Path, repeat: int) -> dict:
                               required=r.palette_colors())
         return [palette.apply(r.render(t, r.bracketing_keys(t), r.frame_label(t))) for t in range(motion.num_frames)]
 
-    t_setup, r = median_time(setup, repeat)
-    t_frames, images = median_time(lambda: frames(r), repeat)
-    t_write, _ = median_time(lambda: gif.write_gif(images, out, gif.delays_ms(len(images), motion.fps)), repeat)
+    wall_setup, cpu_setup, r = median_times(setup, repeat)
+    wall_frames, cpu_frames, images = median_times(lambda: frames(r), repeat)
+    wall_write, cpu_write, _ = median_times(
+        lambda: gif.write_gif(images, out, gif.delays_ms(len(images), motion.fps)), repeat)
     per = 1000 / motion.num_frames
     return {
-        "  setup: FK, camera, figure, static layer": {"seconds": t_setup},
-        "  300 frames: draw + exact palette mapping": {"seconds": t_frames, "ms_per_frame": t_frames * per},
-        "  GIF encoding (Pillow, changed rectangles)": {"seconds": t_write, "ms_per_frame": t_write * per},
+        "  setup: FK, camera, figure, static layer": {"seconds": wall_setup, "cpu_seconds": cpu_setup},
+        "  300 frames: draw + exact palette mapping": {"seconds": wall_frames, "cpu_seconds": cpu_frames,
+                                                        "ms_per_frame": wall_frames * per},
+        "  GIF encoding (Pillow, changed rectangles)": {"seconds": wall_write, "cpu_seconds": cpu_write,
+                                                         "ms_per_frame": wall_write * per},
     }
 
 
@@ -134,34 +146,31 @@ def run(repeat: int) -> dict:
         tmp = Path(tmp)
         for view in ("side", "3d"):
             out = tmp / f"walk_{view}.gif"
-            t = cli_time(["preview", str(walk), "-o", str(out), "--view", view, "--key-every", "30"], repeat)
-            rows[f"preview GIF {view} (CLI)"] = {"seconds": t, "goal_s": GIF_GOAL_S, "bytes": out.stat().st_size}
+            row = cli_time(["preview", str(walk), "-o", str(out), "--view", view, "--key-every", "30"], repeat)
+            rows[f"preview GIF {view} (CLI)"] = {**row, "goal_s": GIF_GOAL_S, "bytes": out.stat().st_size}
         out = tmp / "plot.png"
-        t = cli_time(["plot", str(concat), "-o", str(out), "--key-every", "100"], repeat)
-        rows["plot PNG, 6 panels (CLI)"] = {"seconds": t, "goal_s": PLOT_GOAL_S, "bytes": out.stat().st_size}
+        row = cli_time(["plot", str(concat), "-o", str(out), "--key-every", "100"], repeat)
+        rows["plot PNG, 6 panels (CLI)"] = {**row, "goal_s": PLOT_GOAL_S, "bytes": out.stat().st_size}
         for ext in ("svg", "pdf"):
             out = tmp / f"plot.{ext}"
-            t = cli_time(["plot", str(concat), "-o", str(out)], repeat)
-            rows[f"plot {ext.upper()}, 6 panels (CLI)"] = {"seconds": t, "goal_s": PLOT_GOAL_S,
-                                                           "bytes": out.stat().st_size}
+            row = cli_time(["plot", str(concat), "-o", str(out)], repeat)
+            rows[f"plot {ext.upper()}, 6 panels (CLI)"] = {**row, "goal_s": PLOT_GOAL_S, "bytes": out.stat().st_size}
         out = tmp / "plot3.png"
-        t = cli_time(["plot", str(concat), str(concat), str(concat), "--joints", "Hips", "-o", str(out)], repeat)
-        rows["plot PNG, 3 files x 6 panels (CLI)"] = {"seconds": t, "goal_s": PLOT_GOAL_S,
-                                                      "bytes": out.stat().st_size}
-        t = cli_time(["info", str(walk)], repeat)
-        rows["start-up + read (keyfill info, CLI)"] = {"seconds": t}
+        row = cli_time(["plot", str(concat), str(concat), str(concat), "--joints", "Hips", "-o", str(out)], repeat)
+        rows["plot PNG, 3 files x 6 panels (CLI)"] = {**row, "goal_s": PLOT_GOAL_S, "bytes": out.stat().st_size}
+        rows["start-up + read (keyfill info, CLI)"] = cli_time(["info", str(walk)], repeat)
 
         motion = io.load(walk)
-        info = stick.preview([motion], ["walk"], tmp / "lib.gif")
-        size = info.size
-        t_lib, _ = median_time(lambda: stick.preview([motion], ["walk"], tmp / "lib.gif"), repeat)
-        rows["preview GIF side (library)"] = {"seconds": t_lib, "size": list(size)}
-        peer = sorted(matplotlib_animation_peer(motion, size, tmp / "peer.gif") for _ in range(max(1, repeat // 2)))
-        t_peer = peer[len(peer) // 2]
+        wall, cpu, info = median_times(lambda: stick.preview([motion], ["walk"], tmp / "lib.gif"), repeat)
+        rows["preview GIF side (library)"] = {"seconds": wall, "cpu_seconds": cpu,
+                                              "bytes": (tmp / "lib.gif").stat().st_size}
+        peer = [matplotlib_animation_peer(motion, info.size, tmp / "peer.gif") for _ in range(max(1, repeat // 2))]
+        walls, cpus = zip(*peer)
         rows["matplotlib FuncAnimation + PillowWriter (peer)"] = {
-            "seconds": t_peer, "bytes": (tmp / "peer.gif").stat().st_size, "keyfill_speedup": t_peer / t_lib,
+            "seconds": statistics.median(walls), "cpu_seconds": statistics.median(cpus),
+            "bytes": (tmp / "peer.gif").stat().st_size,
+            "keyfill_speedup_cpu": statistics.median(cpus) / cpu,
         }
-        rows["preview GIF side (library)"]["bytes"] = (tmp / "lib.gif").stat().st_size
         rows.update(gif_split(motion, tmp / "split.gif", repeat))
     return rows
 
@@ -184,13 +193,14 @@ def main() -> int:
         return 0
     print(f"machine: {result['machine']}")
     print(f"load average before/after: {load_before} / {result['load_average_after']}; medians of {args.repeat} runs")
+    print(f"  {'':48} {'wall s':>7} {'cpu s':>7}")
     for name, row in rows.items():
         goal = f"  goal < {row['goal_s']:.0f} s: {'met' if row['seconds'] < row['goal_s'] else 'MISSED'}" \
             if "goal_s" in row else ""
-        extra = f"  ({row['bytes'] / 1000:.0f} kB)" if "bytes" in row else ""
-        speed = f"  keyfill is {row['keyfill_speedup']:.1f}x faster" if "keyfill_speedup" in row else ""
-        per = f"  ({row['ms_per_frame']:.1f} ms/frame)" if "ms_per_frame" in row else ""
-        print(f"  {name:<48} {row['seconds']:7.2f} s{per}{extra}{goal}{speed}")
+        extra = f"  {row['bytes'] / 1000:.0f} kB" if "bytes" in row else ""
+        speed = f"  keyfill uses {row['keyfill_speedup_cpu']:.1f}x less CPU" if "keyfill_speedup_cpu" in row else ""
+        per = f"  {row['ms_per_frame']:.1f} ms/frame" if "ms_per_frame" in row else ""
+        print(f"  {name:<48} {row['seconds']:7.2f} {row['cpu_seconds']:7.2f}{per}{extra}{goal}{speed}")
     return 0
 
 

@@ -47,8 +47,8 @@ def preview(files, output, view, frames, step, trail, fps, size, labels, keys_te
     Keys (recorded in the first file, or given with --keys / --key-every) are
     ghosted in pink: in animations and filmstrips the keys on either side of
     the current frame. The camera framing is fixed from the whole motion, so
-    poses do not jump; the ground is a grid, or a line for planar figures
-    such as the hopping lamp.
+    poses do not jump; the ground is a grid in the top and 3d views, a line
+    in the side and front views and for planar figures such as the lamp.
 
     \b
     Examples:

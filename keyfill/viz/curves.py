@@ -67,16 +67,16 @@ def channel_curves(motion: Motion) -> Curves:
         js = [j for j in range(J) if orders[j] == order and any(c.endswith("rotation") for c in sk.channels[j])]
         if js:
             angles[:, js] = R.quat_to_euler(motion.rotations[:, js], order)
+    n_rot = np.array([sum(c.endswith("rotation") for c in chans) for chans in sk.channels])
+    if F:  # continuous curves over time, all joints at once (as the BVH writer makes them)
+        angles[:, n_rot == 3] = R.euler_continuous_np(angles[:, n_rot == 3])
+        some = (n_rot > 0) & (n_rot < 3)
+        angles[:, some] = np.unwrap(angles[:, some], axis=0)
     length = unit_label(sk.meters_per_unit)
     scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
     names, units, joints, kinds, columns, animated = [], [], [], [], [], []
     for j, chans in enumerate(sk.channels):
-        n_rot = sum(c.endswith("rotation") for c in chans)
         a = angles[:, j]
-        if n_rot == 3:
-            a = R.euler_continuous_np(a)
-        elif n_rot:
-            a = np.unwrap(a, axis=0)
         for c in chans:
             axis = "XYZ".index(c[0])
             if c in POSITION_CHANNELS:

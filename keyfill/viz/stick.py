@@ -446,7 +446,7 @@ class StickRenderer:
         st = self.style
         key = np.array(to_rgb(st.KEY_COLOR))
         flat = [(1.0, 1.0, 1.0), to_rgb(st.TEXT_COLOR), to_rgb(st.GROUND_COLOR), to_rgb(st.GRID_COLOR), tuple(key),
-                tuple(0.35 * key + 0.65), (0.843, 0.843, 0.843)]
+                tuple(0.35 * key + 0.65), to_rgb(st.FRAME_COLOR)]
         for colors in self.colors:
             flat += [to_rgb(c) for c in ([colors] if isinstance(colors, str) else colors)]
         return [tuple(int(round(255 * v)) for v in c) for c in dict.fromkeys(flat)]
@@ -545,6 +545,11 @@ def preview(
     length = max(m.num_frames for m in cut)
     if suffix == ".gif":
         kind = "gif"
+        rate = fps or cut[0].fps
+        stride = gif.gif_step(rate, step or 1)
+        ts = list(range(0, length, stride))
+        if len(ts) > MAX_GIF_FRAMES:
+            raise UsageError(f"{len(ts)} GIF frames is too many (at most {MAX_GIF_FRAMES}); use --step or --frames")
     else:
         kind = "still" if trail else "filmstrip"
     side = {"gif": GIF_SIDE, "still": STILL_SIDE, "filmstrip": -STRIP_HEIGHT}[kind]
@@ -553,12 +558,6 @@ def preview(
 
     with atomic_output(output) as tmp:
         if kind == "gif":
-            rate = fps or cut[0].fps
-            stride = gif.gif_step(rate, step or 1)
-            ts = list(range(0, length, stride))
-            if len(ts) > MAX_GIF_FRAMES:
-                raise UsageError(f"{len(ts)} GIF frames is too many (at most {MAX_GIF_FRAMES}); "
-                                 "use --step or --frames")
             samples = sorted({ts[0], ts[len(ts) // 2], ts[-1]} | {int(k) for k in r.keys[:1]})
             palette = gif.Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in samples],
                                   required=r.palette_colors())
@@ -589,6 +588,8 @@ def _montage(cells, columns: int, colors):
     as a palette image that keeps ``colors`` exact."""
     from PIL import Image, ImageDraw
 
+    from keyfill.viz import gif, style
+
     w, h = cells[0].size
     gap = 4
     cols = min(columns, len(cells))
@@ -599,7 +600,5 @@ def _montage(cells, columns: int, colors):
         x = gap + (i % cols) * (w + gap)
         y = gap + (i // cols) * (h + gap)
         sheet.paste(cell, (x, y))
-        draw.rectangle((x - 1, y - 1, x + w, y + h), outline=(215, 215, 215))
-    from keyfill.viz import gif
-
+        draw.rectangle((x - 1, y - 1, x + w, y + h), outline=style.FRAME_COLOR)
     return gif.Palette([sheet], 256, colors).apply(sheet)

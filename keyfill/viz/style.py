@@ -21,6 +21,8 @@ FILE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf",
 KEY_COLOR = "#e7298a"
 GROUND_COLOR = "#b0b0b0"
 GRID_COLOR = "#d2d2d2"
+#: the frame around each picture of a filmstrip
+FRAME_COLOR = "#d7d7d7"
 TEXT_COLOR = "#333333"
 
 #: rc settings for every picture: a font that ships with matplotlib (same

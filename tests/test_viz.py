@@ -412,6 +412,8 @@ def test_bandai_walk_preview(tmp_path):
     hips = motion.skeleton.index("Hips")
     assert not any(b[1] == hips for b in f.bones.tolist())  # root motion is not a bone
     assert len(f.bones) == 20 + len(motion.skeleton.end_sites)
+    curves = C.channel_curves(motion)  # the default panels: the pelvis, not the static joint_Root
+    assert {curves.joints[i] for i in C.select_panels(curves, motion)} == {"Hips"}
     info = S.preview([motion], ["walk"], tmp_path / "walk.gif")
     frames, delays = gif_frames(tmp_path / "walk.gif")
     assert len(frames) == 31 and abs(sum(delays) - 1033) <= 10 and info.size == (frames[0].shape[1], frames[0].shape[0])

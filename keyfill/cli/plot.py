@@ -15,7 +15,7 @@ from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, say
               help="Picture to write: .png, .svg or .pdf.")
 @click.option("--joints", multiple=True, metavar="NAMES",
               help="Joints whose channels to show, comma-separated or repeated (default: all channels when "
-                   "there are at most 12, else the first joint that moves).")
+                   "there are at most 12, else the first joint that rotates).")
 @click.option("--channels", multiple=True, metavar="NAMES",
               help="Panels to show: JOINT.CHANNEL names (Hips.Zrotation, Hips.y with --positions, a lamp "
                    "variable) or a channel for every chosen joint (Zrotation, Xposition, y).")

@@ -160,8 +160,8 @@ def select_panels(curves: Curves, motion: Motion, joints=None, channels=None) ->
     ``joints``: joint names (UsageError listing the skeleton's joints for an
     unknown one). ``channels``: panel names or their last part (``Zrotation``,
     ``x``), case-insensitive (UsageError listing the valid ones). Without
-    either, all variables, or only the first moving joint's when there are
-    more than :data:`MAX_DEFAULT_PANELS`.
+    either, all variables, or only those of the first joint that rotates when
+    there are more than :data:`MAX_DEFAULT_PANELS`.
     """
     joints, channels = _split_list(joints), _split_list(channels)
     cand = [i for i in range(len(curves.names)) if curves.animated[i]]
@@ -197,12 +197,14 @@ def _valid_channels(curves: Curves, cand: list[int]) -> str:
 
 
 def _first_moving_joint(curves: Curves, cand: list[int]) -> str:
-    """The first joint (in file order) with a variable that changes over time."""
+    """The first joint (in file order) that rotates over time, else the first that moves at all.
+
+    (Bandai's static ``joint_Root`` only slides; its child ``Hips`` is the pelvis.)
+    """
     v = curves.values
-    for i in cand:
-        if len(v) and np.ptp(v[:, i]) > 1e-9:
-            return curves.joints[i]
-    return curves.joints[cand[0]]
+    moving = [i for i in cand if len(v) and np.ptp(v[:, i]) > 1e-9]
+    rotating = [i for i in moving if curves.units[i] == "deg"]
+    return curves.joints[(rotating or moving or cand)[0]]
 
 
 @dataclass(frozen=True)

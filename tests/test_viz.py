@@ -45,6 +45,7 @@ def walker(frames: int = 24, swing: float = 0.6, speed: float = 4.0, keys=(0, 8,
     angles[:, 4, 1] = 0.5 * swing * (1 - np.cos(phase))
     angles[:, 6, 1] = 0.5 * swing * (1 + np.cos(phase))
     angles[:, 1, 0] = 0.1 * np.sin(phase)
+    angles[:, 0, 2] = 0.05 * np.sin(phase)  # the pelvis turns a little
     rot = R.euler_to_quat(angles, "ZXY")
     pos = np.broadcast_to(sk.offsets, (frames, 7, 3)).copy()
     pos[:, 0, 2] = speed * np.arange(frames)

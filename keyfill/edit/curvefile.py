@@ -11,23 +11,24 @@ Layout (``.usda``, ``.usdc`` or ``.usd``)::
         double <Joint>_<Channel>.spline = { bezier, <knots> }   one attribute per control
 
 Each control attribute (for example ``Hips_Zrotation``) carries
-``customData keyfill = {joint = "Hips", channel = "Zrotation"}`` and a
+``customData keyfill = {joint = "Hips", channel = "Zrotation", unit = "radians"}`` and a
 spline of Bezier knots at the key times (time codes are frames;
 ``timeCodesPerSecond`` is the frame rate). A knot's pre/post tangent
 *width* is the tangent's extent in frames and its *slope* the value change
 per frame, so the Bezier control points are ``(t - preWidth, v - preWidth *
 preSlope)`` and ``(t + postWidth, v + postWidth * postSlope)``; knot
 customData ``broken`` says whether the two slopes may differ. Rotation
-channels are Euler angles in **degrees** in the joint's declared order (the
-Skeleton's channel layout), translations are in the stage's units
+channels are Euler angles in **radians** (keyfill's unit everywhere but BVH
+text, so values round-trip bit for bit) in the joint's declared order (the
+Skeleton's channel layout); translations are in the stage's units
 (``metersPerUnit``). Every control has a knot at every key (global key
 poses); extrapolation is held.
 
 Reading also accepts Hermite splines (widths a third of the segment) and
 linear segments (turned into the equivalent Bezier); held segments, dual
 values, loops and other extrapolations are refused with a clear message.
-``attr.Get(time)`` on the saved file equals :meth:`Curves.evaluate` (in
-degrees for rotations) to rounding: both solve the same cubic.
+``attr.Get(time)`` on the saved file equals :meth:`Curves.evaluate` to
+rounding: both solve the same cubic.
 """
 
 from __future__ import annotations
@@ -97,20 +98,19 @@ def write(curves: Curves, path: str | Path) -> None:
     scope.SetCustomDataByKey(_CUSTOM, {"layout": LAYOUT, "version": VERSION})
     sk = curves.skeleton
     used: set[str] = set()
-    deg = np.degrees(1.0)
     for i, c in enumerate(curves.controls):
-        unit = deg if c.is_rotation else 1.0
         attr = scope.CreateAttribute(_attr_name(sk, c, used), Sdf.ValueTypeNames.Double, custom=True)
-        attr.SetCustomDataByKey(_CUSTOM, {"joint": sk.names[c.joint], "channel": c.channel})
+        unit = "radians" if c.is_rotation else "file units"
+        attr.SetCustomDataByKey(_CUSTOM, {"joint": sk.names[c.joint], "channel": c.channel, "unit": unit})
         spline = Ts.Spline()
         spline.SetCurveType(Ts.CurveTypeBezier)
         for k, t in enumerate(curves.times):
             knot = Ts.Knot()
             knot.SetTime(float(t))
-            knot.SetValue(float(curves.values[k, i] * unit))
+            knot.SetValue(float(curves.values[k, i]))
             knot.SetNextInterpolation(Ts.InterpCurve)
             for side, tan in (("Pre", curves.in_tan[k, i]), ("Post", curves.out_tan[k, i])):
-                width, height = float(tan[0]), float(tan[1] * unit)
+                width, height = float(tan[0]), float(tan[1])
                 getattr(knot, f"Set{side}TanWidth")(width)
                 getattr(knot, f"Set{side}TanSlope")(height / width if width > 0 else 0.0)
             knot.SetCustomDataByKey("broken", bool(curves.broken[k, i]))
@@ -207,20 +207,18 @@ def from_stage(stage, motion: Motion, label) -> Curves:
     in_tan = np.empty((K, C, 2))
     out_tan = np.empty((K, C, 2))
     broken = np.zeros((K, C), dtype=bool)
-    rad = np.radians(1.0)
-    for i, (ctl, (curve_type, knots)) in enumerate(zip(controls, per_control)):
-        unit = rad if ctl.is_rotation else 1.0
+    for i, (curve_type, knots) in enumerate(per_control):
         for k, knot in enumerate(knots):
             if knot.IsDualValued():
                 raise FormatError(f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label)
-            values[k, i] = float(knot.GetValue()) * unit
+            values[k, i] = float(knot.GetValue())
             pre = np.array([knot.GetPreTanWidth(), knot.GetPreTanSlope()], dtype=np.float64)
             post = np.array([knot.GetPostTanWidth(), knot.GetPostTanSlope()], dtype=np.float64)
             if curve_type == Ts.CurveTypeHermite:
                 pre[0] = seg[k - 1] / 3 if k > 0 else seg[0] / 3
                 post[0] = seg[k] / 3 if k < K - 1 else seg[-1] / 3
-            in_tan[k, i] = pre[0], pre[0] * pre[1] * unit
-            out_tan[k, i] = post[0], post[0] * post[1] * unit
+            in_tan[k, i] = pre[0], pre[0] * pre[1]
+            out_tan[k, i] = post[0], post[0] * post[1]
             flag = knot.GetCustomDataByKey("broken")
             broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9, atol=1e-12)
         for k, knot in enumerate(knots[:-1]):

@@ -7,6 +7,7 @@ degrees, times in frames. Example::
     epsilon = 0.01                     # pin/contact band of Eq. 11 (default 1e-4 x character size)
     pins = ["Hips"]                    # points whose trajectories stay, in every edit
     lock = ["joint_Root"]              # joints or controls ("Spine.Xrotation") no edit may change
+    break_tangents = false             # default for every move edit (see [[edit]])
 
     [limits]                           # per control (or all rotation channels of a joint): [low, high]
     "LowerArm_L.Zrotation" = [-150, 0]
@@ -25,6 +26,9 @@ degrees, times in frames. Example::
     move = [0, 10, 0]                  # or target = [x, y, z] (world)
     orientation = [1, 0, 0, 0]         # optional world orientation (w, x, y, z)
     hold = [12]                        # optional frames where the point keeps its current state
+    break_tangents = false             # optional: break the segment's end tangents and change only
+                                       # this segment (E_b keeps them close); default keeps unified
+                                       # keys unified, so the neighbouring segments follow
     pins = [{joint = "Hand_R", offset = [0, 5, 0]}]   # optional, for this edit only
     contacts = [{joint = "Toes_L", frames = [0, 10]}] # optional, for this edit only
 
@@ -76,6 +80,7 @@ class Manipulation:
     holds: tuple[float, ...]
     pins: tuple[Point, ...]
     contacts: tuple[Contact, ...]
+    break_tangents: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,8 +118,8 @@ class EditFile:
     epsilon: float | None = None
 
 
-_TOP = {"tolerance", "epsilon", "pins", "lock", "limits", "stiffness", "contact", "edit"}
-_MOVE = {"joint", "offset", "frame", "time", "target", "move", "orientation", "hold", "pins", "contacts"}
+_TOP = {"tolerance", "epsilon", "pins", "lock", "limits", "stiffness", "contact", "edit", "break_tangents"}
+_MOVE = {"joint", "offset", "frame", "time", "target", "move", "orientation", "hold", "pins", "contacts", "break_tangents"}
 _TIMING = {"frame", "time", "timing", "joint"}
 _POINT = {"joint", "offset", "orientation"}
 _CONTACT = {"joint", "offset", "frames"}
@@ -136,7 +141,7 @@ class _Where:
         return next((i + 1 for i, line in enumerate(self.lines) if pat.match(line)), None)
 
     def key(self, name: str, after: int | None = None) -> int | None:
-        pat = re.compile(r'^\s*"?' + re.escape(name) + r'"?\s*=')
+        pat = re.compile(r"^\s*[\"']?" + re.escape(name) + r"[\"']?\s*=")
         start = (after or 1) - 1
         for i in range(start, len(self.lines)):
             if pat.match(self.lines[i]):
@@ -277,6 +282,8 @@ class _Parser:
         out["locked"] = frozenset(c for n in self._list(data.get("lock", []), "lock") for c in self.controls(n, "lock"))
         out["limits"] = self.limits(data.get("limits", {}))
         out["stiffness"] = self.stiffness(data.get("stiffness", {}))
+        self.line = self.where.key("break_tangents")
+        self.break_default = self.flag(data.get("break_tangents", False), "break_tangents")
         contacts = []
         for n, spec in enumerate(self._list(data.get("contact", []), "contact")):
             self.line = self.where.table("contact", n)
@@ -294,6 +301,11 @@ class _Parser:
             self.line = None
             raise self.fail("no [[edit]] in the file; nothing to do")
         return EditFile(path=self.path, edits=tuple(edits), **out)
+
+    def flag(self, value, what: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.fail(f"{what} must be true or false, got {value!r}")
+        return value
 
     def _list(self, value, what: str) -> list:
         if not isinstance(value, list):
@@ -375,7 +387,10 @@ class _Parser:
             raise self.fail(f"hold frame {t:g} is the frame being edited")
         pins = tuple(self.point(p, "pin") for p in self._list(spec.get("pins", []), "pins"))
         contacts = tuple(self.contact(c, f"contact {k + 1}") for k, c in enumerate(self._list(spec.get("contacts", []), "contacts")))
-        return Manipulation(n + 1, self.line or 0, point, t, target, move, orientation, holds, pins, contacts)
+        if self.mode == "pose" and ("hold" in spec or "break_tangents" in spec):
+            raise self.fail("hold and break_tangents apply to edit-tangents, not to keyfill pose")
+        broken = self.flag(spec.get("break_tangents", self.break_default), "break_tangents")
+        return Manipulation(n + 1, self.line or 0, point, t, target, move, orientation, holds, pins, contacts, broken)
 
     def timing(self, spec: dict, n: int) -> TimingEdit:
         if self.mode == "pose":

@@ -28,7 +28,7 @@ from keyfill.errors import DataError
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Keys, Motion
 
 #: weight of the Catmull-Rom prior relative to one frame's squared error
-_PRIOR = 1e-6
+_PRIOR = 1e-10
 
 
 def controls_of(motion: Motion, all_channels: bool = False) -> tuple[Control, ...]:

@@ -72,7 +72,7 @@ def assemble(
     ub: np.ndarray,
     Jc: np.ndarray | None = None,
     rc: np.ndarray | None = None,
-    band: float = 0.0,
+    band: float | np.ndarray = 0.0,
     pair_vars: np.ndarray | None = None,
     pair_gap: np.ndarray | None = None,
     weights: Weights = Weights(),
@@ -83,7 +83,8 @@ def assemble(
         Jm: ``(m, n)`` Jacobian of the manipulated state; ``rm (m,)`` its residual ``s' - s``.
         stiffness: ``(n,)`` the diagonal of ``D``.
         lb, ub: ``(n,)`` bounds on the step ``x``.
-        Jc, rc: ``(k, n)`` and ``(k,)`` hard constraints ``J_c x ~= r_c`` within ``band``.
+        Jc, rc: ``(k, n)`` and ``(k,)`` hard constraints ``J_c x ~= r_c`` within ``band``
+            (a number or one per row).
         pair_vars: indices of variables in ``E_b``; ``pair_gap`` their ``theta - pair``.
     """
     n = Jm.shape[1]
@@ -114,8 +115,8 @@ def check_solver(name: str) -> str:
     return name
 
 
-def solve(program: Program, solver: str = DEFAULT_SOLVER) -> Result:
-    """Solve ``program`` with the qpsolvers backend ``solver``."""
+def solve(program: Program, solver: str = DEFAULT_SOLVER, **options) -> Result:
+    """Solve ``program`` with the qpsolvers backend ``solver`` (``options`` go to the backend)."""
     import qpsolvers
 
     n = len(program.q)
@@ -130,7 +131,7 @@ def solve(program: Program, solver: str = DEFAULT_SOLVER) -> Result:
         program.lb,
         program.ub,
     )
-    sol = qpsolvers.solve_problem(problem, solver=solver)
+    sol = qpsolvers.solve_problem(problem, solver=solver, **options)
     ok = sol.found and sol.x is not None and np.all(np.isfinite(sol.x))
     z = np.asarray(sol.z, dtype=np.float64) if has_rows and sol.z is not None else np.zeros(program.G.shape[0])
     z_box = np.asarray(sol.z_box, dtype=np.float64) if sol.z_box is not None else np.zeros(n)

@@ -170,29 +170,34 @@ class Rig:
             rot[a] = w
         return Frames(rot, pos, axis)
 
-    def state(self, frames: Frames, point: Point) -> tuple[np.ndarray, np.ndarray]:
-        """``(position (T, 3), rotation matrices (T, 3, 3))`` of ``point``."""
+    def state(self, frames: Frames, point: Point, rows=None) -> tuple[np.ndarray, np.ndarray]:
+        """``(position (T, 3), rotation matrices (T, 3, 3))`` of ``point`` (at ``rows`` of ``frames`` only)."""
         rot = frames.rot[point.joint]
         pos = frames.pos[point.joint]
+        if rows is not None:
+            rot, pos = rot[rows], pos[rows]
         if np.any(point.offset):
             pos = pos + rot @ point.offset
         return pos, rot
 
-    def jacobian(self, frames: Frames, point: Point, position: np.ndarray, controls) -> np.ndarray:
+    def jacobian(self, frames: Frames, point: Point, position: np.ndarray, controls, rows=None) -> np.ndarray:
         """``ds/dc``: ``(T, 3 or 6, n)`` for ``controls (n,)`` at the point's ``position (T, 3)``.
 
-        Columns of controls that do not move the point are zero.
+        ``rows``: use only these rows (times) of ``frames``; ``position`` then
+        holds just those rows. Columns of controls that do not move the point
+        are zero.
         """
         T = position.shape[0]
+        sel = slice(None) if rows is None else rows
         out = np.zeros((T, point.state_size, len(controls)))
         moving = self.controls_of(point)
         cols = [k for k, c in enumerate(controls) if c in moving]
         if not cols:
             return out
         ctl = [self.controls[controls[k]] for k in cols]
-        v = np.stack([frames.axis[controls[k]] for k in cols], axis=-1)  # (T, 3, m)
+        v = np.stack([frames.axis[controls[k]][sel] for k in cols], axis=-1)  # (T, 3, m)
         is_rot = np.array([c.is_rotation for c in ctl])
-        lever = position[:, :, None] - np.stack([frames.pos[c.joint] for c in ctl], axis=-1)
+        lever = position[:, :, None] - np.stack([frames.pos[c.joint][sel] for c in ctl], axis=-1)
         cross = v[:, [1, 2, 0]] * lever[:, [2, 0, 1]] - v[:, [2, 0, 1]] * lever[:, [1, 2, 0]]
         out[:, :3, cols] = np.where(is_rot, cross, v)
         if point.orientation:

@@ -43,6 +43,7 @@ size (the extent of its rest pose), in the file's units.
 
 from __future__ import annotations
 
+import functools
 import time as _time
 from dataclasses import dataclass, field
 
@@ -50,7 +51,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.edit import qp as QP
-from keyfill.edit.curves import CurveArrays, Curves, evaluate_segments
+from keyfill.edit.curves import CurveArrays, Curves, evaluate_segments, tangent_derivatives
 from keyfill.edit.edits import Contact, EditFile, Manipulation, TimingEdit
 from keyfill.edit.rig import Frames, Point, Rig
 from keyfill.errors import DataError, InfeasibleError
@@ -84,6 +85,7 @@ class Settings:
     tolerance_scale: float = 1e-3
 
 
+@functools.lru_cache(maxsize=64)
 def character_size(skeleton) -> float:
     """The largest extent of the rest pose (joints and End Sites), in file units."""
     rest = skeleton.rest_world_positions()
@@ -175,10 +177,12 @@ class _Constraint:
     """A pin, contact or hold as the QP sees it."""
 
     name: str
+    kind: str  # "pin", "contact" or "hold"
     point: Point
     start: float
     end: float
     controls: frozenset
+    contact: Contact | None = None
     times: np.ndarray = None
     target_pos: np.ndarray = None
     target_rot: np.ndarray | None = None
@@ -189,39 +193,69 @@ class _Constraint:
 
 @dataclass
 class _Linear:
-    """The problem linearised at the current variables."""
+    """The problem at the current variables: residuals now, Jacobians on demand.
+
+    ``jacobians()`` returns ``(Jm, Jc)``, the rows of ``rm`` and ``rc``
+    differentiated by the variables; it is only called when another QP is
+    needed (an edit that converges does not pay for its last Jacobian).
+    """
 
     distance: float
     violation: float
-    Jm: np.ndarray
     rm: np.ndarray
-    Jc: np.ndarray
     rc: np.ndarray
-    rows: list  # (constraint name, number of rows of Jc)
+    rows: list  # (constraint name, number of rows of rc)
+    jacobians: object
 
 
-def _iterate(theta0, linearize, apply, lb, ub, stiffness, pairs, eps, kappa, solver, settings):
-    """Solve, re-linearise, repeat (section 3.3). Returns ``(theta, distance, iterations, reached, lin, res)``."""
-    theta = theta0.copy()
-    lin = linearize(theta)
+def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, solver, settings):
+    """Solve, re-linearise, repeat (section 3.3).
+
+    ``lin0`` is the problem at ``theta0``; ``relinearize(theta)`` applies new
+    variables to the curves and linearises there. Returns ``(best theta or
+    None, its distance, iterations, reached, last linearisation, last (lin,
+    QP result))``; the best theta is the closest to the target among those
+    whose constraints hold within ``eps``.
+    """
+    theta = np.clip(theta0, lb, ub)  # tangents the limits forbid are brought inside first
+    lin = lin0 if np.array_equal(theta, theta0) else relinearize(theta)
     best_theta, best_d = (theta.copy(), lin.distance) if lin.violation <= eps else (None, np.inf)
     iterations = stall = 0
     last = None
     pair_vars, pair_other = pairs
+    band = settings.band * eps
+    radius = np.inf  # how far toward the target one step aims (shrinks when the linear model fails)
     while best_d >= kappa and iterations < settings.max_iterations and stall < settings.patience:
         gap = theta[pair_vars] - pair_other if len(pair_vars) else None
+        Jm, Jc = lin.jacobians()
+        rm = lin.rm if lin.distance <= radius else lin.rm * (radius / lin.distance)
+        was_feasible = lin.violation <= eps
         program = QP.assemble(
-            lin.Jm, lin.rm, stiffness, lb - theta, ub - theta, lin.Jc, lin.rc,
-            settings.band * eps, pair_vars, gap, settings.weights,
+            Jm, rm, stiffness, lb - theta, ub - theta, Jc, lin.rc, band, pair_vars, gap, settings.weights
         )
         res = QP.solve(program, solver)
+        if res.x is None and was_feasible:
+            # the band cannot be met from here: let rows keep their current error (within eps)
+            program.h = np.concatenate([lin.rc + np.maximum(band, np.abs(lin.rc)), np.maximum(band, np.abs(lin.rc)) - lin.rc])
+            res = QP.solve(program, solver)
         iterations += 1
         last = (lin, res)
         if res.x is None:
             break
-        theta = np.clip(theta + res.x, lb, ub)
-        apply(theta)
-        lin = linearize(theta)
+        # backtrack while the step breaks a constraint that held (the linear model's error)
+        for alpha in (1.0, 0.5, 0.25, 0.125):
+            trial = np.clip(theta + alpha * res.x, lb, ub)
+            new = relinearize(trial)
+            if new.violation <= eps or not was_feasible:
+                break
+        else:
+            radius = 0.25 * min(radius, lin.distance)  # aim closer, from where we are
+            relinearize(theta)
+            stall += 1
+            continue
+        theta, lin = trial, new
+        if alpha == 1.0:
+            radius = 2 * radius
         if lin.violation <= eps and lin.distance < best_d - 1e-3 * kappa:
             best_theta, best_d, stall = theta.copy(), lin.distance, 0
         else:
@@ -258,6 +292,7 @@ def _diagnose(last, var_groups, constraint_names) -> list[str]:
 class _Editor:
     def __init__(self, curves: Curves, ef: EditFile, solver: str, best_effort: bool, settings: Settings):
         self.work = _Work(curves)
+        self.original = self.work.snapshot()  # pins keep the input's trajectories, edit after edit
         self.ef = ef
         self.sk = curves.skeleton
         self.solver = QP.check_solver(solver)
@@ -302,23 +337,24 @@ class _Editor:
                     "(plant it with keyfill pose first, or raise tolerance)"
                 )
 
-    def reduce(self, point: Point, pins, contacts, holds_time_range=None):
+    def reduce(self, point: Point, pins, contacts):
         """Section 3.3: the optimised controls ``C`` and the constraints kept."""
         rig = self.work.rig
         locked = self.ef.locked
         Cs = rig.controls_of(point) - locked
         C = set(Cs)
         kept = []
-        cands = [(self.pin_name(p), p, -np.inf, np.inf) for p in pins]
-        cands += [(self.contact_name(c), c.point, c.start, c.end) for c in contacts]
-        for name, p, start, end in cands:
-            Cj = rig.controls_of(p) - locked
+        cands = [_Constraint(self.pin_name(p), "pin", p, -np.inf, np.inf, frozenset()) for p in pins]
+        cands += [_Constraint(self.contact_name(c), "contact", c.point, c.start, c.end, frozenset(), c) for c in contacts]
+        for con in cands:
+            Cj = rig.controls_of(con.point) - locked
             if not C & Cj:
                 continue
             if Cj <= Cs:
                 C -= Cj
                 continue
-            kept.append(_Constraint(name, p, start, end, Cj))
+            con.controls = Cj
+            kept.append(con)
             C |= Cj
         return sorted(C), kept
 
@@ -340,11 +376,15 @@ class _Editor:
         last = self.work.curves.num_frames - 1
         return np.arange(max(np.ceil(lo_t), 0), min(np.floor(hi_t), last) + 1, dtype=np.float64)
 
-    def check_constraints(self, report: EditReport, before: CurveArrays, pins, contacts, lo_t, hi_t) -> None:
-        """Dense checks at every frame of the changed time range (the report's worst values)."""
+    def check_constraints(self, report: EditReport, pins, contacts, lo_t, hi_t) -> None:
+        """Dense checks at every frame of the changed time range (the report's worst values).
+
+        Pins are measured against the input's trajectories, contacts against
+        their still position.
+        """
         frames = self.frames_in(lo_t, hi_t)
         if pins and len(frames):
-            old = self.work.states(pins, frames, before)
+            old = self.work.states(pins, frames, self.original)
             new = self.work.states(pins, frames)
             worst = 0.0
             for p, (op, orot), (np_, nrot) in zip(pins, old, new):
@@ -381,7 +421,6 @@ class _Editor:
         a, b = s, s + 1
         point = edit.point
         label = f"edit {edit.index} ({point.label(self.sk)} at frame {edit.time:g})"
-        before = work.snapshot()
         pins = list(self.ef.pins) + list(edit.pins)
         contacts = list(self.ef.contacts) + list(edit.contacts)
 
@@ -393,6 +432,8 @@ class _Editor:
         Carr = np.array(C)
         nC = len(C)
         n = 4 * nC
+        if edit.break_tangents:
+            work.broken[a, Carr] = work.broken[b, Carr] = True
         # unified keys: the tangent on the other side follows with the ratio of the widths
         ratio_a = np.zeros(nC)
         ratio_b = np.zeros(nC)
@@ -423,19 +464,8 @@ class _Editor:
                 con.times = t
                 samples.append(con)
         for h in edit.holds:
-            samples.append(_Constraint(f"hold {point.label(self.sk)} at frame {h:g}", point, h, h, frozenset(C), np.array([h])))
-        # targets (from the curves as they are now)
-        cur = work.states([point], [edit.time])[0]
-        target_pos = edit.target if edit.target is not None else cur[0][0] + edit.move
-        target_rot = R.quat_to_matrix(edit.orientation) if edit.orientation is not None else None
-        for con in samples:
-            st = work.states([con.point], con.times)[0]
-            if con.name.startswith("contact"):
-                contact = next(c for c in contacts if self.contact_name(c) == con.name)
-                con.target_pos = self.contact_target(contact, con.times)
-            else:
-                con.target_pos = st[0]
-            con.target_rot = st[1] if con.point.orientation else None
+            name = f"hold {point.label(self.sk)} at frame {h:g}"
+            samples.append(_Constraint(name, "hold", point, h, h, frozenset(C), times=np.array([h])))
 
         # all times the iteration evaluates: the edited time, then each constraint's samples
         T_all = np.concatenate([[edit.time]] + [con.times for con in samples])
@@ -472,53 +502,82 @@ class _Editor:
             if uni_b.any():
                 work.out_tan[b, Carr[uni_b]] = ratio_b[uni_b, None] * in_b[uni_b]
 
-        def linearize(th: np.ndarray) -> _Linear:
+        def evaluate():
             ev = evaluate_segments(work.arrays(), T_all, seg_all, Carr)
             values[:, Carr] = ev.value
-            frames = rig.frames(values, joints)
-            sb1, sb2 = ev.slope * ev.b1, ev.slope * ev.b2
-            dc = np.empty((len(T_all), nC, 4))
-            dc[..., 0] = np.where(in_s, -sb1, np.where(in_prev, ratio_a * sb2, 0.0))
-            dc[..., 1] = np.where(in_s, ev.b1, np.where(in_prev, -ratio_a * ev.b2, 0.0))
-            dc[..., 2] = np.where(in_s, sb2, np.where(in_next, -ratio_b * sb1, 0.0))
-            dc[..., 3] = np.where(in_s, -ev.b2, np.where(in_next, ratio_b * ev.b1, 0.0))
+            return ev, rig.frames(values, joints)
 
-            pos_m, rot_m = rig.state(frames, point)
-            Jm_c = rig.jacobian(frames, point, pos_m, C)[0]  # (ss, nC)
+        def linearize(ev, frames) -> _Linear:
+            r0 = np.array([0])
+            pos_m, rot_m = rig.state(frames, point, r0)
             rm = target_pos - pos_m[0]
             dist2 = float(rm @ rm)
             if point.orientation:
                 rvec = _rotvec(target_rot, rot_m[0]) if target_rot is not None else np.zeros(3)
                 rm = np.concatenate([rm, scale * rvec])
-                Jm_c = np.concatenate([Jm_c[:3], scale * Jm_c[3:]])
                 dist2 += float(scale * scale * (rvec @ rvec))
-            Jm = (Jm_c[:, :, None] * dc[0][None]).reshape(len(rm), n)
-            Jcs, rcs, names, viol = [], [], [], 0.0
+            rcs, names, viol, states = [], [], 0.0, []
             for con, r in zip(samples, rows):
-                pos, rot = rig.state(frames, con.point)
-                pos, rot = pos[r], rot[r]
-                jc = _rows_jacobian(rig, frames, con.point, pos, C, r)
+                pos, rot = rig.state(frames, con.point, r)
                 res = con.target_pos - pos
                 err2 = np.sum(res * res, axis=-1)
                 if con.point.orientation:
                     rv = scale * _rotvec(con.target_rot, rot)
                     res = np.concatenate([res, rv], axis=-1)
-                    jc = np.concatenate([jc[:, :3], scale * jc[:, 3:]], axis=1)
                     err2 = err2 + np.sum(rv * rv, axis=-1)
                 viol = max(viol, float(np.sqrt(err2.max())))
-                Jcs.append((jc[:, :, :, None] * dc[r][:, None]).reshape(-1, n))
                 rcs.append(res.reshape(-1))
                 names.append((con.name, res.size))
-            Jc = np.concatenate(Jcs) if Jcs else np.zeros((0, n))
+                states.append(pos)
             rc = np.concatenate(rcs) if rcs else np.zeros(0)
-            return _Linear(np.sqrt(dist2), viol, Jm, rm, Jc, rc, names)
+
+            def jacobians():
+                # dc/dtheta per time and control: the variables at key a are the out tangent of
+                # this segment and (unified) the in tangent of the previous one, scaled by the
+                # width ratio; likewise at key b with the next segment
+                own = tangent_derivatives(ev)
+                dc = np.empty((len(T_all), nC, 4))
+                dc[..., :2] = np.where(in_s[..., None], own[..., :2], np.where(in_prev[..., None], ratio_a[:, None] * own[..., 2:], 0.0))
+                dc[..., 2:] = np.where(in_s[..., None], own[..., 2:], np.where(in_next[..., None], ratio_b[:, None] * own[..., :2], 0.0))
+                jm = rig.jacobian(frames, point, pos_m, C, r0)[0]  # (3 or 6, nC)
+                if point.orientation:
+                    jm = np.concatenate([jm[:3], scale * jm[3:]])
+                Jm = (jm[:, :, None] * dc[0][None]).reshape(len(rm), n)
+                Jcs = []
+                for con, r, pos in zip(samples, rows, states):
+                    jc = rig.jacobian(frames, con.point, pos, C, r)
+                    if con.point.orientation:
+                        jc = np.concatenate([jc[:, :3], scale * jc[:, 3:]], axis=1)
+                    Jcs.append((jc[:, :, :, None] * dc[r][:, None]).reshape(-1, n))
+                return Jm, (np.concatenate(Jcs) if Jcs else np.zeros((0, n)))
+
+            return _Linear(np.sqrt(dist2), viol, rm, rc, names, jacobians)
+
+        def relinearize(th: np.ndarray) -> _Linear:
+            apply(th)
+            return linearize(*evaluate())
+
+        # targets, from the curves as they are now
+        ev0, frames0 = evaluate()
+        cur_pos, _ = rig.state(frames0, point, np.array([0]))
+        target_pos = edit.target if edit.target is not None else cur_pos[0] + edit.move
+        target_rot = R.quat_to_matrix(edit.orientation) if edit.orientation is not None else None
+        for con, r in zip(samples, rows):
+            if con.kind == "pin":
+                pos, rot = work.states([con.point], con.times, self.original)[0]
+            else:
+                pos, rot = rig.state(frames0, con.point, r)
+            con.target_pos, con.target_rot = pos, (rot if con.point.orientation else None)
+            if con.kind == "contact":
+                con.target_pos = self.contact_target(con.contact, con.times)
+        lin0 = linearize(ev0, frames0)
 
         lb, ub, groups = self.tangent_bounds(s, Carr, ratio_a, ratio_b, prev_seg, next_seg)
         pair_vars, pair_other = self.broken_pairs(a, b, Carr, uni_a, uni_b)
         theta0 = theta_now()
         stiff = np.repeat(self.stiffness[Carr], 4)
         best, dist, iters, reached, lin, last = _iterate(
-            theta0, linearize, apply, lb, ub, stiff, (pair_vars, pair_other), self.eps, self.kappa, self.solver, S
+            theta0, lin0, relinearize, lb, ub, stiff, (pair_vars, pair_other), self.eps, self.kappa, self.solver, S
         )
         if not reached:
             blocking = _diagnose(last, groups, [con.name for con in samples])
@@ -547,7 +606,7 @@ class _Editor:
             constraints=[con.name for con in samples],
             solve_ms=solve_ms,
         )
-        self.check_constraints(report, before, pins, contacts, float(times[lo_seg]), float(times[hi_seg + 1]))
+        self.check_constraints(report, pins, contacts, float(times[lo_seg]), float(times[hi_seg + 1]))
         return report
 
     def distance_now(self, point, t, target_pos, target_rot) -> float:
@@ -699,7 +758,6 @@ class _Editor:
         k = work.curves.key_index(edit.time)
         point = edit.point
         label = f"edit {edit.index} ({point.label(self.sk)} at key {edit.time:g})"
-        before = work.snapshot()
         pins = list(self.ef.pins) + list(edit.pins)
         # a contact through this key holds the point where it is at the key
         contacts = list(self.ef.contacts) + list(edit.contacts)
@@ -720,7 +778,7 @@ class _Editor:
         target_rot = R.quat_to_matrix(edit.orientation) if edit.orientation is not None else None
         for con in kept:
             con.times = T
-            pos, rot = work.states([con.point], T)[0]
+            pos, rot = work.states([con.point], T, self.original)[0]
             con.target_pos, con.target_rot = pos, (rot if con.point.orientation else None)
         scale = self.scale
 
@@ -731,39 +789,45 @@ class _Editor:
             values[0, Carr] = x_abs
             frames = rig.frames(values, joints)
             pos, rot = rig.state(frames, point)
-            Jm = rig.jacobian(frames, point, pos, C)[0]
             rm = target_pos - pos[0]
             dist2 = float(rm @ rm)
             if point.orientation:
                 rvec = _rotvec(target_rot, rot[0]) if target_rot is not None else np.zeros(3)
                 rm = np.concatenate([rm, scale * rvec])
-                Jm = np.concatenate([Jm[:3], scale * Jm[3:]])
                 dist2 += float(scale * scale * (rvec @ rvec))
-            Jcs, rcs, names, viol = [], [], [], 0.0
+            rcs, names, viol, states = [], [], 0.0, []
             for con in kept:
                 p, r = rig.state(frames, con.point)
-                jc = rig.jacobian(frames, con.point, p, C)[0]
                 res = con.target_pos[0] - p[0]
                 err2 = float(res @ res)
                 if con.point.orientation:
                     rv = scale * _rotvec(con.target_rot[0], r[0])
                     res = np.concatenate([res, rv])
-                    jc = np.concatenate([jc[:3], scale * jc[3:]])
                     err2 += float(rv @ rv)
                 viol = max(viol, np.sqrt(err2))
-                Jcs.append(jc)
                 rcs.append(res)
                 names.append((con.name, len(res)))
-            Jc = np.concatenate(Jcs) if Jcs else np.zeros((0, n))
+                states.append(p)
             rc = np.concatenate(rcs) if rcs else np.zeros(0)
-            return _Linear(np.sqrt(dist2), viol, Jm, rm, Jc, rc, names)
+
+            def jacobians():
+                Jm = rig.jacobian(frames, point, pos, C)[0]
+                if point.orientation:
+                    Jm = np.concatenate([Jm[:3], scale * Jm[3:]])
+                Jcs = []
+                for con, p in zip(kept, states):
+                    jc = rig.jacobian(frames, con.point, p, C)[0]
+                    Jcs.append(np.concatenate([jc[:3], scale * jc[3:]]) if con.point.orientation else jc)
+                return Jm, (np.concatenate(Jcs) if Jcs else np.zeros((0, n)))
+
+            return _Linear(np.sqrt(dist2), viol, rm, rc, names, jacobians)
 
         lb, ub = self.value_bounds(k, Carr)
         groups = [f"limit on {self.name(c)}" if np.isfinite(self.low[c]) or np.isfinite(self.high[c]) else None for c in C]
         x0 = work.values[k, Carr].copy()
         empty = (np.zeros(0, dtype=np.int64), np.zeros(0))
         best, dist, iters, reached, lin, last = _iterate(
-            x0, linearize, apply, lb, ub, self.stiffness[Carr], empty, self.eps, self.kappa, self.solver, S
+            x0, linearize(x0), linearize, lb, ub, self.stiffness[Carr], empty, self.eps, self.kappa, self.solver, S
         )
         if not reached:
             blocking = _diagnose(last, groups, [con.name for con in kept])
@@ -788,7 +852,7 @@ class _Editor:
             solve_ms=(_time.perf_counter() - t_start) * 1e3,
         )
         # pins hold at the key itself; limits over both neighbouring segments
-        self.check_constraints(report, before, pins, [], edit.time, edit.time)
+        self.check_constraints(report, pins, [], edit.time, edit.time)
         report.worst_limit_margin, report.worst_limit_control = self.limits_margin(*report.segment)
         return report
 
@@ -812,16 +876,6 @@ class _Editor:
         low = np.where(np.isfinite(low), np.minimum(low, cur), low)
         high = np.where(np.isfinite(high), np.maximum(high, cur), high)
         return low, high
-
-
-def _rows_jacobian(rig: Rig, frames, point: Point, pos_rows: np.ndarray, controls, rows: np.ndarray) -> np.ndarray:
-    """``ds/dc`` of ``point`` at the given rows of ``frames`` only: ``(len(rows), 3 or 6, n)``."""
-    sub = Frames(
-        {j: m[rows] for j, m in frames.rot.items()},
-        {j: p[rows] for j, p in frames.pos.items()},
-        {c: v[rows] for c, v in frames.axis.items()},
-    )
-    return rig.jacobian(sub, point, pos_rows, controls)
 
 
 # --- public API -----------------------------------------------------------------

@@ -70,10 +70,10 @@ class Dimensions:
     out of the plane (it only matters for the inertia of the base).
     """
 
-    base_length: float = 0.20
+    base_length: float = 0.26
     base_height: float = 0.04
     base_depth: float = 0.12
-    base_mass: float = 0.50
+    base_mass: float = 1.00
     leg_length: float = 0.22
     leg_width: float = 0.025
     leg_mass: float = 0.12

@@ -6,7 +6,7 @@ import click
 
 from keyfill.cli.common import emit_json, progress, say
 
-DEFAULT_ITERATIONS = 100
+DEFAULT_ITERATIONS = 200
 
 
 @click.command()

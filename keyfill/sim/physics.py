@@ -126,14 +126,12 @@ class Episode:
     Attributes:
         times: ``(N,)`` seconds since the start, ``k * time_step``.
         states: ``(N, 6)`` the six animation variables at those times (m, rad); row 0 is the start.
-        fell: the base tilted past ``max_tilt`` and the episode stopped early.
-        completed: the episode ran its full length (all cycles and the settle time).
+        fell: the base tilted past ``max_tilt``.
     """
 
     times: np.ndarray
     states: np.ndarray
     fell: bool
-    completed: bool
 
 
 class LampWorld:
@@ -200,8 +198,13 @@ class LampWorld:
         for j, v in zip(self.joints, [0.0, 0.0, 0.0, *map(float, hinge_angles)]):
             p.resetJointState(self.lamp, j, v, 0.0, physicsClientId=cid)
 
-    def simulate(self, controller: Controller) -> Episode:
-        """Run ``settings.cycles`` cycles of ``controller`` plus ``settle_time``; see :class:`Episode`."""
+    def simulate(self, controller: Controller, stop_on_fall: bool = True) -> Episode:
+        """Run ``settings.cycles`` cycles of ``controller`` plus ``settle_time``; see :class:`Episode`.
+
+        With ``stop_on_fall`` (the default) the episode ends as soon as the
+        base tilts past ``max_tilt``; ``False`` runs it to the end regardless
+        (``benchmarks/bench_simulate.py`` measures what stopping saves).
+        """
         s = self.settings
         p, cid, lamp, joints, hinges = self.p, self.client, self.lamp, self.joints, self.hinges
         dt = s.time_step
@@ -223,7 +226,8 @@ class LampWorld:
             states[k] = row
             if abs(row[2]) > max_tilt:
                 fell = True
-                break
+                if stop_on_fall:
+                    break
             if k == n:
                 break
             tgt = targets[k]
@@ -234,4 +238,4 @@ class LampWorld:
             p.setJointMotorControlArray(lamp, hinges, torque, forces=forces, physicsClientId=cid)
             p.stepSimulation(physicsClientId=cid)
         count = k + 1
-        return Episode(times=np.arange(count) * dt, states=states[:count], fell=fell, completed=not fell)
+        return Episode(times=np.arange(count) * dt, states=states[:count], fell=fell)

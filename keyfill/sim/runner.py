@@ -21,6 +21,7 @@ import json
 import multiprocessing
 import os
 import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -238,9 +239,18 @@ class _Inline:
         pass
 
 
-def _quiet_worker() -> None:
-    """Worker processes leave Ctrl-C to the parent, which stops them."""
+def _worker_init() -> None:
+    """Worker processes leave Ctrl-C to the parent, which stops them, and end when the parent dies
+    (killed outright, it cannot stop them)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
 
 
 class _Processes:
@@ -248,7 +258,7 @@ class _Processes:
 
     def __init__(self, workers: int):
         self.pool = cf.ProcessPoolExecutor(
-            max_workers=workers, mp_context=multiprocessing.get_context("spawn"), initializer=_quiet_worker
+            max_workers=workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
         )
 
     def submit(self, fn, *args):
@@ -340,7 +350,7 @@ def simulate(
     folder: str | os.PathLike,
     count: int,
     seed: int = 0,
-    iterations: int = 100,
+    iterations: int = 200,
     workers: int | None = None,
     fmt: str = "usd",
     scheduler: str | None = None,

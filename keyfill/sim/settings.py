@@ -52,7 +52,7 @@ class Settings:
     # --- episodes ---
     cycles: int = 3
     #: time the last target pose is held after the last cycle, so the last hop can land and settle
-    settle_time: float = 0.6
+    settle_time: float = 0.5
     #: the base touches the ground when its lowest point is at most this high
     contact_tolerance: float = 1e-3
     #: |base angle| beyond which the lamp has fallen (episode ends early)

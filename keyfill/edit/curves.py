@@ -273,27 +273,29 @@ def evaluate_segments(curves: CurveArrays, time: np.ndarray, seg: np.ndarray, co
     """
     t0 = curves.times[seg][:, None]
     dt = (curves.times[seg + 1] - curves.times[seg])[:, None]
-    u = np.clip((time[:, None] - t0) / dt, 0.0, 1.0)
-    out = curves.out_tan[seg][:, cols]  # (T, n, 2)
-    inn = curves.in_tan[seg + 1][:, cols]
+    rel = time[:, None] - t0
+    u = np.clip(rel / dt, 0.0, 1.0)
+    k0, k1, c = seg[:, None], seg[:, None] + 1, cols[None, :]
+    out = curves.out_tan[k0, c]  # (T, n, 2)
+    inn = curves.in_tan[k1, c]
     a = out[..., 0] / dt  # normalised inner control point times
     b = 1.0 - inn[..., 0] / dt
-    lam = solve_bezier_time(u * np.ones_like(a), a, b)
+    lam = solve_bezier_time(np.broadcast_to(u, a.shape), a, b)
     one = 1.0 - lam
     b1 = 3.0 * lam * one * one
     b2 = 3.0 * lam * lam * one
-    y0 = curves.values[seg][:, cols]
-    y3 = curves.values[seg + 1][:, cols]
-    y1 = y0 + out[..., 1]
-    y2 = y3 - inn[..., 1]
-    value = one**3 * y0 + b1 * y1 + b2 * y2 + lam**3 * y3
+    y0 = curves.values[k0, c]
+    y3 = curves.values[k1, c]
+    dy1 = out[..., 1]  # y1 - y0
+    dy3 = inn[..., 1]  # y3 - y2
+    value = (one * one * one + b1) * y0 + b1 * dy1 + b2 * (y3 - dy3) + lam * lam * lam * y3
     # d/dlambda of the Bezier in value and in (normalised) time
-    dy = 3.0 * (one * one * (y1 - y0) + 2.0 * lam * one * (y2 - y1) + lam * lam * (y3 - y2))
+    dy = 3.0 * (one * one * dy1 + 2.0 * lam * one * (y3 - dy3 - y0 - dy1) + lam * lam * dy3)
     dx = 3.0 * (one * one * a + 2.0 * lam * one * (b - a) + lam * lam * (1.0 - b)) * dt
-    slope = np.divide(dy, dx, out=np.zeros_like(dy), where=dx > 1e-300)
+    slope = dy / np.where(dx > 1e-300, dx, np.inf)
     # outside [t_k, t_k+1] (hold) the slope is zero
-    outside = ((time[:, None] - t0) < 0) | ((time[:, None] - t0) > dt)
-    if np.any(outside):
+    outside = (rel < 0) | (rel > dt)
+    if outside.any():
         slope = np.where(outside, 0.0, slope)
     return SegmentEval(value, slope, lam, b1, b2)
 
@@ -323,7 +325,7 @@ def solve_bezier_time(u: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     c1 = 3.0 * a
     c2 = 3.0 * b - 6.0 * a
     c3 = 1.0 + 3.0 * a - 3.0 * b
-    lam = u.copy()
+    lam = np.array(u, dtype=np.float64)
     for _ in range(8):
         f = ((c3 * lam + c2) * lam + c1) * lam - u
         df = (3.0 * c3 * lam + 2.0 * c2) * lam + c1

@@ -58,32 +58,55 @@ class Point:
 
 
 class Frames(NamedTuple):
-    """World frames of some joints at ``T`` times.
+    """World frames of some joints at ``T`` times (rows for other joints are unset).
 
-    ``rot[j]``: ``(T, 3, 3)`` world rotation matrices; ``pos[j]``: ``(T, 3)``
-    world positions; ``axis[c]``: ``(T, 3)`` world axis of control ``c``
-    (see the module docstring); dicts keyed by joint / control index.
+    ``rot``: ``(T, J, 3, 3)`` world rotation matrices; ``pos``: ``(T, J, 3)``
+    world positions; ``axis``: ``(T, 3, C)`` world axis of each control of
+    those joints (see the module docstring); indexed by joint / control.
     """
 
-    rot: dict
-    pos: dict
-    axis: dict
+    rot: np.ndarray
+    pos: np.ndarray
+    axis: np.ndarray
 
 
-def _axis_matrices_for(angles: np.ndarray, axes) -> np.ndarray:
-    """``(T, n, 3, 3)`` rotations by ``angles (T, n)`` radians about coordinate ``axes (n,)``."""
-    T, n = angles.shape
+def _rotation_pattern(axes: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Flat positions, in ``m`` Euler factors of 3x3 entries each, of the entries that are
+    1, cos, cos, -sin and sin for rotations about coordinate ``axes (m,)``."""
+    base = 9 * np.arange(len(axes))
+    i, j = (axes + 1) % 3, (axes + 2) % 3
+    return (base + 4 * axes, base + 4 * i, base + 4 * j, base + 3 * i + j, base + 3 * j + i)
+
+
+def _axis_matrices(angles: np.ndarray, pattern) -> np.ndarray:
+    """``(T, m, 3, 3)`` rotations by ``angles (T, m)`` radians about the axes of ``pattern``."""
+    T, m = angles.shape
+    one, ci, cj, sij, sji = pattern
+    out = np.zeros((T, 9 * m))
     c, s = np.cos(angles), np.sin(angles)
-    m = np.zeros((T, n, 3, 3))
-    k = np.arange(n)
-    ax = np.asarray(axes, dtype=np.int64)
-    i, j = (ax + 1) % 3, (ax + 2) % 3
-    m[:, k, ax, ax] = 1.0
-    m[:, k, i, i] = c
-    m[:, k, j, j] = c
-    m[:, k, i, j] = -s
-    m[:, k, j, i] = s
-    return m
+    out[:, one] = 1.0
+    out[:, ci] = c
+    out[:, cj] = c
+    out[:, sij] = -s
+    out[:, sji] = s
+    return out.reshape(T, m, 3, 3)
+
+
+class _Plan(NamedTuple):
+    """Index arrays of :meth:`Rig.frames` for one set of joints (computed once per set)."""
+
+    joints: np.ndarray  # (n,) joint indices, parents first
+    parents: list  # position of each joint's parent in ``joints`` (-1: root)
+    offsets: np.ndarray  # (n, 3)
+    t_at: tuple  # (joint position, axis) of translation controls
+    t_ctl: np.ndarray  # their control indices
+    r_at: tuple  # (joint position, Euler slot) of rotation controls
+    r_ctl: np.ndarray
+    slot_axes: np.ndarray  # (n, 3) coordinate axis of each Euler slot
+    pattern: tuple  # where the elementary rotations' entries go (_rotation_pattern)
+    levels: list  # (positions, parent positions) of the joints at each depth below the roots
+    roots: np.ndarray  # positions of joints without a parent in the set
+    t_parent: np.ndarray  # position of each translation control's parent (n: the world frame)
 
 
 class Rig:
@@ -110,6 +133,9 @@ class Rig:
             else:
                 self.trans_controls[ctl.joint].append((ctl.axis, c))
         self._moving: dict = {}
+        self._plans: dict = {}
+        self._joint_of = np.array([c.joint for c in controls], dtype=np.int64)
+        self._is_rot = np.array([c.is_rotation for c in controls], dtype=bool)
         for lst in self.rot_controls:
             lst.sort()  # Euler slot order: the order the factors compose
         self.chains = []
@@ -139,41 +165,94 @@ class Rig:
         """Joints whose frames the states of ``points`` need, parents first."""
         return sorted({a for p in points for a in self.chains[p.joint]})
 
+    def _plan(self, joints: list[int]) -> _Plan:
+        key = tuple(joints)
+        if key not in self._plans:
+            where = {a: k for k, a in enumerate(joints)}
+            parents = [where.get(self.parents[a], -1) for a in joints]
+            depth = []
+            for p in parents:
+                depth.append(0 if p < 0 else depth[p] + 1)
+            t_at = [(where[a], ax) for a in joints for ax, _ in self.trans_controls[a]]
+            r_at = [(where[a], slot) for a in joints for slot, _ in self.rot_controls[a]]
+            slot_axes = np.array([self.order_axes[a] for a in joints], dtype=np.int64).reshape(-1, 3)
+            levels = []
+            for d in range(1, max(depth, default=0) + 1):
+                ks = [k for k in range(len(joints)) if depth[k] == d]
+                levels.append((np.array(ks), np.array([parents[k] for k in ks])))
+            self._plans[key] = _Plan(
+                joints=np.array(joints, dtype=np.int64),
+                parents=parents,
+                offsets=self.skeleton.offsets[joints],
+                t_at=tuple(np.array(x, dtype=np.int64) for x in zip(*t_at)) if t_at else (),
+                t_ctl=np.array([c for a in joints for _, c in self.trans_controls[a]], dtype=np.int64),
+                r_at=tuple(np.array(x, dtype=np.int64) for x in zip(*r_at)) if r_at else (),
+                r_ctl=np.array([c for a in joints for _, c in self.rot_controls[a]], dtype=np.int64),
+                slot_axes=slot_axes,
+                pattern=_rotation_pattern(slot_axes.reshape(-1)),
+                levels=levels,
+                roots=np.array([k for k in range(len(joints)) if parents[k] < 0]),
+                t_parent=np.array([parents[k] if parents[k] >= 0 else len(joints) for k, _ in t_at], dtype=np.int64),
+            )
+        return self._plans[key]
+
     def frames(self, values: np.ndarray, joints: list[int]) -> Frames:
-        """World frames of ``joints`` (closed under parents, parents first) for values ``(T, C)``."""
-        T = values.shape[0]
-        offsets = self.skeleton.offsets
-        ident = np.broadcast_to(np.eye(3), (T, 3, 3))
-        # all elementary rotations of the joints' Euler angles at once: (T, n, 3, 3)
-        rc = [c for a in joints for _, c in self.rot_controls[a]]
-        elem = _axis_matrices_for(values[:, rc], [self.controls[c].axis for c in rc])
-        k = 0
-        rot, pos, axis = {}, {}, {}
-        for a in joints:
-            p = self.parents[a]
-            wp = rot[p] if p >= 0 else ident
-            t = offsets[a]
-            if self.trans_controls[a]:
-                t = np.broadcast_to(t, (T, 3)).copy()
-                for ax, c in self.trans_controls[a]:
-                    t[:, ax] = values[:, c]
-                    axis[c] = wp[..., :, ax]
-                step = (wp @ t[..., None])[..., 0] if p >= 0 else t
+        """World frames of ``joints`` (closed under parents, parents first) for values ``(T, C)``.
+
+        Each joint's local rotation is the product of its three Euler factors
+        (all joints at once); the hierarchy is then walked one depth at a
+        time with one batched matrix product per depth: the parents' world
+        rotations times, side by side, the joints' local rotations, the axes
+        of their Euler angles (in the parent's frame) and their translations.
+        """
+        plan = self._plan(joints)
+        T, n = values.shape[0], len(joints)
+        angles = np.zeros((T, n, 3))
+        if plan.r_at:
+            angles[:, plan.r_at[0], plan.r_at[1]] = values[:, plan.r_ctl]
+        elem = _axis_matrices(angles.reshape(T, 3 * n), plan.pattern).reshape(T, n, 3, 3, 3)
+        # per joint, in its parent's frame: [local rotation | Euler axes 0, 1, 2 | translation]
+        block = np.empty((T, n, 3, 7))
+        first = elem[:, :, 0]
+        both = first @ elem[:, :, 1]
+        np.matmul(both, elem[:, :, 2], out=block[..., :3])
+        ax, ar = plan.slot_axes, np.arange(n)
+        block[..., 3] = np.eye(3)[ax[:, 0]]
+        block[..., 4] = np.swapaxes(first, -1, -2)[:, ar, ax[:, 1]]
+        block[..., 5] = np.swapaxes(both, -1, -2)[:, ar, ax[:, 2]]
+        block[..., 6] = plan.offsets
+        if plan.t_at:
+            block[:, plan.t_at[0], plan.t_at[1], 6] = values[:, plan.t_ctl]
+        moved = np.empty((T, n + 1, 3, 7))  # the same in world axes; slot n: the world frame
+        moved[:, n, :, :3] = np.eye(3)
+        place = np.empty((T, n, 3))
+        r = plan.roots
+        moved[:, r] = block[:, r]
+        place[:, r] = block[:, r][..., 6]
+        for ks, ps in plan.levels:
+            if len(ks) == 1:  # plain indices give views: no copies along a single chain
+                k, p = int(ks[0]), int(ps[0])
+                np.matmul(moved[:, p, :, :3], block[:, k], out=moved[:, k])
+                np.add(place[:, p], moved[:, k, :, 6], out=place[:, k])
             else:
-                step = wp @ t if p >= 0 else np.broadcast_to(t, (T, 3))
-            pos[a] = pos[p] + step if p >= 0 else np.array(step)
-            w = wp
-            for slot, c in self.rot_controls[a]:
-                axis[c] = w[..., :, self.order_axes[a][slot]]
-                w = elem[:, k] if w is ident else w @ elem[:, k]
-                k += 1
-            rot[a] = w
+                moved[:, ks] = moved[:, ps, :, :3] @ block[:, ks]
+                place[:, ks] = place[:, ps] + moved[:, ks][..., 6]
+        J, C = self.skeleton.num_joints, len(self.controls)
+        rot = np.empty((T, J, 3, 3))
+        pos = np.empty((T, J, 3))
+        rot[:, plan.joints] = moved[:, :n, :, :3]
+        pos[:, plan.joints] = place
+        axis = np.empty((T, 3, C))
+        if plan.r_at:  # Euler axes: columns 3-5 of the joint's block in world axes
+            axis[:, :, plan.r_ctl] = np.swapaxes(np.swapaxes(moved, 2, 3)[:, plan.r_at[0], 3 + plan.r_at[1]], 1, 2)
+        if plan.t_at:  # translation axes: the parent's world axes
+            axis[:, :, plan.t_ctl] = np.swapaxes(np.swapaxes(moved, 2, 3)[:, plan.t_parent, plan.t_at[1]], 1, 2)
         return Frames(rot, pos, axis)
 
     def state(self, frames: Frames, point: Point, rows=None) -> tuple[np.ndarray, np.ndarray]:
         """``(position (T, 3), rotation matrices (T, 3, 3))`` of ``point`` (at ``rows`` of ``frames`` only)."""
-        rot = frames.rot[point.joint]
-        pos = frames.pos[point.joint]
+        rot = frames.rot[:, point.joint]
+        pos = frames.pos[:, point.joint]
         if rows is not None:
             rot, pos = rot[rows], pos[rows]
         if np.any(point.offset):
@@ -188,16 +267,16 @@ class Rig:
         are zero.
         """
         T = position.shape[0]
-        sel = slice(None) if rows is None else rows
         out = np.zeros((T, point.state_size, len(controls)))
         moving = self.controls_of(point)
         cols = [k for k, c in enumerate(controls) if c in moving]
         if not cols:
             return out
-        ctl = [self.controls[controls[k]] for k in cols]
-        v = np.stack([frames.axis[controls[k]][sel] for k in cols], axis=-1)  # (T, 3, m)
-        is_rot = np.array([c.is_rotation for c in ctl])
-        lever = position[:, :, None] - np.stack([frames.pos[c.joint][sel] for c in ctl], axis=-1)
+        ctl = np.asarray(controls, dtype=np.int64)[cols]
+        sel = slice(None) if rows is None else rows
+        v = frames.axis[sel][:, :, ctl]  # (T, 3, m)
+        is_rot = self._is_rot[ctl]
+        lever = position[:, :, None] - np.swapaxes(frames.pos[sel][:, self._joint_of[ctl]], 1, 2)
         cross = v[:, [1, 2, 0]] * lever[:, [2, 0, 1]] - v[:, [2, 0, 1]] * lever[:, [1, 2, 0]]
         out[:, :3, cols] = np.where(is_rot, cross, v)
         if point.orientation:

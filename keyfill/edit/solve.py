@@ -73,6 +73,10 @@ class Settings:
             width bounds of Eq. 7.
         band: the QP's band (Eq. 11) as a fraction of epsilon; the result
             is accepted when the true (non-linear) violation is within epsilon.
+        timing_stiffness: stiffness of the widths (X, frames) relative to the
+            heights (Y) in D of Eq. 4. Widths move the curve non-linearly (through
+            the time cubic) and change timing, which timing edits (Eq. 12) own;
+            10 makes move edits reshape first and converge in fewer iterations.
         epsilon_scale, tolerance_scale: defaults relative to the character size.
     """
 
@@ -80,7 +84,8 @@ class Settings:
     patience: int = 5
     max_iterations: int = 50
     width_margin: float = 0.01
-    band: float = 0.5
+    band: float = 0.25
+    timing_stiffness: float = 10.0
     epsilon_scale: float = 1e-4
     tolerance_scale: float = 1e-3
 
@@ -118,6 +123,7 @@ class EditReport:
     worst_limit_margin: float | None = None
     worst_limit_control: str | None = None
     solve_ms: float = 0.0
+    solve_cpu_ms: float = 0.0
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -225,42 +231,58 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
     pair_vars, pair_other = pairs
     band = settings.band * eps
     radius = np.inf  # how far toward the target one step aims (shrinks when the linear model fails)
+    aim = np.inf
     while best_d >= kappa and iterations < settings.max_iterations and stall < settings.patience:
         gap = theta[pair_vars] - pair_other if len(pair_vars) else None
         Jm, Jc = lin.jacobians()
-        rm = lin.rm if lin.distance <= radius else lin.rm * (radius / lin.distance)
-        was_feasible = lin.violation <= eps
+        # a step that broke constraints (the linear model's error) is mended first, holding the
+        # moved point where it is; otherwise aim at the target, or part way (the trust radius)
+        mend = lin.violation > eps and best_theta is not None
+        if not mend:
+            aim = min(radius, lin.distance)
+        rm = 0.0 * lin.rm if mend else (lin.rm * (aim / lin.distance) if lin.distance > aim else lin.rm)
         program = QP.assemble(
             Jm, rm, stiffness, lb - theta, ub - theta, Jc, lin.rc, band, pair_vars, gap, settings.weights
         )
         res = QP.solve(program, solver)
-        if res.x is None and was_feasible:
+        if res.x is None and lin.violation <= eps:
             # the band cannot be met from here: let rows keep their current error (within eps)
-            program.h = np.concatenate([lin.rc + np.maximum(band, np.abs(lin.rc)), np.maximum(band, np.abs(lin.rc)) - lin.rc])
+            slack = np.maximum(band, np.abs(lin.rc))
+            program.h = np.concatenate([lin.rc + slack, slack - lin.rc])
             res = QP.solve(program, solver)
         iterations += 1
         last = (lin, res)
         if res.x is None:
             break
-        # backtrack while the step breaks a constraint that held (the linear model's error)
+        # the largest step that improves: less violation when mending, else a lower merit
+        # (distance plus 5 x the violation beyond eps)
         for alpha in (1.0, 0.5, 0.25, 0.125):
             trial = np.clip(theta + alpha * res.x, lb, ub)
             new = relinearize(trial)
-            if new.violation <= eps or not was_feasible:
+            if (new.violation < lin.violation) if mend else (_merit(new, eps) < _merit(lin, eps)):
                 break
-        else:
-            radius = 0.25 * min(radius, lin.distance)  # aim closer, from where we are
-            relinearize(theta)
+        else:  # no progress: go back to the best point and aim closer
+            radius = 0.25 * aim
+            if best_theta is not None:
+                theta = best_theta.copy()
+            lin = relinearize(theta)
             stall += 1
             continue
         theta, lin = trial, new
-        if alpha == 1.0:
-            radius = 2 * radius
+        if not mend:
+            if lin.violation > eps:
+                radius = 0.5 * aim
+            elif alpha == 1.0:
+                radius = 2.0 * radius
         if lin.violation <= eps and lin.distance < best_d - 1e-3 * kappa:
             best_theta, best_d, stall = theta.copy(), lin.distance, 0
-        else:
-            stall += 1
+        elif not mend:
+            stall += 1  # (mending steps that reduce the violation are progress)
     return best_theta, best_d, iterations, best_d < kappa, lin, last
+
+
+def _merit(lin: _Linear, eps: float) -> float:
+    return lin.distance + 5.0 * max(lin.violation - eps, 0.0)
 
 
 def _diagnose(last, var_groups, constraint_names) -> list[str]:
@@ -414,7 +436,7 @@ class _Editor:
     # --- move edits ----------------------------------------------------
 
     def manipulate(self, edit: Manipulation) -> EditReport:
-        t_start = _time.perf_counter()
+        t_start, cpu_start = _time.perf_counter(), _time.thread_time()
         work, rig, S = self.work, self.work.rig, self.settings
         times, K = work.times, len(work.times)
         s = int(work.segment(edit.time))
@@ -575,12 +597,12 @@ class _Editor:
         lb, ub, groups = self.tangent_bounds(s, Carr, ratio_a, ratio_b, prev_seg, next_seg)
         pair_vars, pair_other = self.broken_pairs(a, b, Carr, uni_a, uni_b)
         theta0 = theta_now()
-        stiff = np.repeat(self.stiffness[Carr], 4)
+        stiff = np.repeat(self.stiffness[Carr], 4) * np.tile([S.timing_stiffness, 1.0, S.timing_stiffness, 1.0], nC)
         best, dist, iters, reached, lin, last = _iterate(
             theta0, lin0, relinearize, lb, ub, stiff, (pair_vars, pair_other), self.eps, self.kappa, self.solver, S
         )
         if not reached:
-            blocking = _diagnose(last, groups, [con.name for con in samples])
+            blocking = _diagnose(last, groups(), [con.name for con in samples])
             err = self.infeasible(
                 label,
                 dist if np.isfinite(dist) else lin.distance,
@@ -592,6 +614,7 @@ class _Editor:
                 raise err
         apply(best if best is not None else theta0)
         solve_ms = (_time.perf_counter() - t_start) * 1e3
+        solve_cpu_ms = (_time.thread_time() - cpu_start) * 1e3
         report = EditReport(
             edit=edit.index,
             kind="move",
@@ -605,6 +628,7 @@ class _Editor:
             optimised_tangents=2 * nC,
             constraints=[con.name for con in samples],
             solve_ms=solve_ms,
+            solve_cpu_ms=solve_cpu_ms,
         )
         self.check_constraints(report, pins, contacts, float(times[lo_seg]), float(times[hi_seg + 1]))
         return report
@@ -681,30 +705,31 @@ class _Editor:
                 l, h = l.copy(), h.copy()
                 l[bad], h[bad] = mid, mid
             lb[k::4], ub[k::4] = l, h
-        groups = []
-        for i, c in enumerate(Carr):
-            limited = np.isfinite(lo[i]) or np.isfinite(hi[i])
-            ylabel = f"limit on {self.name(c)}" if limited else None
-            groups += [f"timing bounds of {self.name(c)}", ylabel, f"timing bounds of {self.name(c)}", ylabel]
+        def groups():  # what each bound stands for, named only when an edit fails
+            out = []
+            for i, c in enumerate(Carr):
+                limited = np.isfinite(lo[i]) or np.isfinite(hi[i])
+                ylabel = f"limit on {self.name(c)}" if limited else None
+                out += [f"timing bounds of {self.name(c)}", ylabel, f"timing bounds of {self.name(c)}", ylabel]
+            return out
+
         return lb, ub, groups
 
     def broken_pairs(self, a, b, Carr, uni_a, uni_b):
         """Variables of broken keys in E_b and the tangent across their key."""
         work, K = self.work, len(self.work.times)
-        idx, other = [], []
-        for i, c in enumerate(Carr):
-            if not uni_a[i] and a >= 1:
-                idx += [4 * i, 4 * i + 1]
-                other += list(work.in_tan[a, c])
-            if not uni_b[i] and b <= K - 2:
-                idx += [4 * i + 2, 4 * i + 3]
-                other += list(work.out_tan[b, c])
-        return np.array(idx, dtype=np.int64), np.array(other, dtype=np.float64)
+        i = np.arange(len(Carr))
+        sel_a = i[~uni_a] if a >= 1 else i[:0]
+        sel_b = i[~uni_b] if b <= K - 2 else i[:0]
+        idx = np.concatenate([4 * sel_a, 4 * sel_a + 1, 4 * sel_b + 2, 4 * sel_b + 3])
+        other = np.concatenate([work.in_tan[a, Carr[sel_a], 0], work.in_tan[a, Carr[sel_a], 1],
+                                work.out_tan[b, Carr[sel_b], 0], work.out_tan[b, Carr[sel_b], 1]])
+        return idx, other
 
     # --- timing edits (Eq. 12) -------------------------------------------
 
     def timing(self, edit: TimingEdit) -> EditReport:
-        t_start = _time.perf_counter()
+        t_start, cpu_start = _time.perf_counter(), _time.thread_time()
         work, m = self.work, self.settings.width_margin
         times = work.times
         s = int(work.segment(edit.time))
@@ -745,6 +770,7 @@ class _Editor:
             optimised_controls=len(cols),
             optimised_tangents=changed,
             solve_ms=(_time.perf_counter() - t_start) * 1e3,
+            solve_cpu_ms=(_time.thread_time() - cpu_start) * 1e3,
         )
         report.worst_limit_margin, report.worst_limit_control = self.limits_margin(float(times[a]), float(times[b]))
         return report
@@ -752,7 +778,7 @@ class _Editor:
     # --- static posing (Eq. 13) --------------------------------------------
 
     def pose(self, edit: Manipulation) -> EditReport:
-        t_start = _time.perf_counter()
+        t_start, cpu_start = _time.perf_counter(), _time.thread_time()
         work, rig, S = self.work, self.work.rig, self.settings
         times, K = work.times, len(work.times)
         k = work.curves.key_index(edit.time)
@@ -850,6 +876,7 @@ class _Editor:
             optimised_controls=n,
             constraints=[con.name for con in kept],
             solve_ms=(_time.perf_counter() - t_start) * 1e3,
+            solve_cpu_ms=(_time.thread_time() - cpu_start) * 1e3,
         )
         # pins hold at the key itself; limits over both neighbouring segments
         self.check_constraints(report, pins, [], edit.time, edit.time)

@@ -112,12 +112,13 @@ def matplotlib_animation_peer(motion, size, out: Path) -> tuple[float, float]:
 def gif_split(motion, out: Path, repeat: int) -> dict:
     """Median seconds of the three stages of a GIF preview, done by hand with the library's parts."""
     from keyfill.viz import gif, stick
+    from keyfill.viz.palette import Palette
 
     def setup():
         return stick.StickRenderer([motion], ["walk"], "side", None, stick.GIF_SIDE)
 
     def frames(r):
-        palette = gif.Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in (0, 150, 299)],
+        palette = Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in (0, 150, 299)],
                               required=r.palette_colors())
         return [palette.apply(r.render(t, r.bracketing_keys(t), r.frame_label(t))) for t in range(motion.num_frames)]
 

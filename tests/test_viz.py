@@ -20,6 +20,7 @@ from keyfill.io import bvh
 from keyfill.motion import Keys, Motion, Skeleton
 from keyfill.sim import lamp
 from keyfill.viz import frame_range, gif
+from keyfill.viz.palette import Palette
 from keyfill.viz import curves as C
 from keyfill.viz import stick as S
 
@@ -265,7 +266,7 @@ def test_palette_keeps_flat_colours_exact():
     a = np.full((40, 60, 3), 255, dtype=np.uint8)
     a[10:20, 5:50] = (31, 119, 180)
     a[25:30] = rng.integers(0, 256, size=(5, 60, 3))
-    pal = gif.Palette([Image.fromarray(a)], 16, required=[(51, 51, 51)])
+    pal = Palette([Image.fromarray(a)], 16, required=[(51, 51, 51)])
     out = np.asarray(pal.apply(Image.fromarray(a)).convert("RGB"))
     assert np.array_equal(out[:10], a[:10]) and np.array_equal(out[10:20, 5:50], a[10:20, 5:50])
     assert (51, 51, 51) in {tuple(c) for c in pal.rgb.tolist()}

@@ -6,8 +6,9 @@
 * :mod:`keyfill.viz.stick`: stick figures from forward kinematics seen by a
   fixed orthographic camera; keys ghosted, joint trails ("motion curves"),
   a ground line or grid. Renders a GIF, a filmstrip PNG or a trail still.
-* :mod:`keyfill.viz.gif`: palette quantisation and GIF writing with exact
-  frame timing.
+* :mod:`keyfill.viz.gif`: GIF writing with exact frame timing.
+* :mod:`keyfill.viz.palette`: one shared palette per picture with exact colour
+  mapping (GIF frames, and small PNGs).
 * :mod:`keyfill.viz.style`: colours and deterministic figure saving.
 
 Everything draws with matplotlib's Agg renderer through ``Figure`` objects and

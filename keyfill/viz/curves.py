@@ -293,7 +293,7 @@ def plot(
             _flat_limits(ax, [values[:, p] for _, _, values, _ in series], units[p])
             ax.set_title(names[p], loc="left", color=style.TEXT_COLOR)
             ax.set_ylabel(units[p])
-            ax.grid(True, color="#e5e5e5", lw=0.6)
+            ax.grid(True, color=style.AXIS_GRID_COLOR, lw=0.6)
             ax.margins(x=0.01, y=0.1)
             if (row + 1, col) not in used:
                 ax.tick_params(labelbottom=True)

@@ -517,6 +517,7 @@ def preview(
 
     from keyfill.io import atomic_output
     from keyfill.viz import gif
+    from keyfill.viz.palette import Palette
 
     suffix = check_suffix(str(output), PREVIEW_SUFFIXES)
     if view not in VIEWS:
@@ -559,7 +560,7 @@ def preview(
     with atomic_output(output) as tmp:
         if kind == "gif":
             samples = sorted({ts[0], ts[len(ts) // 2], ts[-1]} | {int(k) for k in r.keys[:1]})
-            palette = gif.Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in samples],
+            palette = Palette([r.render(t, r.bracketing_keys(t), r.frame_label(t)) for t in samples],
                                   required=r.palette_colors())
             images = [palette.apply(r.render(t, r.bracketing_keys(t), r.frame_label(t)))
                       for t in wrap(ts, desc="frames", unit="frame")]
@@ -578,7 +579,7 @@ def preview(
             ghosts = r.keys.tolist() if len(r.keys) else sorted({0, cut[0].num_frames - 1})
             last = shown_first + max(m.num_frames for m in cut) - 1
             image = r.render(None, ghosts, f"{', '.join(trail)} path, frames {shown_first}-{last}")
-            gif.Palette([image], 256, r.palette_colors()).apply(image).save(tmp, format="PNG", optimize=True)
+            Palette([image], 256, r.palette_colors()).apply(image).save(tmp, format="PNG", optimize=True)
             shown, out_fps = ghosts, None
     return PreviewInfo(str(output), kind, view, tuple(shown_first + int(t) for t in shown), r.size, out_fps)
 
@@ -588,7 +589,8 @@ def _montage(cells, columns: int, colors):
     as a palette image that keeps ``colors`` exact."""
     from PIL import Image, ImageDraw
 
-    from keyfill.viz import gif, style
+    from keyfill.viz import style
+    from keyfill.viz.palette import Palette
 
     w, h = cells[0].size
     gap = 4
@@ -601,4 +603,4 @@ def _montage(cells, columns: int, colors):
         y = gap + (i // cols) * (h + gap)
         sheet.paste(cell, (x, y))
         draw.rectangle((x - 1, y - 1, x + w, y + h), outline=style.FRAME_COLOR)
-    return gif.Palette([sheet], 256, colors).apply(sheet)
+    return Palette([sheet], 256, colors).apply(sheet)

@@ -24,6 +24,8 @@ GRID_COLOR = "#d2d2d2"
 #: the frame around each picture of a filmstrip
 FRAME_COLOR = "#d7d7d7"
 TEXT_COLOR = "#333333"
+#: the grid lines of plot panels
+AXIS_GRID_COLOR = "#e5e5e5"
 
 #: rc settings for every picture: a font that ships with matplotlib (same
 #: glyphs on every machine) and a fixed SVG id salt (no random ids)
@@ -68,16 +70,23 @@ def new_figure(width_in: float, height_in: float, dpi: float = 100) -> Figure:
 def save_figure(fig: Figure, path: Path, fmt: str) -> None:
     """Save ``fig`` as ``fmt`` (png, svg or pdf) to ``path`` without dates or versions.
 
-    PNGs are written by Pillow from the Agg buffer as RGB (the background is
-    opaque white, so an alpha channel would only add bytes).
+    PNGs are written by Pillow from the Agg buffer with a 256-colour palette:
+    the flat colours of the figure exact, then its most frequent colours
+    (:class:`keyfill.viz.palette.Palette`); a line plot holds a few thousand
+    antialiasing shades, and the rare ones move to their nearest neighbour.
+    The file is about a third of a true-colour PNG.
     """
     if fmt == "png":
         import numpy as np
-        from PIL import Image
+        from matplotlib.colors import to_rgb
+
+        from keyfill.viz.palette import Palette
 
         fig.canvas.draw()
         rgba = np.asarray(fig.canvas.buffer_rgba())
-        Image.fromarray(np.ascontiguousarray(rgba[..., :3])).save(path, format="PNG")
+        flat = ["#ffffff", "#000000", TEXT_COLOR, AXIS_GRID_COLOR, *FILE_COLORS]
+        required = [tuple(int(round(255 * v)) for v in to_rgb(c)) for c in flat]
+        Palette([rgba], 256, required).apply(rgba).save(path, format="PNG")
         return
     fig.savefig(path, format=fmt, metadata=_NO_METADATA[fmt], facecolor="white")
 

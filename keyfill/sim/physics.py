@@ -213,7 +213,7 @@ class LampWorld:
         # The torque applied during step k comes from the state and target at time k * dt.
         state = np.searchsorted(bounds, np.arange(n) * dt, side="right")
         targets = np.vstack([np.tile(controller.poses, (s.cycles, 1)), controller.poses[-1:]])[state].tolist()
-        kp, kd, tmax = s.kp, s.kd, s.max_torque
+        (kp0, kp1, kp2), (kd0, kd1, kd2), (m0, m1, m2) = s.kp, s.kd, s.max_torque
         max_tilt = s.max_tilt
         torque = p.TORQUE_CONTROL
         states = np.empty((n + 1, 6))
@@ -230,10 +230,17 @@ class LampWorld:
                     break
             if k == n:
                 break
-            tgt = targets[k]
+            # PD torques of the three hinges, clipped; written out because this loop is the hot path
+            # (a list comprehension with min/max costs about 4x as much).
+            t0, t1, t2 = targets[k]
+            (q0, w0, _, _), (q1, w1, _, _), (q2, w2, _, _) = js[3], js[4], js[5]
+            f0 = kp0 * (t0 - q0) - kd0 * w0
+            f1 = kp1 * (t1 - q1) - kd1 * w1
+            f2 = kp2 * (t2 - q2) - kd2 * w2
             forces = [
-                min(max(kp[i] * (tgt[i] - js[3 + i][0]) - kd[i] * js[3 + i][1], -tmax[i]), tmax[i])
-                for i in range(3)
+                m0 if f0 > m0 else (-m0 if f0 < -m0 else f0),
+                m1 if f1 > m1 else (-m1 if f1 < -m1 else f1),
+                m2 if f2 > m2 else (-m2 if f2 < -m2 else f2),
             ]
             p.setJointMotorControlArray(lamp, hinges, torque, forces=forces, physicsClientId=cid)
             p.stepSimulation(physicsClientId=cid)

@@ -134,21 +134,28 @@ class Scene:
 
         return _Work(curves).states([self.hand], [frame])[0][0][0]
 
-    def unlocked(self, groups: list[list[int]], k: int) -> list[int]:
-        """``k`` controls taken in turn from ``groups`` (each ordered by preference)."""
+    def unlocked(self, groups: list[list[list[int]]], k: int) -> list[int]:
+        """``k`` controls taken a joint at a time, in turn from ``groups`` (lists of joints' controls)."""
         groups = [list(g) for g in groups if g]
-        out = []
+        out: list[int] = []
         while len(out) < k and any(groups):
             for g in groups:
                 if g and len(out) < k:
-                    out.append(g.pop(0))
+                    out += g.pop(0)[: k - len(out)]
         return out
 
-    def ordered(self, controls, shallow: bool = False) -> list[int]:
-        """Rotations before translations; deepest joints first (nearest the moved point) or shallowest."""
+    def units(self, controls, shallow: bool = False) -> list[list[int]]:
+        """``controls`` grouped by joint, rotations (per joint) before translations (per joint);
+        joints deepest first (nearest the moved point), or shallowest first."""
         ctl = self.curves.controls
-        sign = 1 if shallow else -1
-        return sorted(controls, key=lambda c: (not ctl[c].is_rotation, sign * ctl[c].joint, ctl[c].axis))
+        joints = sorted({ctl[c].joint for c in controls}, reverse=not shallow)
+        out = []
+        for rot in (True, False):
+            for j in joints:
+                unit = sorted(c for c in controls if ctl[c].joint == j and ctl[c].is_rotation == rot)
+                if unit:
+                    out.append(unit)
+        return out
 
 
 def configuration(scene: Scene, name: str, dof: int, segment: int):
@@ -168,11 +175,11 @@ def configuration(scene: Scene, name: str, dof: int, segment: int):
     for p in pins + [c.point for c in contacts]:
         others.append(rig.controls_of(p) - Cs)
     shared = set().union(*(rig.controls_of(p) for p in pins + [c.point for c in contacts])) & Cs if others else set()
-    left = Cs - shared
-    # the constrained point's own controls go shallow first: they can make up for the shared ones
-    groups = [scene.ordered(shared), scene.ordered(left)] + [scene.ordered(o, shallow=True) for o in others]
+    # whole joints in turn: shared ones (they move the hand and the constrained point), then the
+    # constrained point's own (shallow first: they can make up for the shared ones), then the hand's
+    groups = [scene.units(shared)] + [scene.units(o, shallow=True) for o in others] + [scene.units(Cs - shared)]
     if not others:
-        groups = [scene.ordered(Cs)]
+        groups = [scene.units(Cs)]
     keep = scene.unlocked(groups, k)
     locked = frozenset(range(scene.curves.num_controls)) - set(keep)
     return tuple(pins), tuple(contacts), locked

@@ -280,3 +280,42 @@ def test_pose_moves_a_key_and_keeps_pins(curves, tmp_path):
     changed = np.flatnonzero(np.any(out.values != curves.values, axis=1))
     assert changed.tolist() == [2]  # only the key at frame 20
     np.testing.assert_array_equal(out.out_tan, curves.out_tan)
+
+
+def test_a_case_2_pin_stays_fixed_when_a_contact_brings_its_chain(curves, tmp_path):
+    """Pinned hips leave the optimisation (case 2) and stay out when a foot contact adds the leg (case 3)."""
+    text = "pins = ['Hips']\n[[contact]]\njoint = 'Toes_L'\nframes = [10, 20]\n" + (
+        "[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 6, 3]\n"
+    )
+    out, (r,) = solve.edit_tangents(curves, load(tmp_path, curves, text))
+    assert r.reached and r.worst_pin_violation == 0.0
+    for axis in "XYZ":
+        c = curves.control_index(f"Hips.{axis}position")
+        np.testing.assert_array_equal(out.out_tan[:, c], curves.out_tan[:, c])
+    assert "contact Toes_L frames 10-20" in r.constraints  # the hips' rotations still move the leg
+
+
+def test_a_wobbling_contact_is_not_made_worse(tmp_path):
+    """Captured feet wobble while planted: the contact holds them no further from still than they were."""
+    from keyfill import rotations as R
+
+    m = character()
+    j = m.skeleton.index("UpperLeg_L")
+    wobble = np.radians(0.5) * np.sin(2 * np.pi * (np.arange(m.num_frames) - 10) / 10)
+    rot = m.rotations.copy()
+    rot[:, j] = R.quat_mul(rot[:, j], R.quat_from_rotvec(np.stack([wobble, 0 * wobble, 0 * wobble], -1)))
+    c = fit(m.replace(rotations=rot), m.keys)
+    text = "pins = ['Hips']\n[[contact]]\njoint = 'Toes_L'\nframes = [10, 20]\n" + (
+        "[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 6, 3]\n"
+    )
+    ef = load(tmp_path, c, text)
+    out, (r,) = solve.edit_tangents(c, ef)
+    toe = ef.contacts[0].point
+    f = np.arange(10.0, 21.0)
+    before, after = world(c, [toe], f)[0][0], world(out, [toe], f)[0][0]
+    still = before[0] + (f - 10)[:, None] / 10 * (before[-1] - before[0])
+    wobble_before = np.linalg.norm(before - still, axis=-1)
+    assert wobble_before.max() > 0.3  # cm: the input's foot is not still
+    eps = 1e-4 * solve.character_size(c.skeleton)
+    assert np.all(np.linalg.norm(after - still, axis=-1) <= wobble_before + eps)
+    assert r.reached and r.worst_contact_violation <= eps and r.constraints == ["contact Toes_L frames 10-20"]

@@ -249,20 +249,32 @@ class CurveArrays(NamedTuple):
     out_tan: np.ndarray
 
 
-class SegmentEval(NamedTuple):
+class SegmentEval:
     """Curve quantities at times ``(T,)`` for controls ``cols (n,)``, each ``(T, n)``.
 
-    ``value``: c(t); ``slope``: dc/dt; ``lam``: the Bezier parameter;
-    ``b1``, ``b2``: the Bernstein weights ``3 l (1-l)^2`` and ``3 l^2 (1-l)``
-    of the inner control points (the derivatives of ``c`` with respect to
-    the out height at the segment start and minus the in height at its end).
+    ``value``: c(t); ``lam``: the Bezier parameter; ``b1``, ``b2``: the
+    Bernstein weights ``3 l (1-l)^2`` and ``3 l^2 (1-l)`` of the inner control
+    points (the derivatives of ``c`` with respect to the out height at the
+    segment start and minus the in height at its end); ``slope``: dc/dt,
+    computed on first use (zero where the curves hold outside their keys).
     """
 
-    value: np.ndarray
-    slope: np.ndarray
-    lam: np.ndarray
-    b1: np.ndarray
-    b2: np.ndarray
+    def __init__(self, value, lam, b1, b2, parts):
+        self.value, self.lam, self.b1, self.b2 = value, lam, b1, b2
+        self._parts = parts
+        self._slope = None
+
+    @property
+    def slope(self) -> np.ndarray:
+        if self._slope is None:
+            lam, one = self.lam, 1.0 - self.lam
+            a, b, dt, y0, dy1, y3, dy3, outside = self._parts
+            # d/dlambda of the Bezier in value and in time
+            dy = 3.0 * (one * one * dy1 + 2.0 * lam * one * (y3 - dy3 - y0 - dy1) + lam * lam * dy3)
+            dx = 3.0 * (one * one * a + 2.0 * lam * one * (b - a) + lam * lam * (1.0 - b)) * dt
+            slope = dy / np.where(dx > 1e-300, dx, np.inf)
+            self._slope = np.where(outside, 0.0, slope) if outside is not None else slope
+        return self._slope
 
 
 def evaluate_segments(curves: CurveArrays, time: np.ndarray, seg: np.ndarray, cols: np.ndarray) -> SegmentEval:
@@ -272,7 +284,7 @@ def evaluate_segments(curves: CurveArrays, time: np.ndarray, seg: np.ndarray, co
     values with zero slope (the hold of the curves' ends).
     """
     t0 = curves.times[seg][:, None]
-    dt = (curves.times[seg + 1] - curves.times[seg])[:, None]
+    dt = curves.times[seg + 1][:, None] - t0
     rel = time[:, None] - t0
     u = np.clip(rel / dt, 0.0, 1.0)
     k0, k1, c = seg[:, None], seg[:, None] + 1, cols[None, :]
@@ -289,15 +301,8 @@ def evaluate_segments(curves: CurveArrays, time: np.ndarray, seg: np.ndarray, co
     dy1 = out[..., 1]  # y1 - y0
     dy3 = inn[..., 1]  # y3 - y2
     value = (one * one * one + b1) * y0 + b1 * dy1 + b2 * (y3 - dy3) + lam * lam * lam * y3
-    # d/dlambda of the Bezier in value and in (normalised) time
-    dy = 3.0 * (one * one * dy1 + 2.0 * lam * one * (y3 - dy3 - y0 - dy1) + lam * lam * dy3)
-    dx = 3.0 * (one * one * a + 2.0 * lam * one * (b - a) + lam * lam * (1.0 - b)) * dt
-    slope = dy / np.where(dx > 1e-300, dx, np.inf)
-    # outside [t_k, t_k+1] (hold) the slope is zero
     outside = (rel < 0) | (rel > dt)
-    if outside.any():
-        slope = np.where(outside, 0.0, slope)
-    return SegmentEval(value, slope, lam, b1, b2)
+    return SegmentEval(value, lam, b1, b2, (a, b, dt, y0, dy1, y3, dy3, outside if outside.any() else None))
 
 
 def tangent_derivatives(ev: SegmentEval) -> np.ndarray:
@@ -330,8 +335,10 @@ def solve_bezier_time(u: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
         f = ((c3 * lam + c2) * lam + c1) * lam - u
         df = (3.0 * c3 * lam + 2.0 * c2) * lam + c1
         step = f / np.where(df > 1e-12, df, np.inf)
-        lam = lam - step
+        lam -= step
         if np.abs(step).max() <= 1e-15:
+            if lam.min() >= 0.0 and lam.max() <= 1.0:
+                return lam
             break
     f = ((c3 * lam + c2) * lam + c1) * lam - u
     bad = ~((lam >= 0) & (lam <= 1) & (np.abs(f) <= 1e-14))

@@ -78,6 +78,8 @@ class Settings:
             the time cubic) and change timing, which timing edits (Eq. 12) own;
             10 makes move edits reshape first and converge in fewer iterations.
         epsilon_scale, tolerance_scale: defaults relative to the character size.
+        contact_slide: how far (relative to the character size) a contact's
+            point may be apart at its two keys; it then glides straight between them.
     """
 
     weights: QP.Weights = QP.Weights()
@@ -88,6 +90,7 @@ class Settings:
     timing_stiffness: float = 10.0
     epsilon_scale: float = 1e-4
     tolerance_scale: float = 1e-3
+    contact_slide: float = 0.01
 
 
 @functools.lru_cache(maxsize=64)
@@ -132,12 +135,18 @@ class EditReport:
 # --- working state -----------------------------------------------------------
 
 
+@functools.lru_cache(maxsize=16)
+def _rig(skeleton, controls) -> Rig:
+    """One :class:`Rig` (and its caches) per skeleton and control set, across edits and files."""
+    return Rig(skeleton, controls)
+
+
 class _Work:
     """Mutable copies of the curves' key arrays while edits are applied."""
 
     def __init__(self, curves: Curves):
         self.curves = curves
-        self.rig = Rig(curves.skeleton, curves.controls)
+        self.rig = _rig(curves.skeleton, curves.controls)
         self.times = curves.times
         self.values = curves.values.copy()
         self.in_tan = curves.in_tan.copy()
@@ -154,7 +163,7 @@ class _Work:
         return self.curves.replace(values=self.values, in_tan=self.in_tan, out_tan=self.out_tan, broken=self.broken)
 
     def segment(self, t) -> np.ndarray:
-        return np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
+        return np.minimum(np.maximum(np.searchsorted(self.times, t, side="right") - 1, 0), len(self.times) - 2)
 
     def states(self, points, times, arrays: CurveArrays | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
         """``(positions (T, 3), rotations (T, 3, 3))`` of each point at ``times``."""
@@ -192,6 +201,8 @@ class _Constraint:
     times: np.ndarray = None
     target_pos: np.ndarray = None
     target_rot: np.ndarray | None = None
+    allow: np.ndarray | float = 0.0  # per sample: the input's own distance from the target
+    allow_rows: np.ndarray | float = 0.0  # the same per QP row (coordinate)
 
 
 # --- the iteration shared by edits and poses ---------------------------------
@@ -212,6 +223,7 @@ class _Linear:
     rc: np.ndarray
     rows: list  # (constraint name, number of rows of rc)
     jacobians: object
+    allow: np.ndarray | float = 0.0  # per row of rc: error the input itself has there
 
 
 def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, solver, settings):
@@ -223,7 +235,7 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
     QP result))``; the best theta is the closest to the target among those
     whose constraints hold within ``eps``.
     """
-    theta = np.clip(theta0, lb, ub)  # tangents the limits forbid are brought inside first
+    theta = np.minimum(np.maximum(theta0, lb), ub)  # tangents the limits forbid are brought inside first
     lin = lin0 if np.array_equal(theta, theta0) else relinearize(theta)
     best_theta, best_d = (theta.copy(), lin.distance) if lin.violation <= eps else (None, np.inf)
     iterations = stall = 0
@@ -242,12 +254,12 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
             aim = min(radius, lin.distance)
         rm = 0.0 * lin.rm if mend else (lin.rm * (aim / lin.distance) if lin.distance > aim else lin.rm)
         program = QP.assemble(
-            Jm, rm, stiffness, lb - theta, ub - theta, Jc, lin.rc, band, pair_vars, gap, settings.weights
+            Jm, rm, stiffness, lb - theta, ub - theta, Jc, lin.rc, band + lin.allow, pair_vars, gap, settings.weights
         )
         res = QP.solve(program, solver)
         if res.x is None and lin.violation <= eps:
             # the band cannot be met from here: let rows keep their current error (within eps)
-            slack = np.maximum(band, np.abs(lin.rc))
+            slack = np.maximum(band + lin.allow, np.abs(lin.rc))
             program.h = np.concatenate([lin.rc + slack, slack - lin.rc])
             res = QP.solve(program, solver)
         iterations += 1
@@ -257,7 +269,7 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
         # the largest step that improves: less violation when mending, else a lower merit
         # (distance plus 5 x the violation beyond eps)
         for alpha in (1.0, 0.5, 0.25, 0.125):
-            trial = np.clip(theta + alpha * res.x, lb, ub)
+            trial = np.minimum(np.maximum(theta + alpha * res.x, lb), ub)
             new = relinearize(trial)
             if (new.violation < lin.violation) if mend else (_merit(new, eps) < _merit(lin, eps)):
                 break
@@ -290,8 +302,8 @@ def _diagnose(last, var_groups, constraint_names) -> list[str]:
     if last is None:
         return []
     lin, res = last
-    if res.x is None:
-        return list(constraint_names) + sorted({g for g in var_groups if g})
+    if res.x is None:  # no multipliers: name the constraints and limits that were in play
+        return list(constraint_names) + sorted({g for g in var_groups if g and g.startswith("limit")})
     score: dict[str, float] = {}
     k = len(lin.rc)
     z = np.abs(res.z[:k]) + np.abs(res.z[k:]) if len(res.z) == 2 * k else np.zeros(k)
@@ -348,37 +360,46 @@ class _Editor:
         return ends[0] + u * (ends[1] - ends[0])
 
     def check_contacts(self, contacts) -> None:
-        """Contacts need the point at the same place at both keys (keys never move)."""
+        """A contact's point must be (nearly) at the same place at its two keys: keys never move.
+
+        Captured feet glide a little while planted, so up to ``contact_slide``
+        (a fraction of the character's size) is accepted; the contact then
+        holds the point on the straight line between its key positions.
+        """
+        limit = max(self.kappa, self.settings.contact_slide * self.scale)
         for c in contacts:
             ends = self.work.states([c.point], [c.start, c.end])[0][0]
             gap = float(np.linalg.norm(ends[1] - ends[0]))
-            if gap > self.kappa:
+            if gap > limit:
                 raise DataError(
-                    f"{self.contact_name(c)}: the point is {gap:.4g} apart at the two keys "
-                    f"(tolerance {self.kappa:.3g}); keys never move, so it cannot stay in contact "
-                    "(plant it with keyfill pose first, or raise tolerance)"
+                    f"{self.contact_name(c)}: the point is {gap:.4g} apart at the two keys, more than a contact "
+                    f"may slide ({limit:.3g}); keys never move, so pick keys where it stands still "
+                    "(or move it there with keyfill pose first)"
                 )
 
     def reduce(self, point: Point, pins, contacts):
         """Section 3.3: the optimised controls ``C`` and the constraints kept."""
         rig = self.work.rig
-        locked = self.ef.locked
-        Cs = rig.controls_of(point) - locked
+        fixed = set(self.ef.locked)  # locked controls, and those a pin or contact of case 2 fixes
+        Cs = rig.controls_of(point) - fixed
         C = set(Cs)
         kept = []
         cands = [_Constraint(self.pin_name(p), "pin", p, -np.inf, np.inf, frozenset()) for p in pins]
         cands += [_Constraint(self.contact_name(c), "contact", c.point, c.start, c.end, frozenset(), c) for c in contacts]
         for con in cands:
-            Cj = rig.controls_of(con.point) - locked
+            Cj = rig.controls_of(con.point) - fixed
             if not C & Cj:
                 continue
             if Cj <= Cs:
                 C -= Cj
+                fixed |= Cj
                 continue
             con.controls = Cj
             kept.append(con)
             C |= Cj
-        return sorted(C), kept
+        for con in kept:  # a later case 2 may have fixed some of a kept constraint's controls
+            con.controls = con.controls - fixed
+        return sorted(C), [con for con in kept if con.controls & C]
 
     def limits_margin(self, lo_t: float, hi_t: float) -> tuple[float | None, str | None]:
         """Worst ``min(c - low, high - c)`` over limited controls, 10 samples per frame."""
@@ -421,14 +442,17 @@ class _Editor:
             for c in touched:
                 f = frames[(frames >= c.start) & (frames <= c.end)]
                 if len(f):
-                    pos = self.work.states([c.point], f)[0][0]
-                    worst = max(worst, float(np.linalg.norm(pos - self.contact_target(c, f), axis=-1).max()))
+                    target = self.contact_target(c, f)
+                    now = np.linalg.norm(self.work.states([c.point], f)[0][0] - target, axis=-1)
+                    given = np.linalg.norm(self.work.states([c.point], f, self.original)[0][0] - target, axis=-1)
+                    worst = max(worst, float(np.maximum(now - given, 0.0).max()))
             report.worst_contact_violation = worst
         report.worst_limit_margin, report.worst_limit_control = self.limits_margin(lo_t, hi_t)
 
     def infeasible(self, what: str, distance: float, blocking: list[str], extra: str) -> InfeasibleError:
         if blocking:
-            why = "conflicting constraints: " + ", ".join(blocking)
+            shown = blocking[:6] + ([f"and {len(blocking) - 6} more"] if len(blocking) > 6 else [])
+            why = "conflicting constraints: " + ", ".join(shown)
         else:
             why = extra
         return InfeasibleError(f"{what} cannot reach its target: it stops {distance:.4g} away (tolerance {self.kappa:.3g}); {why}")
@@ -442,14 +466,14 @@ class _Editor:
         s = int(work.segment(edit.time))
         a, b = s, s + 1
         point = edit.point
-        label = f"edit {edit.index} ({point.label(self.sk)} at frame {edit.time:g})"
         pins = list(self.ef.pins) + list(edit.pins)
         contacts = list(self.ef.contacts) + list(edit.contacts)
 
         C, kept = self.reduce(point, pins, contacts)
         if not C:
             raise InfeasibleError(
-                f"{label}: nothing can move the point: every control that moves it is locked or fixed by a pin"
+                f"{self.edit_label(edit)}: nothing can move the point: every control that moves it is locked or "
+                "fixed by a pin"
             )
         Carr = np.array(C)
         nC = len(C)
@@ -538,7 +562,7 @@ class _Editor:
                 rvec = _rotvec(target_rot, rot_m[0]) if target_rot is not None else np.zeros(3)
                 rm = np.concatenate([rm, scale * rvec])
                 dist2 += float(scale * scale * (rvec @ rvec))
-            rcs, names, viol, states = [], [], 0.0, []
+            rcs, names, viol, states, allow = [], [], 0.0, [], []
             for con, r in zip(samples, rows):
                 pos, rot = rig.state(frames, con.point, r)
                 res = con.target_pos - pos
@@ -547,11 +571,13 @@ class _Editor:
                     rv = scale * _rotvec(con.target_rot, rot)
                     res = np.concatenate([res, rv], axis=-1)
                     err2 = err2 + np.sum(rv * rv, axis=-1)
-                viol = max(viol, float(np.sqrt(err2.max())))
+                viol = max(viol, float((np.sqrt(err2) - con.allow).max()))
                 rcs.append(res.reshape(-1))
                 names.append((con.name, res.size))
                 states.append(pos)
+                allow.append(np.broadcast_to(con.allow_rows, res.shape).reshape(-1))
             rc = np.concatenate(rcs) if rcs else np.zeros(0)
+            allow = np.concatenate(allow) if allow else 0.0
 
             def jacobians():
                 # dc/dtheta per time and control: the variables at key a are the out tangent of
@@ -573,7 +599,7 @@ class _Editor:
                     Jcs.append((jc[:, :, :, None] * dc[r][:, None]).reshape(-1, n))
                 return Jm, (np.concatenate(Jcs) if Jcs else np.zeros((0, n)))
 
-            return _Linear(np.sqrt(dist2), viol, rm, rc, names, jacobians)
+            return _Linear(np.sqrt(dist2), viol, rm, rc, names, jacobians, allow)
 
         def relinearize(th: np.ndarray) -> _Linear:
             apply(th)
@@ -591,20 +617,24 @@ class _Editor:
                 pos, rot = rig.state(frames0, con.point, r)
             con.target_pos, con.target_rot = pos, (rot if con.point.orientation else None)
             if con.kind == "contact":
+                # a captured foot wobbles around its contact: the edit may not make that worse
                 con.target_pos = self.contact_target(con.contact, con.times)
+                given = work.states([con.point], con.times, self.original)[0][0] - con.target_pos
+                con.allow = np.linalg.norm(given, axis=-1)
+                con.allow_rows = np.abs(given)
         lin0 = linearize(ev0, frames0)
 
         lb, ub, groups = self.tangent_bounds(s, Carr, ratio_a, ratio_b, prev_seg, next_seg)
         pair_vars, pair_other = self.broken_pairs(a, b, Carr, uni_a, uni_b)
         theta0 = theta_now()
-        stiff = np.repeat(self.stiffness[Carr], 4) * np.tile([S.timing_stiffness, 1.0, S.timing_stiffness, 1.0], nC)
+        stiff = np.outer(self.stiffness[Carr], [S.timing_stiffness, 1.0, S.timing_stiffness, 1.0]).reshape(-1)
         best, dist, iters, reached, lin, last = _iterate(
             theta0, lin0, relinearize, lb, ub, stiff, (pair_vars, pair_other), self.eps, self.kappa, self.solver, S
         )
         if not reached:
             blocking = _diagnose(last, groups(), [con.name for con in samples])
             err = self.infeasible(
-                label,
+                self.edit_label(edit),
                 dist if np.isfinite(dist) else lin.distance,
                 blocking,
                 f"no constraint is active, so the tangents between the keys at frames {times[a]:g} and "
@@ -632,6 +662,10 @@ class _Editor:
         )
         self.check_constraints(report, pins, contacts, float(times[lo_seg]), float(times[hi_seg + 1]))
         return report
+
+    def edit_label(self, edit: Manipulation) -> str:
+        where = "key" if self.work.curves.key_index(edit.time) is not None else "frame"
+        return f"edit {edit.index} ({edit.point.label(self.sk)} at {where} {edit.time:g})"
 
     def distance_now(self, point, t, target_pos, target_rot) -> float:
         pos, rot = self.work.states([point], [t])[0]
@@ -783,14 +817,16 @@ class _Editor:
         times, K = work.times, len(work.times)
         k = work.curves.key_index(edit.time)
         point = edit.point
-        label = f"edit {edit.index} ({point.label(self.sk)} at key {edit.time:g})"
         pins = list(self.ef.pins) + list(edit.pins)
         # a contact through this key holds the point where it is at the key
         contacts = list(self.ef.contacts) + list(edit.contacts)
         pins += [c.point for c in contacts if c.start <= edit.time <= c.end]
         C, kept = self.reduce(point, pins, [])
         if not C:
-            raise InfeasibleError(f"{label}: nothing can move the point: every control that moves it is locked or fixed by a pin")
+            raise InfeasibleError(
+                f"{self.edit_label(edit)}: nothing can move the point: every control that moves it is locked or "
+                "fixed by a pin"
+            )
         Carr = np.array(C)
         n = len(C)
         T = np.array([edit.time])
@@ -858,7 +894,7 @@ class _Editor:
         if not reached:
             blocking = _diagnose(last, groups, [con.name for con in kept])
             err = self.infeasible(
-                label, dist if np.isfinite(dist) else lin.distance, blocking,
+                self.edit_label(edit), dist if np.isfinite(dist) else lin.distance, blocking,
                 "no constraint is active, so the controls that move the point cannot take it any closer",
             )
             if not self.best_effort:

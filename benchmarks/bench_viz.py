@@ -38,8 +38,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_bvh_io import (BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, load_average, machine, median_time,
-                          median_times)
+from bench_bvh_io import BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, load_average, machine, median_times
 
 GIF_GOAL_S = 10.0
 PLOT_GOAL_S = 3.0

@@ -361,8 +361,8 @@ class StickRenderer:
         ax.set_ylim(lo[1], hi[1])
         self.fig, self.ax = fig, ax
         ground_color = st.GRID_COLOR if self.ground_is_grid else st.GROUND_COLOR
-        ax.add_collection(LineCollection(self.camera.project(ground), colors=ground_color, linewidths=max(0.8 * s, 0.75),
-                                         zorder=0))
+        ax.add_collection(LineCollection(self.camera.project(ground), colors=ground_color,
+                                         linewidths=max(0.8 * s, 0.75), zorder=0))
         self.ghost = ax.add_collection(LineCollection([], colors=st.KEY_COLOR, alpha=0.35, linewidths=0.85 * lw,
                                                       capstyle="round", joinstyle="round", zorder=3, animated=True))
         self.poses, self.colors = [], []
@@ -570,7 +570,8 @@ def preview(
             if step is not None:
                 shown = list(range(0, length, step))
             else:
-                shown = sorted(set(np.round(np.linspace(0, length - 1, min(STRIP_FRAMES, length))).astype(int).tolist()))
+                even = np.linspace(0, length - 1, min(STRIP_FRAMES, length))
+                shown = sorted(set(np.round(even).astype(int).tolist()))
             cells = [Image.fromarray(r.render(t, r.bracketing_keys(t), r.frame_label(t))[..., :3])
                      for t in wrap(shown, desc="frames")]
             _montage(cells, STRIP_COLUMNS, r.palette_colors()).save(tmp, format="PNG", optimize=True)

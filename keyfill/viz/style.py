@@ -11,6 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import matplotlib
+import matplotlib.style
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -54,8 +55,6 @@ _NO_METADATA = {
 def style():
     """matplotlib's default style plus :data:`RC` for the duration of a drawing (never
     globally): a user's matplotlibrc does not change keyfill's pictures."""
-    import matplotlib.style
-
     with matplotlib.style.context("default"), matplotlib.rc_context(RC):
         yield
 

@@ -53,21 +53,21 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # small dense problems: BLAS threads only contend
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from keyfill import io  # noqa: E402
-from keyfill.edit import solve  # noqa: E402
-from keyfill.edit.edits import Contact, EditFile, Manipulation  # noqa: E402
-from keyfill.edit.fit import fit  # noqa: E402
-from keyfill.edit.rig import Point, Rig  # noqa: E402
-from keyfill.motion import Keys  # noqa: E402
+from keyfill import io
+from keyfill.edit import solve
+from keyfill.edit.edits import Contact, EditFile, Manipulation
+from keyfill.edit.fit import fit
+from keyfill.edit.rig import Point, Rig
+from keyfill.motion import Keys
 
 DOFS = (24, 72, 120, 168)
 LENGTHS = (2, 7, 20)
@@ -102,8 +102,17 @@ def lamp_motion():
     from keyfill.sim.lamp import from_variables
 
     t = np.arange(31) / 30.0
-    v = np.stack([0.4 * t, 0.08 * np.sin(np.pi * t) ** 2, 0.15 * np.sin(2 * np.pi * t), 0.6 + 0.3 * np.sin(3 * t),
-                  -1.1 + 0.25 * np.cos(4 * t), 0.5 * np.sin(2 * t)], -1)
+    v = np.stack(
+        [
+            0.4 * t,
+            0.08 * np.sin(np.pi * t) ** 2,
+            0.15 * np.sin(2 * np.pi * t),
+            0.6 + 0.3 * np.sin(3 * t),
+            -1.1 + 0.25 * np.cos(4 * t),
+            0.5 * np.sin(2 * t),
+        ],
+        -1,
+    )
     return from_variables(v, 30.0)
 
 
@@ -251,7 +260,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--edits", type=int, default=100, help="edits per cell (the paper: over a hundred)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the edit sampler")
-    parser.add_argument("--unified", action="store_true", help="keep unified keys unified (neighbour segments change too)")
+    parser.add_argument(
+        "--unified", action="store_true", help="keep unified keys unified (neighbour segments change too)"
+    )
     parser.add_argument("--configs", default=",".join(CONFIGS), help="comma-separated subset of: " + ", ".join(CONFIGS))
     parser.add_argument("--json", type=Path, help="also write the results here")
     args = parser.parse_args(argv)
@@ -260,8 +271,10 @@ def main(argv=None) -> int:
         return 2
     rng = np.random.default_rng(args.seed)
     load = os.getloadavg()[0]
-    print(f"# {platform.machine()} {os.cpu_count()} cores, load {load:.2f}; {args.edits} edits per cell; "
-          f"{'unified' if args.unified else 'segment-only (paper)'} tangents; solver daqp")
+    print(
+        f"# {platform.machine()} {os.cpu_count()} cores, load {load:.2f}; {args.edits} edits per cell; "
+        f"{'unified' if args.unified else 'segment-only (paper)'} tangents; solver daqp"
+    )
     if load > 0.5 * (os.cpu_count() or 1):
         print("# WARNING: the machine is busy; timings are inflated")
     walk = bandai_motion()
@@ -273,8 +286,14 @@ def main(argv=None) -> int:
         "head": Point(sk.index("Head"), tip[sk.index("Head")]),
         "toes_r": Point(sk.index("Toes_R"), tip[sk.index("Toes_R")]),
     }
-    results = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "load": load, "edits": args.edits,
-               "unified": args.unified, "bandai": {}, "lamp": {}}
+    results = {
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "load": load,
+        "edits": args.edits,
+        "unified": args.unified,
+        "bandai": {},
+        "lamp": {},
+    }
     configs = [c.strip() for c in args.configs.split(",")]
     t0 = time.perf_counter()
     for length in LENGTHS:
@@ -333,8 +352,10 @@ def report(results: dict, key: str = "median_ms") -> str:
         bad = f", {cell['failed']} failed" if cell["failed"] else ""
         lines.append(f"| {length} | {cell[key]:.2f} ({PAPER['alone'][li][0]}) {ratio:.3f}{bad} |")
     what = "wall-clock" if key == "median_ms" else "CPU (this thread)"
-    lines.append(f"\ncells: our median {what} ms per edit (paper ms) ratio; worst ratio {worst:.3f} (goal <= 0.1); "
-                 f"wall {results['wall_s']:.0f} s, load {results['load']:.2f}")
+    lines.append(
+        f"\ncells: our median {what} ms per edit (paper ms) ratio; worst ratio {worst:.3f} (goal <= 0.1); "
+        f"wall {results['wall_s']:.0f} s, load {results['load']:.2f}"
+    )
     return "\n".join(lines)
 
 

@@ -50,8 +50,15 @@ def test_convert_edit_and_back(tmp_path, capsys, curves_file):
     code, stdout, err = run(capsys, "edit-tangents", curves_file, "--edit", edit, "-o", out, "--json")
     assert code == 0, err
     report = json.loads(stdout)["edits"][0]
-    for key in ("iterations", "distance", "worst_pin_violation", "worst_contact_violation", "worst_limit_margin",
-                "optimised_tangents", "solve_ms"):
+    for key in (
+        "iterations",
+        "distance",
+        "worst_pin_violation",
+        "worst_contact_violation",
+        "worst_limit_margin",
+        "optimised_tangents",
+        "solve_ms",
+    ):
         assert key in report
     assert report["reached"] and report["iterations"] >= 1 and report["optimised_tangents"] > 0
     assert "edit 1: Hand_L at frame 15 reached its target" in err
@@ -74,16 +81,26 @@ def test_same_inputs_give_the_same_bytes(tmp_path, capsys, curves_file):
 
 
 BAD = {
-    "unknown joint": ("[[edit]]\njoint = 'Hnad_L'\nframe = 15\nmove = [0, 1, 0]\n", "edit 1: unknown joint 'Hnad_L'", 1),
-    "frame outside": ("[[edit]]\njoint = 'Hand_L'\nframe = 55\nmove = [0, 1, 0]\n", "frame 55 is outside the curves", 1),
+    "unknown joint": (
+        "[[edit]]\njoint = 'Hnad_L'\nframe = 15\nmove = [0, 1, 0]\n",
+        "edit 1: unknown joint 'Hnad_L'",
+        1,
+    ),
+    "frame outside": (
+        "[[edit]]\njoint = 'Hand_L'\nframe = 55\nmove = [0, 1, 0]\n",
+        "frame 55 is outside the curves",
+        1,
+    ),
     "target nan": ("[[edit]]\njoint = 'Hand_L'\nframe = 15\ntarget = [0, nan, 0]\n", "target is nan", 1),
     "contact between keys": (
         "[[contact]]\njoint = 'Toes_L'\nframes = [10, 15]\n[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 1, 0]\n",
-        "frame 15 is not a key (keys: 0, 10, 20, 30, 40)", 1,
+        "frame 15 is not a key (keys: 0, 10, 20, 30, 40)",
+        1,
     ),
     "limits the keys break": (
         "[limits]\n'LowerArm_L.Yrotation' = [0, 50]\n[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 1, 0]\n",
-        "the key at frame 10 is already outside it", 2,
+        "the key at frame 10 is already outside it",
+        2,
     ),
     "frame at a key": ("[[edit]]\njoint = 'Hand_L'\nframe = 20\nmove = [0, 1, 0]\n", "frame 20 is a key", 1),
     "typo": ("[[edit]]\njoint = 'Hand_L'\nframe = 15\nmvoe = [0, 1, 0]\n", "unknown field 'mvoe'", 1),
@@ -136,7 +153,9 @@ def test_pose_changes_a_key(tmp_path, capsys, curves_file):
 def test_usage_errors(tmp_path, capsys, curves_file):
     edit = tmp_path / "reach.toml"
     edit.write_text(REACH)
-    code, _, err = run(capsys, "edit-tangents", curves_file, "--edit", edit, "-o", tmp_path / "o.usda", "--solver", "nope")
+    code, _, err = run(
+        capsys, "edit-tangents", curves_file, "--edit", edit, "-o", tmp_path / "o.usda", "--solver", "nope"
+    )
     assert code == 2 and "QP solver 'nope' is not installed; available: " in err
     code, _, err = run(capsys, "convert", curves_file, tmp_path / "x.bvh", "--curves", "--keys", "0,10")
     assert code == 2 and "--curves writes a USD curves file" in err

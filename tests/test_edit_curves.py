@@ -52,7 +52,12 @@ def test_evaluation_follows_the_bezier_control_points():
     k, i = 2, 7
     t0, t1 = c.times[k], c.times[k + 1]
     px = [t0, t0 + c.out_tan[k, i, 0], t1 - c.in_tan[k + 1, i, 0], t1]
-    py = [c.values[k, i], c.values[k, i] + c.out_tan[k, i, 1], c.values[k + 1, i] - c.in_tan[k + 1, i, 1], c.values[k + 1, i]]
+    py = [
+        c.values[k, i],
+        c.values[k, i] + c.out_tan[k, i, 1],
+        c.values[k + 1, i] - c.in_tan[k + 1, i, 1],
+        c.values[k + 1, i],
+    ]
     basis = np.stack([(1 - lam) ** 3, 3 * lam * (1 - lam) ** 2, 3 * lam**2 * (1 - lam), lam**3], -1)
     x, y = basis @ px, basis @ py
     got = c.evaluate(x, controls=[i])[:, 0]

@@ -17,8 +17,17 @@ from keyfill.sim.lamp import from_variables
 
 def lamp_curves():
     t = np.arange(25) / 30.0
-    v = np.stack([0.3 * t, 0.05 + 0.1 * np.sin(4 * t), 0.2 * np.sin(3 * t), 0.5 + 0.3 * np.sin(5 * t),
-                  -0.8 + 0.2 * np.cos(4 * t), 0.4 * np.sin(2 * t)], -1)
+    v = np.stack(
+        [
+            0.3 * t,
+            0.05 + 0.1 * np.sin(4 * t),
+            0.2 * np.sin(3 * t),
+            0.5 + 0.3 * np.sin(5 * t),
+            -0.8 + 0.2 * np.cos(4 * t),
+            0.4 * np.sin(2 * t),
+        ],
+        -1,
+    )
     m = from_variables(v, 30.0)
     return fit(m, Keys(np.array([0, 8, 16, 24])))
 
@@ -66,7 +75,7 @@ def test_jacobian_matches_finite_differences(which):
 def test_controls_of_a_point():
     c = random_curves(13)
     sk, rig = c.skeleton, Rig(c.skeleton, c.controls)
-    names = lambda s: {c.controls[i].name(sk) for i in s}  # noqa: E731
+    names = lambda s: {c.controls[i].name(sk) for i in s}
     hand = sk.index("Hand_L")
     plain = names(rig.controls_of(Point(hand)))
     assert "Hips.Xposition" in plain and "LowerArm_L.Yrotation" in plain

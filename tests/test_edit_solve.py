@@ -185,7 +185,7 @@ def test_a_small_move_is_reached_in_one_step(curves, tmp_path):
 
 def test_the_reduction_of_section_3_3(curves, tmp_path):
     base = "[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 2, 0]\n"
-    names = lambda r: r.constraints  # noqa: E731
+    names = lambda r: r.constraints
     _, (alone,) = solve.edit_tangents(curves, load(tmp_path, curves, base))
     # case 2: the hips lie on the hand's chain; pinning them removes their controls
     _, (hips,) = solve.edit_tangents(curves, load(tmp_path, curves, "pins = ['Hips']\n" + base))
@@ -216,12 +216,12 @@ def test_orientation_targets(curves, tmp_path):
     from keyfill import rotations as R
 
     hand = Point(curves.skeleton.index("Hand_L"), orientation=True)
-    (pos, rot), = world(curves, [hand], [25.0])
+    ((pos, rot),) = world(curves, [hand], [25.0])
     turn = R.quat_to_matrix(R.quat_from_rotvec(np.radians([0.0, 0.0, 15.0])))
     q = R.quat_from_matrix(turn @ rot[0])
     text = f"[[edit]]\njoint = 'Hand_L'\nframe = 25\ntarget = {pos[0].tolist()}\norientation = {q.tolist()}\n"
     out, (r,) = solve.edit_tangents(curves, load(tmp_path, curves, text))
-    (p2, r2), = world(out, [hand], [25.0])
+    ((p2, r2),) = world(out, [hand], [25.0])
     assert r.reached and np.linalg.norm(p2[0] - pos[0]) < 0.2
     assert np.degrees(R.quat_angle(R.quat_from_matrix(r2[0]), q)) < 0.1
 
@@ -244,7 +244,7 @@ move = [0, 40, 0]
     ef = load(tmp_path, curves, text)
     with pytest.raises(InfeasibleError, match="cannot reach its target.*contact Toes_"):
         solve.edit_tangents(curves, ef)
-    out, (r,) = solve.edit_tangents(curves, ef, best_effort=True)
+    _, (r,) = solve.edit_tangents(curves, ef, best_effort=True)
     eps = 1e-4 * solve.character_size(curves.skeleton)
     assert not r.reached and 1.0 < r.distance < 40.0  # legs stretch as far as they go
     assert r.worst_contact_violation <= eps
@@ -257,7 +257,9 @@ def test_timing_edit_rescales_widths_and_keeps_slopes(curves, tmp_path):
     assert r.kind == "timing" and r.optimised_tangents > 0 and moved.any()
     np.testing.assert_allclose(out.out_tan[1, moved, 0], curves.out_tan[1, moved, 0] + 2.0 * 0.4)
     np.testing.assert_allclose(out.in_tan[2, moved, 0], curves.in_tan[2, moved, 0] + 2.0 * 0.6)
-    np.testing.assert_allclose(out.out_tan[1, :, 1] / out.out_tan[1, :, 0], curves.out_tan[1, :, 1] / curves.out_tan[1, :, 0])
+    np.testing.assert_allclose(
+        out.out_tan[1, :, 1] / out.out_tan[1, :, 0], curves.out_tan[1, :, 1] / curves.out_tan[1, :, 0]
+    )
     np.testing.assert_array_equal(out.values, curves.values)
     assert not np.allclose(out.evaluate([14.0]), curves.evaluate([14.0]))
 

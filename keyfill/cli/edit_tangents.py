@@ -29,14 +29,32 @@ def describe(report) -> str:
 
 @click.command("edit-tangents")
 @click.argument("curves_path", metavar="CURVES", type=click.Path(dir_okay=False))
-@click.option("--edit", "edit_path", required=True, type=click.Path(dir_okay=False),
-              help="Edit file (TOML): points to move, pins, contacts, limits, stiffness, timing edits.")
-@click.option("-o", "--output", "dst", required=True, type=click.Path(dir_okay=False),
-              help="Output: a curves file (.usda, .usdc, .usd) or the baked motion (.bvh).")
-@click.option("--solver", default="daqp", show_default=True,
-              help="QP backend: any solver installed for qpsolvers (daqp, quadprog, piqp, ...).")
-@click.option("--best-effort", is_flag=True,
-              help="Keep the closest result of an edit that cannot reach its target instead of failing.")
+@click.option(
+    "--edit",
+    "edit_path",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Edit file (TOML): points to move, pins, contacts, limits, stiffness, timing edits.",
+)
+@click.option(
+    "-o",
+    "--output",
+    "dst",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Output: a curves file (.usda, .usdc, .usd) or the baked motion (.bvh).",
+)
+@click.option(
+    "--solver",
+    default="daqp",
+    show_default=True,
+    help="QP backend: any solver installed for qpsolvers (daqp, quadprog, piqp, ...).",
+)
+@click.option(
+    "--best-effort",
+    is_flag=True,
+    help="Keep the closest result of an edit that cannot reach its target instead of failing.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print a per-edit report as JSON on stdout.")
 def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
     """Move points of the character between keys by changing only curve tangents.
@@ -67,8 +85,15 @@ def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
         raise InfeasibleError(f"{e}; nothing written (--best-effort keeps the closest result)") from None
     curvefile.save(result, dst)
     if as_json:
-        emit_json({"input": curves_path, "edit_file": edit_path, "output": dst, "solver": solver,
-                   "edits": [r.as_dict() for r in reports]})
+        emit_json(
+            {
+                "input": curves_path,
+                "edit_file": edit_path,
+                "output": dst,
+                "solver": solver,
+                "edits": [r.as_dict() for r in reports],
+            }
+        )
     for r in reports:
         say(describe(r))
     say(f"wrote {dst}")

@@ -147,7 +147,10 @@ def from_stage(stage, motion: Motion, label) -> Curves:
 
     prim = curves_prim(stage)
     if prim is None:
-        raise FormatError("not a keyfill curves file (no Curves prim); make one with keyfill convert IN OUT.usda --curves --keys ...", label)
+        raise FormatError(
+            "not a keyfill curves file (no Curves prim); make one with keyfill convert IN OUT.usda --curves --keys ...",
+            label,
+        )
     version = prim.GetCustomDataByKey(_CUSTOM).get("version", 0)
     if version > VERSION:
         raise FormatError(f"curves layout version {version} is newer than this keyfill reads ({VERSION})", label)
@@ -174,7 +177,10 @@ def from_stage(stage, motion: Motion, label) -> Curves:
     if not controls:
         raise FormatError("the Curves prim holds no spline attributes", label)
     # keep the skeleton's joint and channel order whatever the attribute order
-    order = sorted(range(len(controls)), key=lambda i: (controls[i].joint, sk.channels[controls[i].joint].index(controls[i].channel)))
+    order = sorted(
+        range(len(controls)),
+        key=lambda i: (controls[i].joint, sk.channels[controls[i].joint].index(controls[i].channel)),
+    )
     controls = [controls[i] for i in order]
     splines = [splines[i] for i in order]
     names = [names[i] for i in order]
@@ -197,7 +203,9 @@ def from_stage(stage, motion: Motion, label) -> Curves:
             raise FormatError(f"curve {name} loops; keyfill curves do not", label)
         for extrap in (spline.GetPreExtrapolation(), spline.GetPostExtrapolation()):
             if extrap.mode != Ts.ExtrapHeld:
-                raise FormatError(f"curve {name} extrapolates with {extrap.mode}; keyfill curves hold their end values", label)
+                raise FormatError(
+                    f"curve {name} extrapolates with {extrap.mode}; keyfill curves hold their end values", label
+                )
         per_control.append((spline.GetCurveType(), knots))
     K = len(times)
     if K < 2:
@@ -210,7 +218,9 @@ def from_stage(stage, motion: Motion, label) -> Curves:
     for i, (curve_type, knots) in enumerate(per_control):
         for k, knot in enumerate(knots):
             if knot.IsDualValued():
-                raise FormatError(f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label)
+                raise FormatError(
+                    f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label
+                )
             values[k, i] = float(knot.GetValue())
             pre = np.array([knot.GetPreTanWidth(), knot.GetPreTanSlope()], dtype=np.float64)
             post = np.array([knot.GetPostTanWidth(), knot.GetPostTanSlope()], dtype=np.float64)
@@ -229,7 +239,9 @@ def from_stage(stage, motion: Motion, label) -> Curves:
                 in_tan[k + 1, i] = seg[k] / 3, rise
                 broken[k, i] = broken[k + 1, i] = True
             elif interp != Ts.InterpCurve:
-                raise FormatError(f"curve {names[i]} holds its value after {times[k]:g}; keyfill curves are Bezier", label)
+                raise FormatError(
+                    f"curve {names[i]} holds its value after {times[k]:g}; keyfill curves are Bezier", label
+                )
     try:
         return Curves(
             skeleton=sk,

@@ -123,7 +123,9 @@ class Curves:
         seen = set()
         for ctl in controls:
             if not 0 <= ctl.joint < self.skeleton.num_joints:
-                raise DataError(f"control on joint index {ctl.joint}: the skeleton has {self.skeleton.num_joints} joints")
+                raise DataError(
+                    f"control on joint index {ctl.joint}: the skeleton has {self.skeleton.num_joints} joints"
+                )
             if ctl.channel not in POSITION_CHANNELS + ROTATION_CHANNELS:
                 raise DataError(f"unknown channel {ctl.channel!r}")
             if ctl in seen:
@@ -131,7 +133,13 @@ class Curves:
             seen.add(ctl)
         if int(self.num_frames) < 1 or not (np.isfinite(self.fps) and self.fps > 0):
             raise DataError(f"curves need at least one frame and a positive fps (got {self.num_frames}, {self.fps})")
-        for name, a in (("times", times), ("values", values), ("in_tan", in_tan), ("out_tan", out_tan), ("broken", broken)):
+        for name, a in (
+            ("times", times),
+            ("values", values),
+            ("in_tan", in_tan),
+            ("out_tan", out_tan),
+            ("broken", broken),
+        ):
             a = a.copy()
             a.setflags(write=False)
             object.__setattr__(self, name, a)
@@ -149,7 +157,7 @@ class Curves:
     def num_controls(self) -> int:
         return len(self.controls)
 
-    def replace(self, **changes) -> "Curves":
+    def replace(self, **changes) -> Curves:
         return dataclasses.replace(self, **changes)
 
     def control_names(self) -> list[str]:
@@ -173,7 +181,7 @@ class Curves:
         k = int(np.argmin(np.abs(self.times - time)))
         return k if abs(self.times[k] - time) <= 1e-9 else None
 
-    def arrays(self) -> "CurveArrays":
+    def arrays(self) -> CurveArrays:
         """The key arrays, as :func:`evaluate_segments` takes them."""
         return CurveArrays(self.times, self.values, self.in_tan, self.out_tan)
 
@@ -202,13 +210,12 @@ class Curves:
         """
         sk = self.skeleton
         frames = np.arange(self.num_frames) if frames is None else np.asarray(frames, dtype=np.float64)
-        vals = self.evaluate(frames)
-        rot, pos = controls_to_pose(sk, self.controls, vals)
+        rot, pos = controls_to_pose(sk, self.controls, self.evaluate(frames))
         keys = None
         whole = np.round(self.times)
-        if frames is None or np.array_equal(frames, np.arange(len(frames))):
-            if np.allclose(self.times, whole, atol=1e-9) and whole[0] >= 0 and whole[-1] < len(frames):
-                keys = Keys(whole.astype(np.int64))
+        every_frame = np.array_equal(frames, np.arange(len(frames)))
+        if every_frame and np.allclose(self.times, whole, atol=1e-9) and whole[0] >= 0 and whole[-1] < len(frames):
+            keys = Keys(whole.astype(np.int64))
         return Motion(sk, self.fps, rot, pos, keys=keys)
 
 

@@ -119,7 +119,19 @@ class EditFile:
 
 
 _TOP = {"tolerance", "epsilon", "pins", "lock", "limits", "stiffness", "contact", "edit", "break_tangents"}
-_MOVE = {"joint", "offset", "frame", "time", "target", "move", "orientation", "hold", "pins", "contacts", "break_tangents"}
+_MOVE = {
+    "joint",
+    "offset",
+    "frame",
+    "time",
+    "target",
+    "move",
+    "orientation",
+    "hold",
+    "pins",
+    "contacts",
+    "break_tangents",
+}
 _TIMING = {"frame", "time", "timing", "joint"}
 _POINT = {"joint", "offset", "orientation"}
 _CONTACT = {"joint", "offset", "frames"}
@@ -246,7 +258,9 @@ class _Parser:
                     "a contact spans whole segments between keys"
                 )
         if not a < b:
-            raise self.fail(f"{what} on {self.sk.names[point.joint]}: frames [{a:g}, {b:g}] must go from an earlier key to a later one")
+            raise self.fail(
+                f"{what} on {self.sk.names[point.joint]}: frames [{a:g}, {b:g}] must go from an earlier key to a later one"
+            )
         return Contact(point, a, b)
 
     def controls(self, name, what: str) -> list[int]:
@@ -382,11 +396,15 @@ class _Parser:
                 raise self.fail("orientation must be a unit quaternion (w, x, y, z), got zeros")
             orientation = q / norm
             point = Point(point.joint, point.offset, True)
-        holds = tuple(self.inside(self.number(h, "hold frame"), "hold frame") for h in self._list(spec.get("hold", []), "hold"))
+        holds = tuple(
+            self.inside(self.number(h, "hold frame"), "hold frame") for h in self._list(spec.get("hold", []), "hold")
+        )
         if any(abs(h - t) < 1e-9 for h in holds):
             raise self.fail(f"hold frame {t:g} is the frame being edited")
         pins = tuple(self.point(p, "pin") for p in self._list(spec.get("pins", []), "pins"))
-        contacts = tuple(self.contact(c, f"contact {k + 1}") for k, c in enumerate(self._list(spec.get("contacts", []), "contacts")))
+        contacts = tuple(
+            self.contact(c, f"contact {k + 1}") for k, c in enumerate(self._list(spec.get("contacts", []), "contacts"))
+        )
         if self.mode == "pose" and ("hold" in spec or "break_tangents" in spec):
             raise self.fail("hold and break_tangents apply to edit-tangents, not to keyfill pose")
         broken = self.flag(spec.get("break_tangents", self.break_default), "break_tangents")
@@ -422,5 +440,7 @@ def load(path: str | Path, curves: Curves, mode: str = "tangents", frame: float 
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         m = re.search(r"\(at line (\d+)", str(e))
-        raise FormatError(f"not valid TOML: {str(e).split(' (at line')[0]}", path, int(m.group(1)) if m else None) from None
+        raise FormatError(
+            f"not valid TOML: {str(e).split(' (at line')[0]}", path, int(m.group(1)) if m else None
+        ) from None
     return _Parser(str(path), text, curves, mode, frame).parse(data)

@@ -39,9 +39,11 @@ def controls_of(motion: Motion, all_channels: bool = False) -> tuple[Control, ..
     out = []
     for j, chans in enumerate(sk.channels):
         for c in chans:
-            if c in ROTATION_CHANNELS:
-                out.append(Control(j, c))
-            elif c in POSITION_CHANNELS and (all_channels or sk.parents[j] < 0 or moved[j].any()):
+            if (
+                c in ROTATION_CHANNELS
+                or c in POSITION_CHANNELS
+                and (all_channels or sk.parents[j] < 0 or moved[j].any())
+            ):
                 out.append(Control(j, c))
     return tuple(out)
 
@@ -127,7 +129,7 @@ def _fit_slopes(dense: np.ndarray, kf: np.ndarray, values: np.ndarray, h: np.nda
     at ``u = (f - t_k) / h_k`` is the Hermite cubic
     ``v_k H00 + v_k+1 H01 + h_k (m_k H10 + m_k+1 H11)``: linear in the slopes.
     """
-    K, C = values.shape
+    K = len(values)
     rows, targets = [], []
     for k in range(K - 1):
         f = np.arange(kf[k] + 1, kf[k + 1])

@@ -53,7 +53,7 @@ from keyfill import rotations as R
 from keyfill.edit import qp as QP
 from keyfill.edit.curves import CurveArrays, Curves, evaluate_segments, tangent_derivatives
 from keyfill.edit.edits import Contact, EditFile, Manipulation, TimingEdit
-from keyfill.edit.rig import Frames, Point, Rig
+from keyfill.edit.rig import Point, Rig
 from keyfill.errors import DataError, InfeasibleError
 from keyfill.kinematics import fk
 
@@ -82,7 +82,7 @@ class Settings:
             point may be apart at its two keys; it then glides straight between them.
     """
 
-    weights: QP.Weights = QP.Weights()
+    weights: QP.Weights = field(default_factory=QP.Weights)
     patience: int = 5
     max_iterations: int = 50
     width_margin: float = 0.01
@@ -226,14 +226,16 @@ class _Linear:
     allow: np.ndarray | float = 0.0  # per row of rc: error the input itself has there
 
 
-def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, solver, settings):
+def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, solver, settings, size):
     """Solve, re-linearise, repeat (section 3.3).
 
     ``lin0`` is the problem at ``theta0``; ``relinearize(theta)`` applies new
     variables to the curves and linearises there. Returns ``(best theta or
     None, its distance, iterations, reached, last linearisation, last (lin,
     QP result))``; the best theta is the closest to the target among those
-    whose constraints hold within ``eps``.
+    whose constraints hold within ``eps``. Lengths enter the QP in units of
+    a hundredth of the character's ``size``, so the weights of Eq. 10 act
+    the same on a lamp in metres and a human in centimetres.
     """
     theta = np.minimum(np.maximum(theta0, lb), ub)  # tangents the limits forbid are brought inside first
     lin = lin0 if np.array_equal(theta, theta0) else relinearize(theta)
@@ -253,14 +255,25 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
         if not mend:
             aim = min(radius, lin.distance)
         rm = 0.0 * lin.rm if mend else (lin.rm * (aim / lin.distance) if lin.distance > aim else lin.rm)
+        k = 100.0 / size
         program = QP.assemble(
-            Jm, rm, stiffness, lb - theta, ub - theta, Jc, lin.rc, band + lin.allow, pair_vars, gap, settings.weights
+            k * Jm,
+            k * rm,
+            stiffness,
+            lb - theta,
+            ub - theta,
+            k * Jc,
+            k * lin.rc,
+            k * (band + lin.allow),
+            pair_vars,
+            gap,
+            settings.weights,
         )
         res = QP.solve(program, solver)
         if res.x is None and lin.violation <= eps:
             # the band cannot be met from here: let rows keep their current error (within eps)
-            slack = np.maximum(band + lin.allow, np.abs(lin.rc))
-            program.h = np.concatenate([lin.rc + slack, slack - lin.rc])
+            slack = k * np.maximum(band + lin.allow, np.abs(lin.rc))
+            program.h = np.concatenate([k * lin.rc + slack, slack - k * lin.rc])
             res = QP.solve(program, solver)
         iterations += 1
         last = (lin, res)
@@ -286,7 +299,9 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
                 radius = 0.5 * aim
             elif alpha == 1.0:
                 radius = 2.0 * radius
-        if lin.violation <= eps and lin.distance < best_d - 1e-3 * kappa:
+        # "improved": closer by 1 % at least (slow creeping toward an unreachable target stalls)
+        better = best_d - max(1e-3 * kappa, 0.01 * best_d) if np.isfinite(best_d) else np.inf
+        if lin.violation <= eps and lin.distance < better:
             best_theta, best_d, stall = theta.copy(), lin.distance, 0
         elif not mend:
             stall += 1  # (mending steps that reduce the violation are progress)
@@ -385,7 +400,9 @@ class _Editor:
         C = set(Cs)
         kept = []
         cands = [_Constraint(self.pin_name(p), "pin", p, -np.inf, np.inf, frozenset()) for p in pins]
-        cands += [_Constraint(self.contact_name(c), "contact", c.point, c.start, c.end, frozenset(), c) for c in contacts]
+        cands += [
+            _Constraint(self.contact_name(c), "contact", c.point, c.start, c.end, frozenset(), c) for c in contacts
+        ]
         for con in cands:
             Cj = rig.controls_of(con.point) - fixed
             if not C & Cj:
@@ -405,7 +422,7 @@ class _Editor:
         """Worst ``min(c - low, high - c)`` over limited controls, 10 samples per frame."""
         if not self.ef.limits:
             return None, None
-        n = max(int(round((hi_t - lo_t) * LIMIT_SAMPLES_PER_FRAME)), 1)
+        n = max(round((hi_t - lo_t) * LIMIT_SAMPLES_PER_FRAME), 1)
         t = np.linspace(lo_t, hi_t, n + 1)
         cols = np.array(sorted(self.ef.limits))
         vals = evaluate_segments(self.work.arrays(), t, self.work.segment(t), cols).value
@@ -455,7 +472,9 @@ class _Editor:
             why = "conflicting constraints: " + ", ".join(shown)
         else:
             why = extra
-        return InfeasibleError(f"{what} cannot reach its target: it stops {distance:.4g} away (tolerance {self.kappa:.3g}); {why}")
+        return InfeasibleError(
+            f"{what} cannot reach its target: it stops {distance:.4g} away (tolerance {self.kappa:.3g}); {why}"
+        )
 
     # --- move edits ----------------------------------------------------
 
@@ -585,8 +604,12 @@ class _Editor:
                 # width ratio; likewise at key b with the next segment
                 own = tangent_derivatives(ev)
                 dc = np.empty((len(T_all), nC, 4))
-                dc[..., :2] = np.where(in_s[..., None], own[..., :2], np.where(in_prev[..., None], ratio_a[:, None] * own[..., 2:], 0.0))
-                dc[..., 2:] = np.where(in_s[..., None], own[..., 2:], np.where(in_next[..., None], ratio_b[:, None] * own[..., :2], 0.0))
+                dc[..., :2] = np.where(
+                    in_s[..., None], own[..., :2], np.where(in_prev[..., None], ratio_a[:, None] * own[..., 2:], 0.0)
+                )
+                dc[..., 2:] = np.where(
+                    in_s[..., None], own[..., 2:], np.where(in_next[..., None], ratio_b[:, None] * own[..., :2], 0.0)
+                )
                 jm = rig.jacobian(frames, point, pos_m, C, r0)[0]  # (3 or 6, nC)
                 if point.orientation:
                     jm = np.concatenate([jm[:3], scale * jm[3:]])
@@ -629,7 +652,18 @@ class _Editor:
         theta0 = theta_now()
         stiff = np.outer(self.stiffness[Carr], [S.timing_stiffness, 1.0, S.timing_stiffness, 1.0]).reshape(-1)
         best, dist, iters, reached, lin, last = _iterate(
-            theta0, lin0, relinearize, lb, ub, stiff, (pair_vars, pair_other), self.eps, self.kappa, self.solver, S
+            theta0,
+            lin0,
+            relinearize,
+            lb,
+            ub,
+            stiff,
+            (pair_vars, pair_other),
+            self.eps,
+            self.kappa,
+            self.solver,
+            S,
+            self.scale,
         )
         if not reached:
             blocking = _diagnose(last, groups(), [con.name for con in samples])
@@ -739,6 +773,7 @@ class _Editor:
                 l, h = l.copy(), h.copy()
                 l[bad], h[bad] = mid, mid
             lb[k::4], ub[k::4] = l, h
+
         def groups():  # what each bound stands for, named only when an edit fails
             out = []
             for i, c in enumerate(Carr):
@@ -756,8 +791,14 @@ class _Editor:
         sel_a = i[~uni_a] if a >= 1 else i[:0]
         sel_b = i[~uni_b] if b <= K - 2 else i[:0]
         idx = np.concatenate([4 * sel_a, 4 * sel_a + 1, 4 * sel_b + 2, 4 * sel_b + 3])
-        other = np.concatenate([work.in_tan[a, Carr[sel_a], 0], work.in_tan[a, Carr[sel_a], 1],
-                                work.out_tan[b, Carr[sel_b], 0], work.out_tan[b, Carr[sel_b], 1]])
+        other = np.concatenate(
+            [
+                work.in_tan[a, Carr[sel_a], 0],
+                work.in_tan[a, Carr[sel_a], 1],
+                work.out_tan[b, Carr[sel_b], 0],
+                work.out_tan[b, Carr[sel_b], 1],
+            ]
+        )
         return idx, other
 
     # --- timing edits (Eq. 12) -------------------------------------------
@@ -885,16 +926,31 @@ class _Editor:
             return _Linear(np.sqrt(dist2), viol, rm, rc, names, jacobians)
 
         lb, ub = self.value_bounds(k, Carr)
-        groups = [f"limit on {self.name(c)}" if np.isfinite(self.low[c]) or np.isfinite(self.high[c]) else None for c in C]
+        groups = [
+            f"limit on {self.name(c)}" if np.isfinite(self.low[c]) or np.isfinite(self.high[c]) else None for c in C
+        ]
         x0 = work.values[k, Carr].copy()
         empty = (np.zeros(0, dtype=np.int64), np.zeros(0))
         best, dist, iters, reached, lin, last = _iterate(
-            x0, linearize(x0), linearize, lb, ub, self.stiffness[Carr], empty, self.eps, self.kappa, self.solver, S
+            x0,
+            linearize(x0),
+            linearize,
+            lb,
+            ub,
+            self.stiffness[Carr],
+            empty,
+            self.eps,
+            self.kappa,
+            self.solver,
+            S,
+            self.scale,
         )
         if not reached:
             blocking = _diagnose(last, groups, [con.name for con in kept])
             err = self.infeasible(
-                self.edit_label(edit), dist if np.isfinite(dist) else lin.distance, blocking,
+                self.edit_label(edit),
+                dist if np.isfinite(dist) else lin.distance,
+                blocking,
                 "no constraint is active, so the controls that move the point cannot take it any closer",
             )
             if not self.best_effort:
@@ -945,7 +1001,10 @@ class _Editor:
 
 
 def edit_tangents(
-    curves: Curves, edit_file: EditFile, solver: str = QP.DEFAULT_SOLVER, best_effort: bool = False,
+    curves: Curves,
+    edit_file: EditFile,
+    solver: str = QP.DEFAULT_SOLVER,
+    best_effort: bool = False,
     settings: Settings = Settings(),
 ) -> tuple[Curves, list[EditReport]]:
     """Apply the edits of ``edit_file`` in order; returns the new curves and one report per edit.
@@ -955,7 +1014,9 @@ def edit_tangents(
     constraint is kept and its report says ``reached = False``).
     """
     ed = _Editor(curves, edit_file, solver, best_effort, settings)
-    ed.check_contacts(list(edit_file.contacts) + [c for e in edit_file.edits if isinstance(e, Manipulation) for c in e.contacts])
+    ed.check_contacts(
+        list(edit_file.contacts) + [c for e in edit_file.edits if isinstance(e, Manipulation) for c in e.contacts]
+    )
     reports = []
     for edit in edit_file.edits:
         reports.append(ed.timing(edit) if isinstance(edit, TimingEdit) else ed.manipulate(edit))
@@ -963,7 +1024,10 @@ def edit_tangents(
 
 
 def pose(
-    curves: Curves, edit_file: EditFile, solver: str = QP.DEFAULT_SOLVER, best_effort: bool = False,
+    curves: Curves,
+    edit_file: EditFile,
+    solver: str = QP.DEFAULT_SOLVER,
+    best_effort: bool = False,
     settings: Settings = Settings(),
 ) -> tuple[Curves, list[EditReport]]:
     """Change key poses (Eq. 13): each edit moves its point at its key frame; tangents stay."""

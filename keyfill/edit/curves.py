@@ -271,6 +271,24 @@ class SegmentEval:
         self._parts = parts
         self._slope = None
 
+    def columns(self, idx) -> SegmentEval:
+        """The same quantities for a subset ``idx`` of the columns."""
+        a, b, dt, y0, dy1, y3, dy3, outside = self._parts
+        parts = (
+            a[:, idx],
+            b[:, idx],
+            dt,
+            y0[:, idx],
+            dy1[:, idx],
+            y3[:, idx],
+            dy3[:, idx],
+            None if outside is None else outside[:, idx],
+        )
+        out = SegmentEval(self.value[:, idx], self.lam[:, idx], self.b1[:, idx], self.b2[:, idx], parts)
+        if self._slope is not None:
+            out._slope = self._slope[:, idx]
+        return out
+
     @property
     def slope(self) -> np.ndarray:
         if self._slope is None:

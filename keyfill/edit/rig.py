@@ -165,6 +165,11 @@ class Rig:
         """Joints whose frames the states of ``points`` need, parents first."""
         return sorted({a for p in points for a in self.chains[p.joint]})
 
+    def controls_on(self, joints: list[int]) -> np.ndarray:
+        """Sorted indices of the controls of ``joints`` (what :meth:`frames` reads)."""
+        plan = self._plan(joints)
+        return np.sort(np.concatenate([plan.r_ctl, plan.t_ctl]))
+
     def _plan(self, joints: list[int]) -> _Plan:
         key = tuple(joints)
         if key not in self._plans:

@@ -169,16 +169,13 @@ class _Work:
         """``(positions (T, 3), rotations (T, 3, 3))`` of each point at ``times``."""
         times = np.asarray(times, dtype=np.float64)
         joints = self.rig.joints_for(points)
-        cols = sorted({c for a in joints for c in self._joint_controls(a)})
+        cols = self.rig.controls_on(joints)
         values = np.zeros((len(times), len(self.curves.controls)))
-        if cols:
-            ev = evaluate_segments(arrays or self.arrays(), times, self.segment(times), np.array(cols))
+        if len(cols):
+            ev = evaluate_segments(arrays or self.arrays(), times, self.segment(times), cols)
             values[:, cols] = ev.value
         frames = self.rig.frames(values, joints)
         return [self.rig.state(frames, p) for p in points]
-
-    def _joint_controls(self, a: int) -> list[int]:
-        return [c for _, c in self.rig.rot_controls[a]] + [c for _, c in self.rig.trans_controls[a]]
 
 
 def _rotvec(target: np.ndarray, current: np.ndarray) -> np.ndarray:
@@ -541,11 +538,11 @@ class _Editor:
         seg_all = work.segment(T_all)
         pts = [point] + [con.point for con in samples]
         joints = rig.joints_for(pts)
-        needed = sorted({c for j in joints for c in work._joint_controls(j)})
+        # every control the frames need, once; those not optimised stay as they are
+        needed = rig.controls_on(joints)
         values = np.zeros((len(T_all), len(work.curves.controls)))
-        fixed = [c for c in needed if c not in pos_in_C]
-        if fixed:
-            values[:, fixed] = evaluate_segments(work.arrays(), T_all, seg_all, np.array(fixed)).value
+        ev_all = evaluate_segments(work.arrays(), T_all, seg_all, needed)
+        values[:, needed] = ev_all.value
         in_s = (seg_all == s)[:, None]
         in_prev = (seg_all == s - 1)[:, None] & prev_seg[None]
         in_next = (seg_all == s + 1)[:, None] & next_seg[None]
@@ -629,7 +626,8 @@ class _Editor:
             return linearize(*evaluate())
 
         # targets, from the curves as they are now
-        ev0, frames0 = evaluate()
+        ev0 = ev_all.columns(np.searchsorted(needed, Carr))
+        frames0 = rig.frames(values, joints)
         cur_pos, _ = rig.state(frames0, point, np.array([0]))
         target_pos = edit.target if edit.target is not None else cur_pos[0] + edit.move
         target_rot = R.quat_to_matrix(edit.orientation) if edit.orientation is not None else None
@@ -753,6 +751,15 @@ class _Editor:
             xb_lo[next_seg] = np.maximum(xb_lo[next_seg], m * seg[s + 1] / r)
             xb_hi[next_seg] = np.minimum(xb_hi[next_seg], (1 - m) * seg[s + 1] / r)
         # heights: Eqs. 8-9 (infinite without limits)
+        if not (np.isfinite(lo).any() or np.isfinite(hi).any()):
+            for k, (l, h) in enumerate(((xa_lo, xa_hi), (xb_lo, xb_hi))):
+                lb[2 * k :: 4], ub[2 * k :: 4] = l, h
+            lb[1::2], ub[1::2] = -np.inf, np.inf
+            return (
+                lb,
+                ub,
+                lambda: [f"timing bounds of {self.name(c)}" if k % 2 == 0 else None for c in Carr for k in range(4)],
+            )
         phi, psi = phi_psi(s)
         ya_lo, ya_hi = phi.copy(), psi.copy()
         yb_lo, yb_hi = -psi, -phi
@@ -873,7 +880,7 @@ class _Editor:
         T = np.array([edit.time])
         pts = [point] + [con.point for con in kept]
         joints = rig.joints_for(pts)
-        needed = sorted({c for j in joints for c in work._joint_controls(j)})
+        needed = rig.controls_on(joints)
         values = np.zeros((1, work.curves.num_controls))
         values[0, needed] = work.values[k, needed]
         cur = work.states([point], T)[0]

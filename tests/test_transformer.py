@@ -279,3 +279,16 @@ def test_cli_train_transformer(corpus_dir, tmp_path, capsys):
     bad.write_text('{"model": {"layers": 2, "colour": 3}}')
     assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x.safetensors"), "--config", str(bad)]) == 2
     assert "colour" in capsys.readouterr().err
+
+
+def test_cli_evaluate_a_model(trained, corpus_dir, capsys):
+    out, model = trained
+    code = main(["evaluate", str(out), str(corpus_dir), "--test-pattern", "*_calm_*", "--lengths", "5,15", "--json"])
+    assert code == 0, capsys.readouterr().err
+    res = json.loads(capsys.readouterr().out)["results"]
+    assert set(res) == {out.name, "zero-velocity", "interpolation"}
+    from keyfill.learn import benchmark as B
+
+    proto = B.lafan1([corpus_dir], ["*_calm_*"], fold=True, cache=False)
+    lib = B.evaluate({"m": model.benchmark_method()}, proto.test, proto.stats, (5, 15))
+    assert res[out.name]["15"]["L2Q"] == pytest.approx(lib["m"][15]["L2Q"], rel=1e-9)

@@ -31,7 +31,7 @@ def _lafan1(method_or_model, data, test_pattern, train_pattern, lengths, fold_ro
         data,
         test_pattern or benchmark.LAFAN1_TEST_PATTERNS,
         train_pattern,
-        fold=fold_root,
+        fold=fold_root if fold_root is not None else getattr(method, "folded", None),
         facing_axis=facing_axis,
         progress=lambda files: progress(files, desc="reading clips", unit="file"),
     )
@@ -42,11 +42,37 @@ def _lafan1(method_or_model, data, test_pattern, train_pattern, lengths, fold_ro
 PROTOCOLS = {"lafan1": _lafan1}
 
 
+def _is_lamp_dataset(data) -> bool:
+    """DATA is one folder made by 'keyfill simulate' (it has a manifest.jsonl)."""
+    from pathlib import Path
+
+    return len(data) == 1 and (Path(data[0]) / "manifest.jsonl").is_file()
+
+
+def _keys(method_or_model, data, baselines, as_json):
+    """The lamp protocol (Zhang & van de Panne 2018, Tables 1 and 2) on a 'keyfill simulate' folder."""
+    from keyfill.learn import lamp_eval
+
+    if len(data) != 1:
+        raise UsageError("the keys protocol takes one dataset folder made by 'keyfill simulate'")
+    reports, info = lamp_eval.protocol(method_or_model, data[0], baselines=baselines)
+    if as_json:
+        emit_json({"protocol": "keys", "method": method_or_model, **info,
+                   "results": {r.method: r.as_dict() for r in reports}})
+        return
+    say(f"keys: {info['test_sequences']} test sequences of {info['data']} ({info['test_first']} .. "
+        f"{info['test_last']}), completed with all keys and with 1-2 keys deleted; losses on standardised "
+        f"variables (total = key + frame)")
+    click.echo(lamp_eval.format_table(reports))
+
+
 @click.command()
 @click.argument("method_or_model")
 @click.argument("data", nargs=-1, required=True, type=click.Path(exists=True))
-@click.option("--protocol", type=click.Choice(sorted(PROTOCOLS)), default="lafan1", show_default=True,
-              help="Benchmark protocol. lafan1: Harvey et al. 2020 (L2Q, L2P, NPSS).")
+@click.option("--protocol", type=click.Choice(sorted([*PROTOCOLS, "keys"])), default=None,
+              help="Benchmark protocol. lafan1: Harvey et al. 2020 (L2Q, L2P, NPSS). keys: the hopping lamp's "
+                   "test split with all keys and 1-2 keys deleted (Zhang & van de Panne 2018, Tables 1-2). "
+                   "Default: keys when DATA is a 'keyfill simulate' folder, else lafan1.")
 @click.option("--test-pattern", multiple=True, metavar="GLOB",
               help="Test clips: file names matching any of these shell patterns (repeatable). "
                    "Default: *subject5*, LaFAN1's test subject.")
@@ -55,7 +81,8 @@ PROTOCOLS = {"lafan1": _lafan1}
 @click.option("--lengths", default="5,15,30,45", show_default=True, metavar="LIST",
               help="Transition lengths to score (at most 45 with the protocol's 65-frame test windows).")
 @click.option("--fold-root/--no-fold-root", default=None,
-              help="Fold a static top joint (like Bandai's joint_Root) into the hips. Default: when it is static.")
+              help="Fold a static top joint (like Bandai's joint_Root) into the hips. "
+                   "Default: as the model's corpus, else when the top joint is static.")
 @click.option("--facing-axis", default="+Y", show_default=True, metavar="AXIS",
               help="The root joint's local axis that points forward (+Y as in the reference code).")
 @click.option("--baselines/--no-baselines", default=True, show_default=True,
@@ -78,7 +105,11 @@ def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengt
       keyfill evaluate model.safetensors bandai1/data --test-pattern '*_happy_*' \\
           --test-pattern '*_tired_*' --fold-root
       keyfill evaluate cubic bandai2/data --test-pattern '*_normal_*' --json
+      keyfill evaluate arnn data/hops          (lamp models: the keys protocol)
     """
+    if protocol == "keys" or (protocol is None and _is_lamp_dataset(data)):
+        return _keys(method_or_model, data, baselines, as_json)
+    protocol = protocol or "lafan1"
     from keyfill.learn import benchmark
 
     results, info = PROTOCOLS[protocol](method_or_model, data, test_pattern, train_pattern, _lengths(lengths),

@@ -170,7 +170,7 @@ def apply_transform(quats: np.ndarray, root: np.ndarray, turn: np.ndarray, shift
 
 @dataclass(frozen=True, eq=False)
 class Features:
-    """Frames <-> feature vectors for one skeleton and coordinate system (torch).
+    """Frames <-> feature vectors for one skeleton and coordinate system (numpy or torch).
 
     Attributes:
         coordinates: ``"global"``: ``J * 3`` normalised global positions, then
@@ -197,33 +197,34 @@ class Features:
         J = self.num_joints
         return J * 7 if self.coordinates == "global" else 3 + J * 4
 
-    def _stats(self, like):
+    def _like(self, a, like):
+        if R._xp(like) is np:
+            return np.asarray(a, dtype=like.dtype)
         import torch
 
-        mean = torch.as_tensor(self.pos_mean, dtype=like.dtype, device=like.device)
-        std = torch.as_tensor(self.pos_std, dtype=like.dtype, device=like.device)
-        if self.coordinates == "local":
-            return mean[:3], std[:3]
-        return mean, std
+        return torch.as_tensor(a, dtype=like.dtype, device=like.device)
+
+    def _stats(self, like):
+        n = 3 if self.coordinates == "local" else len(self.pos_mean)
+        return self._like(self.pos_mean[:n], like), self._like(self.pos_std[:n], like)
 
     def global_pose(self, quats, root):
-        """Global ``(quats, positions)`` from local quats ``(..., J, 4)`` and root ``(..., 3)`` (torch)."""
-        import torch
-
-        off = torch.as_tensor(self.offsets, dtype=quats.dtype, device=quats.device)
-        pos = torch.cat([root[..., None, :], off[1:].expand(root.shape[:-1] + off[1:].shape)], dim=-2)
+        """Global ``(quats, positions)`` from local quats ``(..., J, 4)`` and root ``(..., 3)``."""
+        xp = R._xp(quats)
+        off = self._like(self.offsets[1:], root)
+        rest = xp.broadcast_to(off, root.shape[:-1] + off.shape) if xp is np else off.expand(root.shape[:-1] + off.shape)
+        pos = xp.concat([root[..., None, :], rest], axis=-2)
         return fk(quats, pos, self.parents)
 
     def encode(self, quats, root):
         """``(B, T, size)`` features of local quats ``(B, T, J, 4)`` and root ``(B, T, 3)``."""
-        import torch
-
+        xp = R._xp(quats)
         B, T = root.shape[:2]
         mean, std = self._stats(root)
         if self.coordinates == "global":
             gq, gp = self.global_pose(quats, root)
-            return torch.cat([(gp.reshape(B, T, -1) - mean) / std, gq.reshape(B, T, -1)], dim=-1)
-        return torch.cat([(root - mean) / std, quats.reshape(B, T, -1)], dim=-1)
+            return xp.concat([(gp.reshape(B, T, -1) - mean) / std, gq.reshape(B, T, -1)], axis=-1)
+        return xp.concat([(root - mean) / std, quats.reshape(B, T, -1)], axis=-1)
 
     def split(self, x):
         """Features -> ``(positions or root (B, T, J*3 or 3), quats (B, T, J, 4) normalised)``."""
@@ -236,14 +237,12 @@ class Features:
 
     def decode(self, x):
         """Features -> local ``(quats (B, T, J, 4), root (B, T, 3))`` (global: simplest IK)."""
-        import torch
-
         pos, q = self.split(x)
         if self.coordinates == "local":
             return q, pos
-        par = list(int(p) for p in self.parents)
-        local = [q[..., 0, :]] + [R.quat_mul(R.quat_conjugate(q[..., par[j], :]), q[..., j, :]) for j in range(1, len(par))]
-        return torch.stack(local, dim=-2), pos[..., :3]
+        par = np.asarray(self.parents)
+        local = R.quat_mul(R.quat_conjugate(q[..., par[1:], :]), q[..., 1:, :])
+        return R._xp(q).concat([q[..., :1, :], local], axis=-2), pos[..., :3]
 
 
 # --- the network -------------------------------------------------------------------------
@@ -395,15 +394,11 @@ class CompletionModel:
         q, r = apply_transform(q, r, turn, shift)
         q, r = prefill(q, r, keys)
         dev = self.device
+        x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
         with torch.inference_mode():
-            tq = torch.as_tensor(q, dtype=torch.float32, device=dev)
-            tr = torch.as_tensor(r, dtype=torch.float32, device=dev)
-            x = self.features.encode(tq, tr)
             k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
-            y = self.network(x, k)
-            pq, pr = self.features.decode(y)
-        pq = pq.double().cpu().numpy()
-        pr = pr.double().cpu().numpy()
+            y = self.network(torch.as_tensor(x, dtype=torch.float32, device=dev), k)
+        pq, pr = self.features.decode(y.double().cpu().numpy())
         outside = kinds == IGNORED
         pq[:, outside], pr[:, outside] = q[:, outside], r[:, outside]
         pq, pr = apply_transform(pq, pr, turn, shift, inverse=True)
@@ -418,6 +413,7 @@ class CompletionModel:
                 raise ModelError(f"the model serves another skeleton: {diff}")
             return self.complete_windows(quats, root, keys)
 
+        method.folded = self.folded  # the protocol should prepare clips as the model's corpus was
         return method
 
     # --- files ---

@@ -1,0 +1,128 @@
+"""Inference speed of the motion-completion transformer on this CPU.
+
+The paper (Duan et al. 2021, Table 2) completes 1 sequence of 30 frames in
+25 ms and a batch of 10 in 83 ms on an i7-8700K. keyfill's goal on the 2-core
+development VM: 1 x 30 in at most 10 ms, 10 x 30 in at most 25 ms.
+
+Measured here, each the median of ``--repeat`` calls in one process, for the
+LaFAN1 in-betweening layout with a 30-frame transition (10 context frames, 30
+unknown frames, 1 target key: 41 frames in, 30 of them generated):
+
+* ``network``: the torch forward pass alone (Conv1d, mixture embedding, 8-layer
+  encoder, Conv1d) in ``inference_mode``;
+* ``complete``: :meth:`CompletionModel.complete_windows`, everything from
+  numpy windows in to numpy windows out (canonical frame, LERP/SLERP
+  pre-fill, global features by forward kinematics, network, IK back to local
+  rotations, frame restored).
+
+The model is the paper's size (8 layers, d_model 256, FFN 512, 8 heads) with
+random weights unless ``--model`` names a trained file: the time does not
+depend on the weights. Threads: torch's default (one per core) and 1.
+
+    .venv/bin/python benchmarks/bench_transformer.py
+    .venv/bin/python benchmarks/bench_transformer.py --model runs/bandai2/model.safetensors --repeat 200 --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+import torch
+
+from keyfill import rotations as R
+from keyfill.learn import transformer as T
+from keyfill.motion import Skeleton
+
+PAPER_MS = {1: 25.0, 10: 83.0}
+GOAL_MS = {1: 10.0, 10: 25.0}
+
+
+def bandai_like_skeleton() -> Skeleton:
+    """A 22-joint chain-tree skeleton (Bandai-Namco's topology) for a model with random weights."""
+    parents = [-1, 0, 1, 2, 3, 4, 3, 6, 7, 8, 3, 10, 11, 12, 1, 14, 15, 16, 1, 18, 19, 20]
+    rng = np.random.default_rng(0)
+    offsets = rng.normal(size=(22, 3)) * 10
+    offsets[0] = 0
+    return Skeleton([f"j{i}" for i in range(22)], parents, offsets, [()] * 22)
+
+
+def median_ms(fn, repeat: int) -> float:
+    for _ in range(5):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return 1000 * statistics.median(times)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--model", help="a trained model file (default: paper-size model with random weights)")
+    ap.add_argument("--repeat", type=int, default=100, help="timed calls per figure (default 100)")
+    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = ap.parse_args(argv)
+
+    load_before = os.getloadavg()
+    if args.model:
+        model = T.load_model(args.model)
+    else:
+        torch.manual_seed(0)
+        skel = bandai_like_skeleton()
+        model = T.new_model(skel, T.ModelConfig(), np.zeros(66), np.full(66, 20.0), folded=False)
+        model.network.eval()
+    J = model.skeleton.num_joints
+    rng = np.random.default_rng(1)
+    frames = 10 + 30 + 1
+    keys = np.append(np.arange(10), 40)
+    results = {}
+    default_threads = torch.get_num_threads()
+    for threads in sorted({default_threads, 1}, reverse=True):
+        torch.set_num_threads(threads)
+        for batch in (1, 10):
+            q = R.quat_normalize(rng.normal(size=(batch, frames, J, 4)))
+            r = rng.normal(size=(batch, frames, 3)) * 50
+            x = torch.randn(batch, frames, model.features.size)
+            kinds = torch.as_tensor(T.frame_kinds(frames, keys)).expand(batch, frames)
+
+            def network():
+                with torch.inference_mode():
+                    model.network(x, kinds)
+
+            results[(threads, batch)] = {
+                "network_ms": median_ms(network, args.repeat),
+                "complete_ms": median_ms(lambda: model.complete_windows(q, r, keys), args.repeat),
+            }
+    torch.set_num_threads(default_threads)
+    load_after = os.getloadavg()
+    report = {
+        "machine": f"{platform.machine()}, {os.cpu_count()} logical CPUs, torch {torch.__version__}",
+        "load_before": load_before,
+        "load_after": load_after,
+        "model": args.model or "paper size (8 x 256, FFN 512, 8 heads), random weights",
+        "frames": frames,
+        "results": [{"threads": t, "batch": b, **v, "goal_ms": GOAL_MS[b], "paper_ms": PAPER_MS[b],
+                     "complete_vs_paper": v["complete_ms"] / PAPER_MS[b]} for (t, b), v in results.items()],
+    }
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    print(f"machine: {report['machine']}; load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
+    print(f"model: {report['model']}; in-betweening of 30 frames ({frames} frames in), median of {args.repeat}")
+    print(f"{'threads':>7} {'batch':>5} {'network ms':>11} {'complete ms':>12} {'goal ms':>8} {'paper ms':>9} {'vs paper':>9}")
+    for row in report["results"]:
+        print(f"{row['threads']:>7} {row['batch']:>5} {row['network_ms']:>11.2f} {row['complete_ms']:>12.2f} "
+              f"{row['goal_ms']:>8.0f} {row['paper_ms']:>9.0f} {row['complete_vs_paper']:>9.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -144,13 +144,19 @@ class Scene:
         return _Work(curves).states([self.hand], [frame])[0][0][0]
 
     def unlocked(self, groups: list[list[list[int]]], k: int) -> list[int]:
-        """``k`` controls taken a joint at a time, in turn from ``groups`` (lists of joints' controls)."""
+        """``k`` controls taken in turn from ``groups`` (lists of joints' controls): a whole joint at
+        a time when there is room for one from every group, else one control at a time."""
         groups = [list(g) for g in groups if g]
+        size = 3 if k >= 3 * len(groups) else 1
         out: list[int] = []
         while len(out) < k and any(groups):
             for g in groups:
                 if g and len(out) < k:
-                    out += g.pop(0)[: k - len(out)]
+                    unit = g[0][:size]
+                    g[0] = g[0][size:]
+                    if not g[0]:
+                        g.pop(0)
+                    out += unit[: k - len(out)]
         return out
 
     def units(self, controls, shallow: bool = False) -> list[list[int]]:
@@ -172,7 +178,7 @@ def configuration(scene: Scene, name: str, dof: int, segment: int):
     rig, k = scene.rig, dof // 4
     Cs = rig.controls_of(scene.hand)
     a, b = scene.curves.times[segment], scene.curves.times[segment + 1]
-    pins, contacts, others = [], [], []
+    pins, contacts = [], []
     if name in ("pin low", "pin + contact"):
         pins.append(scene.points["hand_r"])
     if name == "pin high":
@@ -181,12 +187,15 @@ def configuration(scene: Scene, name: str, dof: int, segment: int):
         contacts.append(Contact(scene.points["toes_r"], a, b))
     if name == "contact high":
         contacts.append(Contact(scene.points["head"], a, b))
-    for p in pins + [c.point for c in contacts]:
-        others.append(rig.controls_of(p) - Cs)
-    shared = set().union(*(rig.controls_of(p) for p in pins + [c.point for c in contacts])) & Cs if others else set()
-    # whole joints in turn: shared ones (they move the hand and the constrained point), then the
-    # constrained point's own (shallow first: they can make up for the shared ones), then the hand's
-    groups = [scene.units(shared)] + [scene.units(o, shallow=True) for o in others] + [scene.units(Cs - shared)]
+    chains = [rig.controls_of(p) for p in pins + [c.point for c in contacts]]
+    others = [ch - Cs for ch in chains]
+    shared = set().union(*chains) & Cs if chains else set()
+    # in turn: controls shared with the constrained points (those shared with the most of them
+    # first), the constrained points' own (shallow joints first: they can make up for the
+    # shared ones), then the hand's own
+    by_joint = scene.units(shared)
+    by_joint.sort(key=lambda unit: -sum(unit[0] in ch for ch in chains))
+    groups = [by_joint] + [scene.units(o, shallow=True) for o in others] + [scene.units(Cs - shared)]
     if not others:
         groups = [scene.units(Cs)]
     keep = scene.unlocked(groups, k)

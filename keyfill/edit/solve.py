@@ -237,61 +237,78 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
     theta = np.minimum(np.maximum(theta0, lb), ub)  # tangents the limits forbid are brought inside first
     lin = lin0 if np.array_equal(theta, theta0) else relinearize(theta)
     best_theta, best_d = (theta.copy(), lin.distance) if lin.violation <= eps else (None, np.inf)
-    iterations = stall = 0
-    last = None
+    count = [0]  # QPs solved
+    last = [None]
     pair_vars, pair_other = pairs
     band = settings.band * eps
-    radius = np.inf  # how far toward the target one step aims (shrinks when the linear model fails)
-    aim = np.inf
-    while best_d >= kappa and iterations < settings.max_iterations and stall < settings.patience:
-        gap = theta[pair_vars] - pair_other if len(pair_vars) else None
-        Jm, Jc = lin.jacobians()
-        # a step that broke constraints (the linear model's error) is mended first, holding the
-        # moved point where it is; otherwise aim at the target, or part way (the trust radius)
-        mend = lin.violation > eps and best_theta is not None
-        if not mend:
-            aim = min(radius, lin.distance)
-        rm = 0.0 * lin.rm if mend else (lin.rm * (aim / lin.distance) if lin.distance > aim else lin.rm)
-        k = 100.0 / size
+    k = 100.0 / size
+
+    def step(at, lin_at, aim):
+        """The QP step from ``at``: toward the target by ``aim`` (0: mend the constraints only)."""
+        Jm, Jc = lin_at.jacobians()
+        rm = lin_at.rm * (aim / lin_at.distance) if lin_at.distance > aim else lin_at.rm
+        mending = aim == 0.0
+        if mending:  # the smallest change that restores the constraints, holding the point (no E_b pull)
+            rm = 0.0 * rm
+        pv = pair_vars if not mending else pair_vars[:0]
+        gap = at[pv] - pair_other[: len(pv)] if len(pv) else None
         program = QP.assemble(
-            k * Jm,
-            k * rm,
-            stiffness,
-            lb - theta,
-            ub - theta,
-            k * Jc,
-            k * lin.rc,
-            k * (band + lin.allow),
-            pair_vars,
-            gap,
-            settings.weights,
-        )
+            k * Jm, k * rm, stiffness, lb - at, ub - at, k * Jc, k * lin_at.rc, k * (band + lin_at.allow),
+            pv, gap, settings.weights,
+        )  # fmt: skip
         res = QP.solve(program, solver)
-        if res.x is None and lin.violation <= eps:
+        if res.x is None and lin_at.violation <= eps:
             # the band cannot be met from here: let rows keep their current error (within eps)
-            slack = k * np.maximum(band + lin.allow, np.abs(lin.rc))
-            program.h = np.concatenate([k * lin.rc + slack, slack - k * lin.rc])
+            slack = k * np.maximum(band + lin_at.allow, np.abs(lin_at.rc))
+            program.h = np.concatenate([k * lin_at.rc + slack, slack - k * lin_at.rc])
             res = QP.solve(program, solver)
-        iterations += 1
-        last = (lin, res)
-        if res.x is None:
-            break
-        # the largest step that improves: less violation when mending, else a lower merit
-        # (distance plus 5 x the violation beyond eps)
-        for alpha in (1.0, 0.5, 0.25, 0.125):
-            trial = np.minimum(np.maximum(theta + alpha * res.x, lb), ub)
-            new = relinearize(trial)
-            if (new.violation < lin.violation) if mend else (_merit(new, eps) < _merit(lin, eps)):
+        count[0] += 1
+        last[0] = (lin_at, res)
+        return res.x
+
+    radius = np.inf  # how far toward the target one step aims (shrinks when the linear model fails)
+    stall = 0
+    while best_d >= kappa and count[0] < settings.max_iterations and stall < settings.patience:
+        if lin.violation > eps and best_theta is not None:
+            # constraints broken by the linear model's error: mend them, holding the moved point
+            x = step(theta, lin, 0.0)
+            if x is None:
                 break
-        else:  # no progress: go back to the best point and aim closer
-            radius = 0.25 * aim
-            if best_theta is not None:
-                theta = best_theta.copy()
-            lin = relinearize(theta)
-            stall += 1
-            continue
-        theta, lin = trial, new
-        if not mend:
+            trial = np.minimum(np.maximum(theta + x, lb), ub)
+            new = relinearize(trial)
+            if new.violation < lin.violation:
+                theta, lin = trial, new
+            else:  # cannot mend: back to the best point, aim closer
+                theta, radius = best_theta.copy(), 0.25 * min(radius, lin.distance)
+                lin = relinearize(theta)
+                stall += 1
+                continue
+        else:
+            aim = min(radius, lin.distance)
+            x = step(theta, lin, aim)
+            if x is None:
+                break
+            for alpha in (1.0, 0.5, 0.25, 0.125):
+                trial = np.minimum(np.maximum(theta + alpha * x, lb), ub)
+                new = relinearize(trial)
+                if new.violation > eps and lin.violation <= eps and count[0] < settings.max_iterations:
+                    # second-order correction: mend at the trial point before judging the step
+                    x2 = step(trial, new, 0.0)
+                    if x2 is not None:
+                        fixed = np.minimum(np.maximum(trial + x2, lb), ub)
+                        mended = relinearize(fixed)
+                        if mended.violation < new.violation:
+                            trial, new = fixed, mended
+                if _merit(new, eps) < _merit(lin, eps):
+                    break
+            else:  # no progress: go back to the best point and aim closer
+                radius = 0.25 * aim
+                if best_theta is not None:
+                    theta = best_theta.copy()
+                lin = relinearize(theta)
+                stall += 1
+                continue
+            theta, lin = trial, new
             if lin.violation > eps:
                 radius = 0.5 * aim
             elif alpha == 1.0:
@@ -300,9 +317,9 @@ def _iterate(theta0, lin0, relinearize, lb, ub, stiffness, pairs, eps, kappa, so
         better = best_d - max(1e-3 * kappa, 0.01 * best_d) if np.isfinite(best_d) else np.inf
         if lin.violation <= eps and lin.distance < better:
             best_theta, best_d, stall = theta.copy(), lin.distance, 0
-        elif not mend:
-            stall += 1  # (mending steps that reduce the violation are progress)
-    return best_theta, best_d, iterations, best_d < kappa, lin, last
+        elif lin.violation <= eps:
+            stall += 1
+    return best_theta, best_d, count[0], best_d < kappa, lin, last[0]
 
 
 def _merit(lin: _Linear, eps: float) -> float:

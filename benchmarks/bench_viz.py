@@ -1,7 +1,10 @@
 """Speed of ``keyfill preview`` (a 300-frame GIF) and ``keyfill plot`` (10,000 frames).
 
 Goals (issue 7): a 300-frame, 22-joint GIF in under 10 s; a plot of 10,000
-frames in under 3 s, on this machine, process start included.
+frames in under 3 s, on this machine, process start included. The work is
+single-threaded, so on an idle machine the wall time is about the CPU time;
+on the shared 2-core machine under load the wall time can be twice that, so
+both are printed and judged.
 
 Inputs (Bandai-Namco dataset-1, read from ``data/bandai1/`` or unpacked there
 from ``../shared/data/corpora/``, see ``bench_bvh_io.py``; skipped without it):
@@ -195,8 +198,11 @@ def main() -> int:
     print(f"load average before/after: {load_before} / {result['load_average_after']}; medians of {args.repeat} runs")
     print(f"  {'':48} {'wall s':>7} {'cpu s':>7}")
     for name, row in rows.items():
-        goal = f"  goal < {row['goal_s']:.0f} s: {'met' if row['seconds'] < row['goal_s'] else 'MISSED'}" \
-            if "goal_s" in row else ""
+        goal = ""
+        if "goal_s" in row:
+            verdict = {True: "met", False: "MISSED"}
+            goal = (f"  goal < {row['goal_s']:.0f} s: wall {verdict[row['seconds'] < row['goal_s']]},"
+                    f" CPU {verdict[row['cpu_seconds'] < row['goal_s']]}")
         extra = f"  {row['bytes'] / 1000:.0f} kB" if "bytes" in row else ""
         speed = f"  keyfill uses {row['keyfill_speedup_cpu']:.1f}x less CPU" if "keyfill_speedup_cpu" in row else ""
         per = f"  {row['ms_per_frame']:.1f} ms/frame" if "ms_per_frame" in row else ""

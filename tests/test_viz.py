@@ -204,7 +204,7 @@ def test_plot_of_files_with_different_variables_fails(tmp_path):
 def test_limb_sides():
     left = ["LeftUpLeg", "mixamorig:LeftHand", "UpperArm_L", "l_knee", "LHipJoint", "Foot.L"]
     right = ["RightArm", "Hand_R", "RThumb", "r_elbow"]
-    centre = ["Hips", "Spine1", "Head", "LowerBack", "joint_Root", "Leg"]
+    centre = ["Hips", "Spine1", "Head", "LowerBack", "joint_Root", "Leg", "LUMBAR", "Root"]
     assert [S.limb_side(n) for n in left] == [-1] * len(left)
     assert [S.limb_side(n) for n in right] == [1] * len(right)
     assert [S.limb_side(n) for n in centre] == [0] * len(centre)

@@ -182,6 +182,8 @@ def select_panels(curves: Curves, motion: Motion, joints=None, channels=None) ->
     elif not joints and len(cand) > MAX_DEFAULT_PANELS:
         first = _first_moving_joint(curves, cand)
         cand = [i for i in cand if curves.joints[i] == first]
+    if not cand:
+        raise DataError("nothing to plot: no channel of this motion is animated; try --positions")
     if len(cand) > MAX_PANELS:
         raise UsageError(f"{len(cand)} panels is too many for one figure (at most {MAX_PANELS}); "
                          "choose fewer with --joints or --channels")
@@ -235,8 +237,9 @@ def plot(
 
     Panels come from the first motion (see :func:`select_panels`); every other
     motion must have the same variables. Lamps show their six variables
-    unless ``joints`` or ``positions`` ask for channels or world positions. ``frames`` is ``"A:B"`` (see
-    :func:`keyfill.viz.frame_range`). The file is written atomically.
+    unless ``joints`` or ``positions`` ask for channels or world positions.
+    ``frames`` is ``"A:B"`` (see :func:`keyfill.viz.frame_range`). The file is
+    written atomically.
     """
     from keyfill.io import atomic_output
     from keyfill.viz import style
@@ -247,20 +250,16 @@ def plot(
     lamp = lamp_module()
     use_lamp = (not joints and not positions and lamp is not None
                 and all(lamp.is_lamp(m.skeleton) for m in motions))
-    series = []  # (label, x (F,), values (F, P), key positions)
-    panels: list[int] = []
-    names: tuple[str, ...] = ()
-    units: tuple[str, ...] = ()
+    series = []  # (label, frame numbers (F,), values (F, P), key indices into the frames)
     for n, (motion, label) in enumerate(zip(motions, labels)):
         idx = frame_range(frames, motion.num_frames, label)
         cut = motion.frames(slice(int(idx[0]), int(idx[-1]) + 1))
         curves = curves_of(cut, positions=positions, lamp=use_lamp)
         if n == 0:
-            panels = select_panels(curves, cut, joints, channels)
-            names = tuple(curves.names[i] for i in panels)
-            curves_joints = [curves.joints[i] for i in panels]
-            units = tuple(curves.units[i] for i in panels)
-            cols = panels
+            cols = select_panels(curves, cut, joints, channels)
+            names = tuple(curves.names[i] for i in cols)
+            panel_joints = [curves.joints[i] for i in cols]
+            units = tuple(curves.units[i] for i in cols)
         else:
             lookup = {name: i for i, name in enumerate(curves.names)}
             missing = [name for name in names if name not in lookup]
@@ -271,7 +270,7 @@ def plot(
         series.append((label, idx, curves.values[:, cols], keys))
 
     P = len(names)
-    cells = _layout(curves_joints)
+    cells = _layout(panel_joints)
     nrows = max(r for r, _ in cells) + 1
     ncols = max(c for _, c in cells) + 1
     with style.style():
@@ -297,7 +296,7 @@ def plot(
             ax.margins(x=0.01, y=0.1)
             if (row + 1, col) not in used:
                 ax.tick_params(labelbottom=True)
-        fig.supxlabel("frame", fontsize=8, y=0.02 / fig.get_figheight() * 8)
+        fig.supxlabel("frame", fontsize=8, y=0.16 / fig.get_figheight())  # 0.16 in above the bottom
         handles = _legend_handles(series, style)
         fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 1.0), ncols=min(len(handles), 6),
                    frameon=False)

@@ -69,9 +69,9 @@ def limb_side(name: str) -> int:
         if word in low:
             return side
     tokens = [t for t in re.split(r"[^A-Za-z0-9]+", base) if t]
-    if any(t in ("L", "l") for t in tokens) or re.match(r"L[A-Z]", base):
+    if any(t in ("L", "l") for t in tokens) or re.match(r"L[A-Z][a-z]", base):
         return -1
-    if any(t in ("R", "r") for t in tokens) or re.match(r"R[A-Z]", base):
+    if any(t in ("R", "r") for t in tokens) or re.match(r"R[A-Z][a-z]", base):
         return 1
     return 0
 
@@ -118,7 +118,7 @@ def figure_points(motion: Motion) -> Figure3D:
             bones.append((j, J + e))
             sides.append(limb_side(sk.names[j]))
     lamp = lamp_module()
-    if lamp is not None and lamp.is_lamp(sk) and sk.end_sites:
+    if lamp is not None and lamp.is_lamp(sk) and sk.end_sites and sk.end_sites[0][0] == 3:  # the head's tip
         points, extra = _lamp_outline(lamp.DIMENSIONS, world_rot, points)
         bones = [b for b in bones if b != (3, J)] + extra
         sides += [0] * (len(bones) - len(sides))

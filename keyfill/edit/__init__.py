@@ -1,1 +1,12 @@
-"""Tangent-space editing of Bezier animation curves (Ciccone et al. 2019)."""
+"""Tangent-space editing of Bezier animation curves (Ciccone, Oztireli & Sumner 2019).
+
+* :mod:`keyfill.edit.curves`: the curve type (per-control Bezier keys and tangents), exact evaluation, baking;
+* :mod:`keyfill.edit.fit`: curves through the keys of a dense motion;
+* :mod:`keyfill.edit.curvefile`: curves as ``pxr.Ts`` splines in USD files;
+* :mod:`keyfill.edit.rig`: states of points and their Jacobians with respect to the controls;
+* :mod:`keyfill.edit.edits`: edit files (TOML);
+* :mod:`keyfill.edit.qp`: the quadratic programs (Eqs. 10 and 13) through qpsolvers;
+* :mod:`keyfill.edit.solve`: ``edit_tangents`` and ``pose``.
+
+The walkthrough is docs/editing.md.
+"""

@@ -31,7 +31,15 @@ never change, no key is added):
    is within ``tolerance`` of its target with every kept constraint within
    ``epsilon``; after 5 iterations without improvement the edit is rejected
    (:class:`~keyfill.errors.InfeasibleError`, naming the constraints whose
-   multipliers block it) unless ``best_effort``.
+   multipliers block it) unless ``best_effort``. A step whose constraints
+   break by more than the linear model allows is *mended* (a QP that holds
+   the moved point and restores them, from the step's end), steps that make
+   things worse are halved, and a trust radius limits how far one step aims.
+
+Pins keep the input's trajectories. A contact holds its point on the
+straight path between its positions at the two keys (still when they agree;
+up to 1 % of the character's size apart is accepted for captured feet) and
+never further from it than the input already was.
 
 A *timing* edit applies Eq. 12 (with the tangent's slope kept, so unified
 keys stay unified). :func:`pose` is the static case of Eq. 13: it changes

@@ -292,3 +292,17 @@ def test_cli_evaluate_a_model(trained, corpus_dir, capsys):
     proto = B.lafan1([corpus_dir], ["*_calm_*"], fold=True, cache=False)
     lib = B.evaluate({"m": model.benchmark_method()}, proto.test, proto.stats, (5, 15))
     assert res[out.name]["15"]["L2Q"] == pytest.approx(lib["m"][15]["L2Q"], rel=1e-9)
+
+
+def test_output_fk_loss_is_zero_for_the_truth_and_positive_otherwise(corpus):
+    cfg = T.ModelConfig(**{**TINY.__dict__, "fk_weight": 1.0})
+    torch.manual_seed(0)
+    model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    q, r, _, _ = corpus.windows(65, 20)
+    x, y, gq, gr, kinds = make_batch(model, q[:4], r[:4], np.append(np.arange(10), 30), 31)
+    exact = T.losses(model.features, y, y, gq, gr, kinds, cfg)
+    assert float(exact["output_fk"]) < 1e-5 and float(exact["total"]) < 1e-4
+    off = T.losses(model.features, x, y, gq, gr, kinds, cfg)  # the interpolation
+    assert float(off["output_fk"]) > 1e-3
+    assert float(off["total"]) == pytest.approx(float(off["position"] + off["rotation"] + 0.01 * off["kinematics"]
+                                                      + off["output_fk"]), rel=1e-6)

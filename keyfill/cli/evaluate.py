@@ -120,4 +120,8 @@ def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengt
         return
     say(f"{protocol}: {info['test_windows']} test windows from {info['test_clips']} clips, "
         f"statistics from {info['train_windows']} windows of {info['train_clips']} clips")
+    short = info.get("test_clips_too_short", 0) + info.get("train_clips_too_short", 0)
+    if short:
+        say(f"skipped {info['test_clips_too_short']} test and {info['train_clips_too_short']} training clips "
+            f"shorter than a window")
     click.echo(benchmark.format_table(results))

@@ -56,8 +56,14 @@ def transformer(data, output, config_file, epochs, seed, resume, device, threads
         vals = " ".join(f"L2P@{n} {r[f'val_L2P_{n}_vs_interp']:.3f}" for n in train_cfg.val_lengths if f"val_L2P_{n}_vs_interp" in r)
         say(f"epoch {r['epoch']}: loss {r['loss_total']:.4f}" + (f", vs interpolation {vals}" if vals else ""))
 
+    def started(info):
+        say(f"training on {info['train_windows']} windows of {info['train_clips']} clips "
+            f"({info['clips_too_short']} clips shorter than a window skipped), "
+            f"validating on {info['validation_clips']} clips; mirroring {'on' if info['mirrored'] else 'off'}")
+
     model = train(corpus, output, model_cfg, train_cfg, seed=seed, device=device, resume=resume,
-                  progress=lambda **kw: progress(**kw), report=None if as_json else report)
+                  progress=lambda **kw: progress(**kw), report=None if as_json else report,
+                  started=None if as_json else started)
     if as_json:
         emit_json({"output": output, **model.info})
     else:

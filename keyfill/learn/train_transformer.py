@@ -239,6 +239,7 @@ def train(
     resume: bool = False,
     progress: Callable | None = None,
     report: Callable[[dict], None] | None = None,
+    started: Callable[[dict], None] | None = None,
 ) -> CompletionModel:
     """Train a transformer on ``corpus`` and write it to ``output`` (``.safetensors``).
 
@@ -256,6 +257,7 @@ def train(
         resume: continue from the checkpoint beside ``output``.
         progress: ``progress(total=..., desc=...)`` -> a tqdm-like bar (optional).
         report: called with each epoch's log record (optional).
+        started: called once with the data summary before the first step (optional).
     """
     import torch
 
@@ -276,6 +278,8 @@ def train(
     info = {"seed": seed, "corpus_clips": len(corpus), **data.info, "mirrored": mirror is not None}
     if data.validation is not None:
         info["validation_windows"] = data.validation.info["test_windows"]
+    if started is not None:
+        started(info)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)

@@ -117,29 +117,21 @@ def anchor_frame(keys) -> int:
     return int(keys[gaps[0]] if len(gaps) else keys[0])
 
 
-def prefill(quats, root, keys):
-    """LERP the root and SLERP local quaternions between the nearest keys (numpy or torch).
+def prefill(quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """LERP the root and SLERP local quaternions between the nearest keys.
 
     ``quats (..., T, J, 4)``, ``root (..., T, 3)``; frames outside the keys hold
-    the nearest key. Only key frames are read.
+    the nearest key. Only key frames are read; key frames are copied.
     """
     T = quats.shape[-3]
     k = np.asarray(keys, dtype=np.int64)
     s, u = segment_coordinates(T, k)
     a, b = k[s], k[s + 1]
-    xp = R._xp(quats)
-    uu = u if xp is np else xp.as_tensor(u, dtype=quats.dtype, device=quats.device)
-    r = root[..., a, :] + uu[:, None] * (root[..., b, :] - root[..., a, :])
+    r = root[..., a, :] + u[:, None] * (root[..., b, :] - root[..., a, :])
     q0, q1 = quats[..., a, :, :], quats[..., b, :, :]
-    q = R.quat_slerp(q0, q1, uu[:, None] + 0 * q0[..., 0])
-    if xp is np:
-        q[..., k, :, :] = quats[..., k, :, :]
-        r[..., k, :] = root[..., k, :]
-    else:
-        q = q.clone()
-        r = r.clone()
-        q[..., k, :, :] = quats[..., k, :, :]
-        r[..., k, :] = root[..., k, :]
+    q = R.quat_slerp(q0, q1, np.broadcast_to(u[:, None], q0.shape[:-1]))
+    q[..., k, :, :] = quats[..., k, :, :]
+    r[..., k, :] = root[..., k, :]
     return q, r
 
 

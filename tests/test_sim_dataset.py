@@ -226,3 +226,26 @@ def test_help_shows_an_example(capsys):
     assert rc == 0 and "keyfill simulate -o data/hops --count 300 --seed 0" in out
     for option in ("--count", "--seed", "--iterations", "--workers", "--format", "--scheduler", "--force", "--json"):
         assert option in out
+
+
+@pytest.mark.slow
+def test_the_full_dataset_is_valid():
+    """data/hops as built by `keyfill simulate -o data/hops --count 300 --seed 0` (skipped when absent)."""
+    from keyfill.sim.hops import link_clearances
+    from keyfill.sim.settings import Settings
+
+    folder = Path(__file__).resolve().parents[1] / "data" / "hops"
+    if not (folder / "manifest.jsonl").is_file():
+        pytest.skip(f"needs {folder} (make -C examples hops)")
+    s = Settings()
+    seqs = read_dataset(folder)
+    assert len(seqs) >= 300
+    for seq in seqs:
+        rec = seq.record
+        assert rec["hops"] == 3 and seq.motion.num_frames == 87 and len(rec["keys"]) == 9
+        assert rec["distance"] >= s.min_distance and rec["max_height"] >= s.min_height
+        clear = link_clearances(to_variables(seq.motion), s.dimensions)
+        tol = s.contact_tolerance + 1e-5  # USD keeps 32-bit floats
+        assert np.all(clear[rec["liftoff_frames"], 0] <= tol) and np.all(clear[rec["landing_frames"], 0] <= tol)
+        assert np.all(clear[rec["air_frames"], 0] > s.contact_tolerance - 1e-5)
+        assert clear[:, 1:].min() > 0.0

@@ -30,6 +30,7 @@ from keyfill.edit.curves import Control
 from keyfill.motion import Skeleton
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
+_EYE = np.eye(3)
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,16 +59,31 @@ class Point:
 
 
 class Frames(NamedTuple):
-    """World frames of some joints at ``T`` times (rows for other joints are unset).
+    """World frames of a set of joints at ``T`` times.
 
-    ``rot``: ``(T, J, 3, 3)`` world rotation matrices; ``pos``: ``(T, J, 3)``
-    world positions; ``axis``: ``(T, 3, C)`` world axis of each control of
-    those joints (see the module docstring); indexed by joint / control.
+    ``moved``: ``(T, n + 1, 3, 7)``, per joint of the set (in the set's
+    order; the last slot is the world frame) its world rotation matrix
+    (columns 0-2) and, in world axes, the axes of its Euler angles (columns
+    3-5) and its translation (column 6); ``place``: ``(T, n, 3)`` world
+    positions; ``joint_at`` / ``control_at``: where a joint's frame / a
+    control's axis is (``(slot, column)``), ``-1`` when not in the set.
     """
 
-    rot: np.ndarray
-    pos: np.ndarray
-    axis: np.ndarray
+    moved: np.ndarray
+    place: np.ndarray
+    joint_at: np.ndarray
+    control_at: np.ndarray
+
+    def rot(self, joint: int, rows=slice(None)) -> np.ndarray:
+        return self.moved[rows, self.joint_at[joint], :, :3]
+
+    def pos(self, joint: int, rows=slice(None)) -> np.ndarray:
+        return self.place[rows, self.joint_at[joint]]
+
+    def axes(self, controls, rows=slice(None)) -> np.ndarray:
+        """World axes ``(T, 3, m)`` of ``controls``."""
+        at = self.control_at[controls]
+        return self.moved[rows].swapaxes(2, 3)[:, at[:, 0], at[:, 1]].swapaxes(1, 2)
 
 
 def _rotation_pattern(axes: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -106,7 +122,9 @@ class _Plan(NamedTuple):
     pattern: tuple  # where the elementary rotations' entries go (_rotation_pattern)
     levels: list  # (positions, parent positions) of the joints at each depth below the roots
     roots: np.ndarray  # positions of joints without a parent in the set
-    t_parent: np.ndarray  # position of each translation control's parent (n: the world frame)
+    first_axes: np.ndarray  # (n, 3) the unit axis of each joint's first Euler angle
+    joint_at: np.ndarray  # (J,) position of each skeleton joint in the set, -1 if absent
+    control_at: np.ndarray  # (C, 2) (slot in ``moved``, column) of each control's world axis
 
 
 class Rig:
@@ -181,6 +199,15 @@ class Rig:
             t_at = [(where[a], ax) for a in joints for ax, _ in self.trans_controls[a]]
             r_at = [(where[a], slot) for a in joints for slot, _ in self.rot_controls[a]]
             slot_axes = np.array([self.order_axes[a] for a in joints], dtype=np.int64).reshape(-1, 3)
+            joint_at = np.full(self.skeleton.num_joints, -1, dtype=np.int64)
+            joint_at[joints] = np.arange(len(joints))
+            control_at = np.full((len(self.controls), 2), -1, dtype=np.int64)
+            for a in joints:  # Euler axes: columns 3-5 of the joint; translations: the parent's axes
+                for slot, c in self.rot_controls[a]:
+                    control_at[c] = where[a], 3 + slot
+                for ax, c in self.trans_controls[a]:
+                    p = where.get(self.parents[a], -1)
+                    control_at[c] = (p if p >= 0 else len(joints)), ax
             levels = []
             for d in range(1, max(depth, default=0) + 1):
                 ks = [k for k in range(len(joints)) if depth[k] == d]
@@ -197,7 +224,9 @@ class Rig:
                 pattern=_rotation_pattern(slot_axes.reshape(-1)),
                 levels=levels,
                 roots=np.array([k for k in range(len(joints)) if parents[k] < 0]),
-                t_parent=np.array([parents[k] if parents[k] >= 0 else len(joints) for k, _ in t_at], dtype=np.int64),
+                first_axes=np.eye(3)[slot_axes[:, 0]],
+                joint_at=joint_at,
+                control_at=control_at,
             )
         return self._plans[key]
 
@@ -222,14 +251,14 @@ class Rig:
         both = first @ elem[:, :, 1]
         np.matmul(both, elem[:, :, 2], out=block[..., :3])
         ax, ar = plan.slot_axes, np.arange(n)
-        block[..., 3] = np.eye(3)[ax[:, 0]]
-        block[..., 4] = np.swapaxes(first, -1, -2)[:, ar, ax[:, 1]]
-        block[..., 5] = np.swapaxes(both, -1, -2)[:, ar, ax[:, 2]]
+        block[..., 3] = plan.first_axes
+        block[..., 4] = first.swapaxes(-1, -2)[:, ar, ax[:, 1]]
+        block[..., 5] = both.swapaxes(-1, -2)[:, ar, ax[:, 2]]
         block[..., 6] = plan.offsets
         if plan.t_at:
             block[:, plan.t_at[0], plan.t_at[1], 6] = values[:, plan.t_ctl]
         moved = np.empty((T, n + 1, 3, 7))  # the same in world axes; slot n: the world frame
-        moved[:, n, :, :3] = np.eye(3)
+        moved[:, n, :, :3] = _EYE
         place = np.empty((T, n, 3))
         r = plan.roots
         moved[:, r] = block[:, r]
@@ -242,25 +271,14 @@ class Rig:
             else:
                 moved[:, ks] = moved[:, ps, :, :3] @ block[:, ks]
                 place[:, ks] = place[:, ps] + moved[:, ks][..., 6]
-        J, C = self.skeleton.num_joints, len(self.controls)
-        rot = np.empty((T, J, 3, 3))
-        pos = np.empty((T, J, 3))
-        rot[:, plan.joints] = moved[:, :n, :, :3]
-        pos[:, plan.joints] = place
-        axis = np.empty((T, 3, C))
-        if plan.r_at:  # Euler axes: columns 3-5 of the joint's block in world axes
-            axis[:, :, plan.r_ctl] = np.swapaxes(np.swapaxes(moved, 2, 3)[:, plan.r_at[0], 3 + plan.r_at[1]], 1, 2)
-        if plan.t_at:  # translation axes: the parent's world axes
-            axis[:, :, plan.t_ctl] = np.swapaxes(np.swapaxes(moved, 2, 3)[:, plan.t_parent, plan.t_at[1]], 1, 2)
-        return Frames(rot, pos, axis)
+        return Frames(moved, place, plan.joint_at, plan.control_at)
 
     def state(self, frames: Frames, point: Point, rows=None) -> tuple[np.ndarray, np.ndarray]:
         """``(position (T, 3), rotation matrices (T, 3, 3))`` of ``point`` (at ``rows`` of ``frames`` only)."""
-        rot = frames.rot[:, point.joint]
-        pos = frames.pos[:, point.joint]
-        if rows is not None:
-            rot, pos = rot[rows], pos[rows]
-        if np.any(point.offset):
+        sel = slice(None) if rows is None else rows
+        rot = frames.rot(point.joint, sel)
+        pos = frames.pos(point.joint, sel)
+        if point.offset.any():
             pos = pos + rot @ point.offset
         return pos, rot
 
@@ -279,9 +297,9 @@ class Rig:
             return out
         ctl = np.asarray(controls, dtype=np.int64)[cols]
         sel = slice(None) if rows is None else rows
-        v = frames.axis[sel][:, :, ctl]  # (T, 3, m)
+        v = frames.axes(ctl, sel)  # (T, 3, m)
         is_rot = self._is_rot[ctl]
-        lever = position[:, :, None] - np.swapaxes(frames.pos[sel][:, self._joint_of[ctl]], 1, 2)
+        lever = position[:, :, None] - frames.place[sel][:, frames.joint_at[self._joint_of[ctl]]].swapaxes(1, 2)
         cross = v[:, [1, 2, 0]] * lever[:, [2, 0, 1]] - v[:, [2, 0, 1]] * lever[:, [1, 2, 0]]
         out[:, :3, cols] = np.where(is_rot, cross, v)
         if point.orientation:

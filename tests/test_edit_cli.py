@@ -159,3 +159,19 @@ def test_usage_errors(tmp_path, capsys, curves_file):
     assert code == 2 and "QP solver 'nope' is not installed; available: " in err
     code, _, err = run(capsys, "convert", curves_file, tmp_path / "x.bvh", "--curves", "--keys", "0,10")
     assert code == 2 and "--curves writes a USD curves file" in err
+
+
+def test_curves_input_must_be_a_curves_file(tmp_path, capsys):
+    edit = tmp_path / "reach.toml"
+    edit.write_text(REACH)
+    bvh = tmp_path / "wave.bvh"
+    io.save(character(), bvh)
+    plain = tmp_path / "plain.usda"
+    io.save(character(), plain)
+    for src, message in (
+        (bvh, "not a keyfill curves file (a .usda"),
+        (plain, "no Curves prim"),
+        (tmp_path / "missing.usda", "no such file"),
+    ):
+        code, _, err = run(capsys, "edit-tangents", src, "--edit", edit, "-o", tmp_path / "o.usda")
+        assert code == 1 and message in err and len(err.strip().splitlines()) == 1

@@ -269,6 +269,11 @@ def read(path: str | Path, label=None) -> Curves:
     from keyfill.io import usd
 
     label = path if label is None else label
+    hint = "make one with keyfill convert IN.bvh OUT.usda --curves --keys ..."
+    if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
+        raise FormatError(f"not a keyfill curves file (a .usda, .usdc or .usd file); {hint}", label)
+    if not Path(path).is_file():
+        raise FormatError("no such file", label)
     motion = usd.read(path, label=label, curves=False)
     stage = Usd.Stage.Open(str(path))
     return from_stage(stage, motion, label)

@@ -274,6 +274,7 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--configs", default=",".join(CONFIGS), help="comma-separated subset of: " + ", ".join(CONFIGS))
     parser.add_argument("--json", type=Path, help="also write the results here")
+    parser.add_argument("--markdown", type=Path, help="also write the tables (wall and CPU medians) as Markdown")
     args = parser.parse_args(argv)
     if not WALK.exists():
         print(f"needs {WALK} (the shared Bandai fixtures beside the checkout)", file=sys.stderr)
@@ -321,6 +322,9 @@ def main(argv=None) -> int:
     results["load_after"] = os.getloadavg()[0]
     print(report(results))
     print(report(results, "median_cpu_ms"))
+    if args.markdown:
+        args.markdown.parent.mkdir(parents=True, exist_ok=True)
+        args.markdown.write_text(markdown(results))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=1, sort_keys=True))
@@ -335,7 +339,8 @@ def report(results: dict, key: str = "median_ms") -> str:
     """
     lines = []
     worst = 0.0
-    for name, by_length in results["bandai"].items():
+    for name in [c for c in CONFIGS if c in results["bandai"]]:
+        by_length = results["bandai"][name]
         ti = CONFIGS.index(name)
         lines.append(f"\n**{name}** (Bandai; paper: table {ti + 1} of Table 3 in reading order)\n")
         lines.append("| frames | " + " | ".join(f"{d} DOF" for d in DOFS) + " |")
@@ -366,6 +371,38 @@ def report(results: dict, key: str = "median_ms") -> str:
         f"wall {results['wall_s']:.0f} s, load {results['load']:.2f}"
     )
     return "\n".join(lines)
+
+
+def markdown(results: dict) -> str:
+    """The tables for docs: per cell ``wall / CPU ms (paper)``, bold where wall > 1/10 of the paper."""
+    lines = []
+    for name in [c for c in CONFIGS if c in results["bandai"]]:
+        by_length = results["bandai"][name]
+        ti = CONFIGS.index(name)
+        lines += [f"**{name}**", "", "| frames | " + " | ".join(f"{d} DOF" for d in DOFS) + " |"]
+        lines.append("|---|" + "---|" * len(DOFS))
+        for li, length in enumerate(LENGTHS):
+            cells = []
+            for di, dof in enumerate(DOFS):
+                cell = by_length[str(length)][str(dof)]
+                paper = PAPER[name][li][di]
+                goal = paper if ti == 0 else min(paper, PAPER_CONSTRAINED_MIN[li][di])
+                text = f"{cell['median_ms']:.1f} / {cell['median_cpu_ms']:.1f} ({paper})"
+                if cell["median_ms"] > 0.1 * goal:
+                    text = f"**{text}**"
+                if cell["failed"]:
+                    text += f" {cell['failed']} unreached"
+                cells.append(text)
+            lines.append(f"| {length} | " + " | ".join(cells) + " |")
+        lines.append("")
+    lines += ["**lamp, alone** (24 DOF)", "", "| frames | 24 DOF |", "|---|---|"]
+    for li, length in enumerate(LENGTHS):
+        cell = results["lamp"][str(length)]
+        text = f"{cell['median_ms']:.1f} / {cell['median_cpu_ms']:.1f} ({PAPER['alone'][li][0]})"
+        if cell["median_ms"] > 0.1 * PAPER["alone"][li][0]:
+            text = f"**{text}**"
+        lines.append(f"| {length} | {text} |")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -85,7 +85,8 @@ def test_frame_rates_must_agree(tmp_path):
         C.load_corpus([tmp_path])
 
 
-def test_cache_round_trip_and_invalidation(tmp_path):
+def test_cache_round_trip_and_invalidation(tmp_path, monkeypatch):
+    monkeypatch.setattr(C, "CACHE_AFTER_S", 0.0)
     folder = tmp_path / "clips"
     write_corpus(folder, styles=("a",), clips_per_style=2)
     first = C.load_corpus([folder])

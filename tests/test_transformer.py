@@ -21,6 +21,11 @@ TINY_TRAINING = TrainConfig(epochs=2, batch_size=16, lr=2e-3, warmup_epochs=0.2,
 
 
 @pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("KEYFILL_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture(autouse=True)
 def one_thread():
     """Small models train fastest on one thread (and much faster on a busy machine)."""
     threads = torch.get_num_threads()

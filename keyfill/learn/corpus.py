@@ -40,6 +40,7 @@ import re
 import shutil
 import tarfile
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -51,6 +52,7 @@ from keyfill.errors import DataError
 from keyfill.motion import Motion, Skeleton
 
 CACHE_VERSION = 1
+CACHE_AFTER_S = 1.0  #: only corpora that take longer than this to read are cached
 
 #: known corpora: name -> (archive in ../shared/data/corpora, folder under data/, BVH folder inside it)
 CORPORA = {
@@ -272,7 +274,8 @@ def load_corpus(
         paths: files or folders (searched recursively for ``*.bvh``).
         pattern: keep only files whose name matches this shell pattern.
         fold: fold the top joint into its child (``None``: when it is static).
-        cache: read and write the preprocessed arrays under :func:`cache_dir`.
+        cache: read the preprocessed arrays from :func:`cache_dir`, and write
+            them there when reading the files took more than a second.
         progress: optional wrapper for the file iterator (e.g. a tqdm bar).
 
     Raises:
@@ -287,8 +290,9 @@ def load_corpus(
             return _read_cache(cached)
         except (OSError, ValueError, KeyError):
             pass  # a damaged cache entry is rebuilt below
+    t0 = time.perf_counter()
     corpus = _load(files, fold, progress)
-    if cache:
+    if cache and time.perf_counter() - t0 > CACHE_AFTER_S:
         _write_cache(corpus, cached)
     return corpus
 

@@ -59,6 +59,23 @@ def test_folder_contents(reference):
         assert len(rec["frame_times"]) == 87 and rec["liftoff_frames"] == [0, 31, 62]
 
 
+def test_a_record_replays_its_episode(reference):
+    from keyfill.sim.controller import Controller
+    from keyfill.sim.hops import analyse
+    from keyfill.sim.physics import LampWorld
+    from keyfill.sim.settings import Settings
+
+    rec = read_manifest(reference)[1]
+    settings = Settings()
+    assert rec["settings"] == settings.to_dict()
+    with LampWorld(settings) as world:
+        episode = world.simulate(Controller.from_dict(rec["controller"]))
+    hops = analyse(episode, settings)
+    assert episode.times[hops.liftoffs].tolist() == rec["liftoff_times"]
+    assert episode.times[hops.landings].tolist() == rec["landing_times"]
+    assert (hops.distance, hops.max_height) == (rec["distance"], rec["max_height"])
+
+
 def test_read_dataset(reference):
     seqs = read_dataset(reference)
     assert [s.id for s in seqs] == [r["id"] for r in read_manifest(reference)]

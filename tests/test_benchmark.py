@@ -59,6 +59,32 @@ def test_baselines_fill_only_the_transition():
     np.testing.assert_allclose(iq[:, 12], R.quat_slerp(q[:, 9], q[:, 15], 0.5), atol=1e-12)
 
 
+def test_baselines_on_any_key_layout():
+    rng = np.random.default_rng(2)
+    q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 13, 3, 4))), axis=1)
+    r = rng.normal(size=(2, 13, 3))
+    keys = [1, 4, 10]
+    pq, pr = B.interpolation(None, q, r, keys)
+    np.testing.assert_array_equal(pq[:, keys], q[:, keys])
+    np.testing.assert_allclose(pr[:, 2], r[:, 1] + (r[:, 4] - r[:, 1]) / 3)
+    np.testing.assert_allclose(pq[:, 7], R.quat_slerp(q[:, 4], q[:, 10], 0.5), atol=1e-12)
+    np.testing.assert_array_equal(pr[:, 0], r[:, 1])  # before the first key: hold it
+    np.testing.assert_array_equal(pr[:, 12], r[:, 10])  # after the last key: hold it
+    zq, zr = B.zero_velocity(None, q, r, keys)
+    np.testing.assert_array_equal(zr[:, 5:10], np.repeat(r[:, 4:5], 5, axis=1))
+    np.testing.assert_array_equal(zr[:, [1, 4, 10, 11]], r[:, [1, 4, 10, 10]])
+
+
+def test_score_any_key_layout(walkers):
+    proto = B.lafan1([walkers], ["*_happy_*"])
+    infill = B.score_keys({"i": B.interpolation, "z": B.zero_velocity}, proto.test, proto.stats, np.arange(0, 61, 10))
+    assert 0 < infill["i"]["L2P"] < infill["z"]["L2P"]
+    inbetween = B.score_keys({"i": B.interpolation}, proto.test, proto.stats, np.append(np.arange(10), 25))
+    assert inbetween["i"] == B.evaluate({"i": B.interpolation}, proto.test, proto.stats, (15,))["i"][15]
+    with pytest.raises(UsageError, match="key 70 is beyond the 65-frame test windows"):
+        B.score_keys({"i": B.interpolation}, proto.test, proto.stats, [0, 70])
+
+
 def test_lengths_the_windows_cannot_hold_are_refused(walkers):
     proto = B.lafan1([walkers], ["*_happy_*"], fold=True)
     with pytest.raises(UsageError, match="transition length 46 does not fit: .*65 frames.*1 to 45"):

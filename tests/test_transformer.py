@@ -92,17 +92,6 @@ def test_sampled_layouts_fit_the_window():
     assert seen == {"inbetween", "infill", "blend"}
 
 
-def test_prefill_interpolates_between_keys_and_keeps_them():
-    rng = np.random.default_rng(2)
-    q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 11, 3, 4))), axis=1)
-    r = rng.normal(size=(2, 11, 3))
-    keys = [0, 4, 10]
-    pq, pr = T.prefill(q, r, keys)
-    np.testing.assert_array_equal(pq[:, keys], q[:, keys])
-    np.testing.assert_allclose(pr[:, 2], 0.5 * (r[:, 0] + r[:, 4]))
-    np.testing.assert_allclose(pq[:, 7], R.quat_slerp(q[:, 4], q[:, 10], 0.5), atol=1e-12)
-
-
 def test_canonical_frame_round_trip():
     rng = np.random.default_rng(3)
     q = R.quat_normalize(rng.normal(size=(3, 20, 4, 4)))

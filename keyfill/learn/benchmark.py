@@ -26,6 +26,8 @@ given frames.
 A method is a function ``(skeleton, quats (B, T, J, 4), root (B, T, 3), keys)
 -> (quats, root)`` over windows of ``T = 11 + n`` frames whose unknown frames are
 NaN (so a method cannot see them); it returns all ``T`` frames.
+:func:`score_keys` scores any other key layout (in-filling, blending) the
+same way.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
 from keyfill.kinematics import fk
 from keyfill.learn import metrics
+from keyfill.learn.baselines import segment_coordinates
 from keyfill.learn.corpus import Corpus, load_corpus
 from keyfill.motion import Keys, Motion, Skeleton
 
@@ -176,25 +179,31 @@ class TestSet:
 # --- methods ---------------------------------------------------------------------------
 
 
-def zero_velocity(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys: np.ndarray):
-    """Hold the last context frame (``keys[-2]``) over the transition."""
-    last = keys[-2]
-    q, r = quats.copy(), root.copy()
-    q[:, last + 1 : keys[-1]] = quats[:, last : last + 1]
-    r[:, last + 1 : keys[-1]] = root[:, last : last + 1]
-    return q, r
+def zero_velocity(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """Hold the previous key (for in-betweening: the last context frame) until the next key."""
+    k = np.asarray(keys, dtype=np.int64)
+    s, _ = segment_coordinates(quats.shape[1], k)
+    src = np.where(np.arange(quats.shape[1]) >= k[-1], k[-1], k[s])
+    return quats[:, src].copy(), root[:, src].copy()
 
 
-def interpolation(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys: np.ndarray):
-    """LERP the root and SLERP the local quaternions from the last context frame to the target."""
-    a, b = int(keys[-2]), int(keys[-1])
-    n = b - a - 1
-    w = np.linspace(0.0, 1.0, n + 2)[1:-1]  # (n,)
-    q, r = quats.copy(), root.copy()
-    r[:, a + 1 : b] = root[:, a : a + 1] + w[None, :, None] * (root[:, b : b + 1] - root[:, a : a + 1])
-    q0 = np.broadcast_to(quats[:, a : a + 1], (len(quats), n) + quats.shape[2:])
-    q1 = np.broadcast_to(quats[:, b : b + 1], q0.shape)
-    q[:, a + 1 : b] = R.quat_slerp(q0, q1, np.broadcast_to(w[None, :, None], q0.shape[:-1]))
+def interpolation(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """LERP the root and SLERP the local quaternions between the nearest keys.
+
+    For in-betweening this is the protocol's interpolation from the last
+    context frame to the target with weights ``linspace(0, 1, n + 2)[1:-1]``.
+    Frames outside the keys hold the nearest key; key frames are copied. Only
+    key frames are read. ``quats (B, T, J, 4)``, ``root (B, T, 3)``.
+    """
+    k = np.asarray(keys, dtype=np.int64)
+    s, u = segment_coordinates(quats.shape[1], k)
+    a, b = k[s], k[s + 1]
+    r = root[:, a] + u[:, None] * (root[:, b] - root[:, a])
+    q0 = quats[:, a]
+    q = R.quat_slerp(q0, quats[:, b], np.broadcast_to(u[:, None], q0.shape[:-1]))
+    src = np.clip(np.arange(quats.shape[1]), k[0], k[-1])
+    copy = np.union1d(k, np.flatnonzero(src != np.arange(quats.shape[1])))  # keys, and frames that hold one
+    q[:, copy], r[:, copy] = quats[:, src[copy]], root[:, src[copy]]
     return q, r
 
 
@@ -247,9 +256,8 @@ def evaluate(
     test: TestSet,
     stats: Statistics,
     lengths: Sequence[int] = LENGTHS,
-    batch_size: int | None = None,
 ) -> dict[str, dict[int, dict[str, float]]]:
-    """Score ``methods`` on ``test`` at each transition length.
+    """Score ``methods`` on ``test`` at each transition length (the LaFAN1 task).
 
     Returns ``{method: {n: {"L2Q": ..., "L2P": ..., "NPSS": ...}}}``.
 
@@ -264,32 +272,44 @@ def evaluate(
                 f"transition length {n} does not fit: the protocol's test windows have {T} frames, "
                 f"which hold transitions of 1 to {T - N_PAST - N_FUTURE} frames (10 context + n + 10)"
             )
-    if len(test.quats) == 0:
-        raise DataError("the test set has no windows")
-    skel = test.skeleton
     out: dict[str, dict[int, dict[str, float]]] = {name: {} for name in methods}
     for n in lengths:
-        T_n = N_PAST + n + 1
-        keys = np.append(np.arange(N_PAST), N_PAST + n)
-        gt_q, gt_r = test.quats[:, :T_n], test.root[:, :T_n]
-        given_q, given_r = gt_q.copy(), gt_r.copy()
-        given_q[:, N_PAST : N_PAST + n] = np.nan
-        given_r[:, N_PAST : N_PAST + n] = np.nan
-        trans = slice(N_PAST, N_PAST + n)
-        g_q, g_p = global_pose(gt_q[:, trans], gt_r[:, trans], skel.offsets, skel.parents)
-        for name, method in methods.items():
-            step = batch_size or len(gt_q)
-            parts = [method(skel, given_q[i : i + step], given_r[i : i + step], keys) for i in range(0, len(gt_q), step)]
-            p_q = np.concatenate([p[0] for p in parts])
-            p_r = np.concatenate([p[1] for p in parts])
-            if p_q.shape != gt_q.shape or p_r.shape != gt_r.shape:
-                raise ValueError(f"method {name!r} returned shapes {p_q.shape}, {p_r.shape}")
-            pr_q, pr_p = global_pose(p_q[:, trans], p_r[:, trans], skel.offsets, skel.parents)
-            out[name][n] = {
-                "L2Q": metrics.l2q(g_q, pr_q),
-                "L2P": metrics.l2p(g_p, pr_p, stats.x_mean, stats.x_std),
-                "NPSS": metrics.npss(g_q, pr_q),
-            }
+        res = score_keys(methods, test, stats, np.append(np.arange(N_PAST), N_PAST + n))
+        for name in methods:
+            out[name][n] = res[name]
+    return out
+
+
+def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, keys) -> dict[str, dict[str, float]]:
+    """Score ``methods`` on any key layout: the test windows cut to ``keys[-1] + 1`` frames.
+
+    Every frame between the first and the last key that is not a key is hidden
+    (NaN) from the methods and scored. Returns ``{method: {"L2Q", "L2P", "NPSS"}}``.
+    """
+    keys = np.asarray(keys, dtype=np.int64)
+    if len(test.quats) == 0:
+        raise DataError("the test set has no windows")
+    if keys[-1] >= test.quats.shape[1]:
+        raise UsageError(f"key {keys[-1]} is beyond the {test.quats.shape[1]}-frame test windows")
+    skel = test.skeleton
+    T = int(keys[-1]) + 1
+    hidden = np.setdiff1d(np.arange(keys[0], T), keys)
+    gt_q, gt_r = test.quats[:, :T], test.root[:, :T]
+    given_q, given_r = gt_q.copy(), gt_r.copy()
+    given_q[:, hidden] = np.nan
+    given_r[:, hidden] = np.nan
+    g_q, g_p = global_pose(gt_q[:, hidden], gt_r[:, hidden], skel.offsets, skel.parents)
+    out = {}
+    for name, method in methods.items():
+        p_q, p_r = method(skel, given_q, given_r, keys)
+        if p_q.shape != gt_q.shape or p_r.shape != gt_r.shape:
+            raise ValueError(f"method {name!r} returned shapes {p_q.shape}, {p_r.shape}")
+        pr_q, pr_p = global_pose(p_q[:, hidden], p_r[:, hidden], skel.offsets, skel.parents)
+        out[name] = {
+            "L2Q": metrics.l2q(g_q, pr_q),
+            "L2P": metrics.l2p(g_p, pr_p, stats.x_mean, stats.x_std),
+            "NPSS": metrics.npss(g_q, pr_q),
+        }
     return out
 
 

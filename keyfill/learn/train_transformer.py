@@ -51,7 +51,6 @@ from keyfill.learn.transformer import (
     frame_kinds,
     losses,
     new_model,
-    prefill,
 )
 
 LAYOUTS = ("inbetween", "infill", "blend")
@@ -170,7 +169,7 @@ def make_batch(model: CompletionModel, quats: np.ndarray, root: np.ndarray, keys
     q, r = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
     turn, shift = canonical_transform(q, r, keys, model.config.facing_axis, model.skeleton.up_axis)
     q, r = apply_transform(q, r, turn, shift)
-    pq, pr = prefill(q, r, keys)
+    pq, pr = benchmark.interpolation(None, q, r, keys)
     dev = model.device
     t = lambda a: torch.as_tensor(a, dtype=torch.float32, device=dev)  # noqa: E731
     gq, gr = t(q), t(r)

@@ -4,7 +4,8 @@ Every missing frame is predicted in one forward pass (section 3 of the paper):
 
 1. Frames are *key* (given), *unknown* (to fill) or *ignored* (padding; no
    loss): :func:`frame_kinds`. Unknown frames are pre-filled by LERP of the root
-   and SLERP of the local rotations between the nearest keys (:func:`prefill`).
+   and SLERP of the local rotations between the nearest keys
+   (:func:`keyfill.learn.benchmark.interpolation`).
 2. Each frame becomes a feature vector (:class:`Features`): in ``global``
    coordinates (the paper's best variant) the normalised global positions and
    the global quaternions of all joints; in ``local`` coordinates the
@@ -52,8 +53,7 @@ import numpy as np
 from keyfill import rotations as R
 from keyfill.errors import ModelError
 from keyfill.kinematics import fk
-from keyfill.learn.baselines import segment_coordinates
-from keyfill.learn.benchmark import axis_vector, facing_rotation, horizontal_axes
+from keyfill.learn.benchmark import axis_vector, facing_rotation, horizontal_axes, interpolation
 from keyfill.motion import Skeleton
 
 KEY, UNKNOWN, IGNORED = 0, 1, 2
@@ -115,24 +115,6 @@ def anchor_frame(keys) -> int:
     keys = np.asarray(keys)
     gaps = np.flatnonzero(np.diff(keys) > 1)
     return int(keys[gaps[0]] if len(gaps) else keys[0])
-
-
-def prefill(quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
-    """LERP the root and SLERP local quaternions between the nearest keys.
-
-    ``quats (..., T, J, 4)``, ``root (..., T, 3)``; frames outside the keys hold
-    the nearest key. Only key frames are read; key frames are copied.
-    """
-    T = quats.shape[-3]
-    k = np.asarray(keys, dtype=np.int64)
-    s, u = segment_coordinates(T, k)
-    a, b = k[s], k[s + 1]
-    r = root[..., a, :] + u[:, None] * (root[..., b, :] - root[..., a, :])
-    q0, q1 = quats[..., a, :, :], quats[..., b, :, :]
-    q = R.quat_slerp(q0, q1, np.broadcast_to(u[:, None], q0.shape[:-1]))
-    q[..., k, :, :] = quats[..., k, :, :]
-    r[..., k, :] = root[..., k, :]
-    return q, r
 
 
 def canonical_transform(quats: np.ndarray, root: np.ndarray, keys, facing_axis: str, up_axis: str = "Y"):
@@ -397,7 +379,7 @@ class CompletionModel:
         up = self.skeleton.up_axis
         turn, shift = canonical_transform(q, r, keys, self.config.facing_axis, up)
         q, r = apply_transform(q, r, turn, shift)
-        q, r = prefill(q, r, keys)
+        q, r = interpolation(None, q, r, keys)
         dev = self.device
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
         with torch.inference_mode():

@@ -297,3 +297,13 @@ def test_output_fk_loss_is_zero_for_the_truth_and_positive_otherwise(corpus):
     assert float(off["output_fk"]) > 1e-3
     assert float(off["total"]) == pytest.approx(float(off["position"] + off["rotation"] + 0.01 * off["kinematics"]
                                                       + off["output_fk"]), rel=1e-6)
+
+
+def test_a_missing_gpu_is_a_usage_error(trained):
+    out, _ = trained
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    with pytest.raises(UsageError, match="no CUDA GPU"):
+        T.load_model(out, device="cuda")
+    with pytest.raises(UsageError, match="unknown torch device"):
+        T.load_model(out, device="gpu0")

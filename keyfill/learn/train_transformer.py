@@ -51,6 +51,7 @@ from keyfill.learn.transformer import (
     frame_kinds,
     losses,
     new_model,
+    torch_device,
 )
 
 LAYOUTS = ("inbetween", "infill", "blend")
@@ -260,6 +261,7 @@ def train(
     """
     import torch
 
+    device = torch_device(device)
     output = Path(output)
     ckpt_path = output.with_suffix(".ckpt")
     log_path = output.with_suffix(".log.jsonl")

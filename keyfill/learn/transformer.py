@@ -470,11 +470,26 @@ def read_metadata(path: str | os.PathLike) -> dict:
     return desc
 
 
+def torch_device(name: str):
+    """``torch.device(name)``, or a :class:`UsageError` when it is not there."""
+    import torch
+
+    from keyfill.errors import UsageError
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError):
+        raise UsageError(f"unknown torch device {name!r}; use cpu, cuda or cuda:N") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise UsageError(f"device {name!r} was asked for, but torch sees no CUDA GPU here; use --device cpu")
+    return dev
+
+
 def load_model(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
     """Read a model written by :meth:`CompletionModel.save` (no code is executed)."""
-    import torch
     from safetensors.torch import load_file
 
+    dev = torch_device(device)
     desc = read_metadata(path)
     try:
         cfg = ModelConfig(**desc["config"])
@@ -492,7 +507,7 @@ def load_model(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
     except Exception as e:
         raise ModelError(f"{path}: damaged model weights ({e})") from None
     model.network.eval()
-    return model.to(device)
+    return model.to(dev)
 
 
 # --- keyfill complete --------------------------------------------------------------

@@ -192,7 +192,7 @@ def learning_rate(cfg: TrainConfig, epoch_float: float) -> float:
 
 @dataclass
 class Split:
-    """Training windows, validation protocol and the statistics of one run."""
+    """The training windows of one run and its validation protocol (None without validation clips)."""
 
     quats: np.ndarray
     root: np.ndarray
@@ -263,6 +263,8 @@ def train(
 
     device = torch_device(device)
     output = Path(output)
+    if not output.parent.is_dir():
+        raise UsageError(f"{output}: the output folder {str(output.parent)!r} does not exist")
     ckpt_path = output.with_suffix(".ckpt")
     log_path = output.with_suffix(".log.jsonl")
     if model_cfg.max_frames < cfg.window:

@@ -13,13 +13,15 @@ from keyfill.cli.common import emit_json, progress, say
               help="Model folder to write (config.json + weights.safetensors); replaced if it is a model.")
 @click.option("--arch", type=click.Choice(["arnn", "no-memory", "segregated"]), default="arnn", show_default=True,
               help="Network: the ARNN, or section 9's no-memory or segregated comparison networks.")
-@click.option("--epochs", type=int, default=1200, show_default=True, help="Passes over the training sequences.")
-@click.option("--batch-size", type=int, default=32, show_default=True, help="Sequences per gradient step.")
+@click.option("--epochs", type=int, default=400, show_default=True, help="Passes over the training sequences.")
+@click.option("--batch-size", type=int, default=16, show_default=True, help="Sequences per gradient step.")
 @click.option("--lr", type=float, default=1e-3, show_default=True, help="Adam learning rate.")
 @click.option("--curriculum/--no-curriculum", default=True, show_default=True,
               help="Scheduled sampling then a rising key weight (section 7.2); without: free-running, weight 1.")
 @click.option("--max-deleted", type=int, default=2, show_default=True,
               help="Delete 0 to this many interior keys of a sequence each time it is used.")
+@click.option("--key-loss", type=click.Choice(["mean", "sum"]), default="mean", show_default=True,
+              help="Key term of the loss: mean squared key error, or the paper's literal sum over keys.")
 @click.option("--clip", type=float, default=1.0, show_default=True,
               help="Clip the gradient norm to this (0: no clipping).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of all training randomness.")
@@ -33,15 +35,15 @@ from keyfill.cli.common import emit_json, progress, say
 @click.option("--log", "log", type=click.Path(dir_okay=False),
               help="Loss log, one JSON line per epoch [default: OUTPUT.log.jsonl].")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def arnn(data, output, arch, epochs, batch_size, lr, curriculum, max_deleted, clip, seed, threads, checkpoint,
-         checkpoint_every, resume, log, as_json):
+def arnn(data, output, arch, epochs, batch_size, lr, curriculum, max_deleted, key_loss, clip, seed, threads,
+         checkpoint, checkpoint_every, resume, log, as_json):
     """Train a lamp in-betweening network on the dataset folder DATA.
 
     DATA is a folder made by 'keyfill simulate'. Its sequences are split by
     position: the last 20 % are the test split (for 'keyfill evaluate'), the
     10 % before them are held out and scored every epoch in the log, the rest
     is trained on. Training follows Zhang & van de Panne 2018: the loss
-    100 w (key errors) + frame MSE, scheduled sampling and a sigmoid key
+    100 w (key error) + frame MSE, scheduled sampling and a sigmoid key
     weight w (--no-curriculum: none), 0-2 keys deleted at random each time a
     sequence is used, Adam. The same data, options, --seed and --threads give
     the same model bytes, also across --resume.
@@ -59,7 +61,8 @@ def arnn(data, output, arch, epochs, batch_size, lr, curriculum, max_deleted, cl
 
     torch.set_num_threads(threads)
     settings = Settings(arch=arch, epochs=epochs, batch_size=batch_size, lr=lr, curriculum=curriculum,
-                        max_deleted=max_deleted, clip=clip, seed=seed, checkpoint_every=checkpoint_every).check()
+                        max_deleted=max_deleted, key_loss=key_loss, clip=clip, seed=seed,
+                        checkpoint_every=checkpoint_every).check()
     parts = split(read_sequences(data))
     output = output.rstrip("/")
     checkpoint = checkpoint or output + ".checkpoint.pt"

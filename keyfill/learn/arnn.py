@@ -32,6 +32,7 @@ the scheduled-sampling curriculum (:mod:`keyfill.learn.train_arnn`).
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
@@ -40,7 +41,9 @@ import torch
 from torch import nn
 
 from keyfill.errors import DataError, ModelError, UsageError
-from keyfill.learn.lamp_features import NUM_VARIABLES, LampSequence, Normalizer, conditioning, make_batch
+from keyfill.learn.lamp_features import (
+    NUM_VARIABLES, LampSequence, Normalizer, conditioning, make_batch, origin, wrap_angles,
+)
 
 #: the model that ``keyfill complete --method arnn`` uses for lamp files without --model
 DEFAULT_MODEL = Path(__file__).parent / "models" / "lamp-arnn"
@@ -56,6 +59,18 @@ def _drop(x: torch.Tensor, p: float, training: bool, generator: torch.Generator 
         return x
     keep = torch.rand(x.shape, generator=generator, dtype=x.dtype) >= p
     return x * keep / (1.0 - p)
+
+
+def _gru_step(gru: nn.GRU, x: torch.Tensor, h: torch.Tensor | None) -> torch.Tensor:
+    """One step ``(B, in) -> (B, hidden)`` of a one-layer ``nn.GRU`` (the computation of ``nn.GRUCell``).
+
+    Calling the ``nn.GRU`` module on a length-1 sequence costs about twice as
+    much per frame; the weights stay those of the fused layer used for
+    teacher-forced batches.
+    """
+    if h is None:
+        h = x.new_zeros(x.shape[0], gru.hidden_size)
+    return torch._VF.gru_cell(x, h, gru.weight_ih_l0, gru.weight_hh_l0, gru.bias_ih_l0, gru.bias_hh_l0)
 
 
 class PoseFeatures(nn.Module):
@@ -150,21 +165,20 @@ class ARNN(Completer):
     def key_features(self, x_prev, x_next, t_rel):
         return torch.cat([self.key_before(x_prev), self.key_after(x_next), t_rel], dim=-1)
 
-    def _head(self, y_prev, cond, h, generator):
-        x = torch.selu(torch.cat([self.pose(y_prev), cond], dim=-1))
-        h1, h2 = (None, None) if h is None else h
-        a, h1 = self.gru1(x, h1)
-        a = _drop(torch.selu(a), self.dropout[0], self.training, generator)
-        b, h2 = self.gru2(a, h2)
-        b = _drop(torch.selu(b), self.dropout[1], self.training, generator)
-        return y_prev + self.ff(b, generator), (h1, h2)
-
     def sequence(self, y_prev, cond, generator):
-        return self._head(y_prev, cond, None, generator)[0]
+        x = torch.selu(torch.cat([self.pose(y_prev), cond], dim=-1))
+        a = _drop(torch.selu(self.gru1(x)[0]), self.dropout[0], self.training, generator)
+        b = _drop(torch.selu(self.gru2(a)[0]), self.dropout[1], self.training, generator)
+        return y_prev + self.ff(b, generator)
 
     def step(self, y_prev, cond_t, state, generator):
-        y, state = self._head(y_prev[:, None], cond_t[:, None], state, generator)
-        return y[:, 0], state
+        h1, h2 = (None, None) if state is None else state
+        x = torch.selu(torch.cat([self.pose(y_prev), cond_t], dim=-1))
+        h1 = _gru_step(self.gru1, x, h1)
+        a = _drop(torch.selu(h1), self.dropout[0], self.training, generator)
+        h2 = _gru_step(self.gru2, a, h2)
+        b = _drop(torch.selu(h2), self.dropout[1], self.training, generator)
+        return y_prev + self.ff(b, generator), (h1, h2)
 
 
 class NoMemory(Completer):
@@ -218,22 +232,21 @@ class Segregated(Completer):
     def key_features(self, x_prev, x_next, t_rel):
         return torch.cat([self.key_before(x_prev), self.key_after(x_next), t_rel], dim=-1)
 
-    def _head(self, y_prev, cond, h, generator):
-        h1, h2 = (None, None) if h is None else h
-        a, h1 = self.gru1(torch.selu(self.pose(y_prev)), h1)
-        a = _drop(torch.selu(a), self.dropout[0], self.training, generator)
-        b, h2 = self.gru2(a, h2)
-        b = _drop(torch.selu(b), self.dropout[1], self.training, generator)
-        y_rnn = y_prev + self.ff(b, generator)
+    def _correct(self, y_prev, b, cond, generator):
+        """The motion network's frame from its GRU output ``b``, plus the interpolation network's correction."""
+        y_rnn = y_prev + self.ff(_drop(torch.selu(b), self.dropout[1], self.training, generator), generator)
         x = torch.selu(torch.cat([self.predicted(y_rnn), cond], dim=-1))
-        return y_rnn + self.interp(x, generator), (h1, h2)
+        return y_rnn + self.interp(x, generator)
 
     def sequence(self, y_prev, cond, generator):
-        return self._head(y_prev, cond, None, generator)[0]
+        a = _drop(torch.selu(self.gru1(torch.selu(self.pose(y_prev)))[0]), self.dropout[0], self.training, generator)
+        return self._correct(y_prev, self.gru2(a)[0], cond, generator)
 
     def step(self, y_prev, cond_t, state, generator):
-        y, state = self._head(y_prev[:, None], cond_t[:, None], state, generator)
-        return y[:, 0], state
+        h1, h2 = (None, None) if state is None else state
+        h1 = _gru_step(self.gru1, torch.selu(self.pose(y_prev)), h1)
+        h2 = _gru_step(self.gru2, _drop(torch.selu(h1), self.dropout[0], self.training, generator), h2)
+        return self._correct(y_prev, h2, cond_t, generator), (h1, h2)
 
 
 _CLASSES = {"arnn": ARNN, "no-memory": NoMemory, "segregated": Segregated}
@@ -295,7 +308,7 @@ class LampModel:
         for b, s in enumerate(sequences):
             n = int(batch.lengths[b])
             z = np.concatenate([batch.frames[b, :1].numpy(), pred[b, : n - 1].numpy()]).astype(np.float64)
-            out.append(self.normalizer.decode(z, origin_x=float(s.values[s.keys[0], 0])))
+            out.append(self.normalizer.decode(z, origin(s.values[s.keys[0]])))
         return out
 
 
@@ -338,10 +351,26 @@ def load(path: str | Path) -> LampModel:
     return LampModel(net, normalizer, config, str(path))
 
 
+@functools.lru_cache(maxsize=4)
+def _load_cached(path: str, stamp: tuple) -> LampModel:
+    return load(path)
+
+
+def load_cached(path: str | Path) -> LampModel:
+    """:func:`load`, remembering the last few models while their files stay unchanged (size and mtime)."""
+    from keyfill.learn.modelfile import CONFIG, WEIGHTS, model_folder
+
+    folder = model_folder(path)
+    stamp = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None
+                  for f in (folder / CONFIG, folder / WEIGHTS))
+    return _load_cached(str(path), stamp)
+
+
 def complete(motion, keys, options):
     """``keyfill complete --method arnn``: fill a lamp motion's frames between ``keys`` with a trained model.
 
-    Frames before the first and after the last key hold those keys. With
+    Key angles are read within ``[-pi, pi)`` (:func:`~keyfill.learn.lamp_features.wrap_angles`).
+    Frames before the first and after the last key hold the frames there. With
     ``options.exact_keys`` the small residual at the keys is removed by
     :func:`keyfill.learn.exact_keys.snap_to_keys` and its size reported.
     """
@@ -360,11 +389,11 @@ def complete(motion, keys, options):
         path = DEFAULT_MODEL
     else:
         path = Path(options.model)
-    model = load(path)
+    model = load_cached(path)
     check_skeleton(model.config, motion.skeleton, path)
     k = keys.frames
     try:
-        key_values = to_variables(motion.frames(k))  # only the key frames are read
+        key_values = wrap_angles(to_variables(motion.frames(k)))  # only the key frames are read
     except DataError as e:
         raise DataError(f"the ARNN completes lamp motions only: {e}") from None
     values = np.zeros((motion.num_frames, key_values.shape[1]))
@@ -372,8 +401,8 @@ def complete(motion, keys, options):
     span = model.predict([LampSequence(values, k)])[0]
     out = np.empty_like(values)
     out[k[0]: k[-1] + 1] = span
-    out[: k[0]] = key_values[0]
-    out[k[-1] + 1:] = key_values[-1]
+    out[: k[0]] = span[0]  # hold; the exact-keys correction then moves them with their key
+    out[k[-1] + 1:] = span[-1]
     positions = motion.positions.copy()
     positions[:, 0, :2] = out[:, :2]
     pred = motion.replace(rotations=from_variables(out, motion.fps).rotations, positions=positions, keys=keys)

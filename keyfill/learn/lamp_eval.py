@@ -13,6 +13,16 @@ the networks see it), are:
 * ``rmse``: per variable, the root mean squared error over the frames in the
   variable's own unit (m or rad), so numbers read physically.
 
+Angles are compared modulo a full turn (the difference wrapped to
+``[-pi, pi)``): a pose is the same after a joint spins once. Methods get the
+keys the way they are read from a file of keys (rotations): the ARNN reads
+each key's angles within ``[-pi, pi)`` (:func:`keys_as_read`); the
+``linear`` and ``cubic`` methods of ``keyfill complete`` interpolate the
+rotations themselves, so between two keys more than half a turn apart they
+turn the short way. ``cubic-variables`` is the animator's spline: a C1 cubic
+through each animation variable (keys read like the ARNN's, tangents as in
+:func:`keyfill.learn.baselines.cubic`).
+
 Methods: the spline baselines (``linear``, ``cubic``; they go through
 :func:`keyfill.learn.methods.complete` like ``keyfill complete`` does, and hit
 their keys exactly) and trained lamp models (raw network output, or with the
@@ -26,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from keyfill.errors import DataError
-from keyfill.learn.lamp_features import LampSequence, Normalizer
+from keyfill.learn.lamp_features import LampSequence, Normalizer, wrap_angles
 
 CONDITIONS = ("all_keys", "deleted_keys")
 
@@ -73,6 +83,16 @@ def deleted_keys(sequences: list[LampSequence], seed: int = 0) -> list[LampSeque
     return out
 
 
+def keys_as_read(sequence: LampSequence) -> LampSequence:
+    """``sequence`` with its keys' angles as ``keyfill complete --method arnn`` reads them (within ``[-pi, pi)``).
+
+    Other frames are left as they are (no method reads them).
+    """
+    values = sequence.values.copy()
+    values[sequence.keys] = wrap_angles(values[sequence.keys])
+    return LampSequence(values, sequence.keys, sequence.name)
+
+
 def score(sequences: list[LampSequence], predictions: list[np.ndarray], normalizer: Normalizer) -> Scores:
     """Scores of ``predictions`` (each ``(T, 6)``, first to last key) against ``sequences``."""
     from keyfill.sim.lamp import VARIABLE_NAMES
@@ -83,6 +103,7 @@ def score(sequences: list[LampSequence], predictions: list[np.ndarray], normaliz
         if p.shape != truth.shape:
             raise DataError(f"{s.name}: a prediction of shape {p.shape} for {truth.shape} frames")
         diff = p - truth
+        diff[:, 2:] = (diff[:, 2:] + np.pi) % (2 * np.pi) - np.pi  # angles modulo a full turn
         sq.append(diff[1:] ** 2)
         z = diff / normalizer.std  # base_x relative or not: a difference is the same
         frame_err.append(z[1:] ** 2)
@@ -104,6 +125,28 @@ def spline_predictions(method: str, sequences: list[LampSequence]) -> list[np.nd
         keys = Keys(s.keys)
         filled = complete(from_variables(s.values, 30.0), keys, method).motion
         out.append(to_variables(filled)[s.keys[0]: s.keys[-1] + 1])
+    return out
+
+
+def variable_spline_predictions(sequences: list[LampSequence]) -> list[np.ndarray]:
+    """``cubic-variables``: a C1 cubic Hermite spline through the keys of each animation variable.
+
+    Tangents at inner keys are the segment slopes averaged with the other
+    segment's length as weight, at the end keys the end segment's slope (the
+    rule of :func:`keyfill.learn.baselines.cubic`).
+    """
+    from scipy.interpolate import CubicHermiteSpline
+
+    out = []
+    for s in sequences:
+        k = s.keys.astype(np.float64)
+        v = s.values[s.keys]
+        h = np.diff(k)[:, None]
+        slopes = np.diff(v, axis=0) / h
+        tangents = np.empty_like(v)
+        tangents[0], tangents[-1] = slopes[0], slopes[-1]
+        tangents[1:-1] = (h[1:] * slopes[:-1] + h[:-1] * slopes[1:]) / (h[:-1] + h[1:])
+        out.append(CubicHermiteSpline(k, v, tangents, axis=0)(np.arange(s.keys[0], s.keys[-1] + 1)))
     return out
 
 
@@ -133,7 +176,7 @@ def evaluate(method: str, sequences: list[LampSequence], model=None, exact_keys:
     """Score ``method`` on ``sequences`` with all keys and with 1-2 keys deleted.
 
     Args:
-        method: ``"linear"``, ``"cubic"``, or a label for ``model``.
+        method: ``"linear"``, ``"cubic"``, ``"cubic-variables"``, or a label for ``model``.
         model: a loaded lamp model for learned methods (None for the splines).
         exact_keys: apply the exact-keys correction to the model's output.
         seed: seed of the key deletions.
@@ -145,9 +188,72 @@ def evaluate(method: str, sequences: list[LampSequence], model=None, exact_keys:
     if model is not None:
         report.details = {"arch": model.arch, "model": model.path, "exact_keys": exact_keys}
     for condition, seqs in (("all_keys", sequences), ("deleted_keys", deleted_keys(sequences, seed))):
-        if model is None:
-            preds = spline_predictions(method, seqs)
+        given = [keys_as_read(s) for s in seqs]
+        if method == "cubic-variables":
+            preds = variable_spline_predictions(given)
+        elif model is None:
+            preds = spline_predictions(method, given)
         else:
-            preds = model_predictions(model, seqs, exact_keys)
+            preds = model_predictions(model, given, exact_keys)
         report.scores[condition] = score(seqs, preds, normalizer)
     return report
+
+
+def resolve(method_or_model: str):
+    """``(label, model or None)`` for ``linear``, ``cubic``, ``arnn`` (the built-in model) or a model folder."""
+    from pathlib import Path
+
+    from keyfill.errors import UsageError
+
+    if method_or_model in ("linear", "cubic", "cubic-variables"):
+        return method_or_model, None
+    from keyfill.learn import arnn
+
+    if method_or_model == "arnn":
+        return "arnn", arnn.load(arnn.DEFAULT_MODEL)
+    if Path(method_or_model).exists():
+        model = arnn.load(method_or_model)
+        return f"{model.arch} ({method_or_model})", model
+    raise UsageError(f"{method_or_model!r} is neither a method (linear, cubic, cubic-variables, arnn) "
+                     f"nor a model folder")
+
+
+def protocol(method_or_model: str, folder, baselines: bool = True, seed: int = 0) -> tuple[list[Report], dict]:
+    """The lamp protocol on the test split of a ``keyfill simulate`` folder.
+
+    Scores ``method_or_model`` (a model twice: raw, and with the exact-keys
+    correction) and, with ``baselines``, ``linear``, ``cubic`` and
+    ``cubic-variables``. Returns the
+    reports and a summary of the data.
+    """
+    from keyfill.learn.lamp_features import read_sequences
+    from keyfill.learn.train_arnn import split
+
+    sequences = read_sequences(folder)
+    parts = split(sequences)
+    test = parts["test"]
+    label, model = resolve(method_or_model)
+    if model is None:
+        reports = [evaluate(label, test, seed=seed)]
+    else:
+        reports = [evaluate(label, test, model, seed=seed),
+                   evaluate(label + " + exact keys", test, model, exact_keys=True, seed=seed)]
+    if baselines:
+        reports += [evaluate(name, test, seed=seed) for name in ("linear", "cubic", "cubic-variables")
+                    if name != label]
+    info = {"data": str(folder), "sequences": len(sequences), "test_sequences": len(test),
+            "test_first": test[0].name, "test_last": test[-1].name, "deletion_seed": seed}
+    return reports, info
+
+
+def format_table(reports: list[Report]) -> str:
+    """The scores as a text table: key, frame and total loss with all keys and with 1-2 keys deleted."""
+    width = max(len(r.method) for r in reports) + 2
+    head = f"{'':<{width}}{'all keys':^30}  {'1-2 keys deleted':^30}"
+    cols = f"{'method':<{width}}" + "  ".join(f"{'key':>9} {'frame':>9} {'total':>9}" for _ in CONDITIONS)
+    lines = [head, cols]
+    for r in reports:
+        cells = "  ".join(f"{r.scores[c].key:9.5f} {r.scores[c].frame:9.5f} {r.scores[c].total:9.5f}"
+                          for c in CONDITIONS)
+        lines.append(f"{r.method:<{width}}{cells}")
+    return "\n".join(lines)

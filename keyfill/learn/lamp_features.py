@@ -7,7 +7,8 @@ its key frames. The networks see it *encoded*:
 * ``base_x`` is taken relative to the first key's, so the same keys give the
   same motion wherever the lamp stands (the paper uses absolute positions
   rather than per-frame deltas; an offset fixed per sequence keeps that and
-  adds horizontal invariance);
+  adds horizontal invariance), and each angle loses the whole turns that
+  bring the first key's into ``[-pi, pi)`` (:func:`origin`);
 * every variable is standardised with the training set's mean and standard
   deviation (:class:`Normalizer`, stored in the model file).
 
@@ -75,6 +76,20 @@ def sequence_from_motion(motion, keys=None, name: str = "") -> LampSequence:
     return LampSequence(to_variables(motion), np.asarray(keys.frames), name)
 
 
+def wrap_angles(values: np.ndarray) -> np.ndarray:
+    """``values (..., 6)`` with the four angles wrapped into ``[-pi, pi)`` (positions unchanged).
+
+    This is how lamp keys are read from a file: a key stores rotations, not
+    turn counts, and the lamp's hinges stay within half a turn of straight
+    (in the simulated data every angle is within +-2.7 rad), whereas two keys
+    may well be more than half a turn apart (a neck swinging from -1.5 to
+    2.0 rad), so wrapping each key beats unwrapping from key to key.
+    """
+    out = np.array(values, dtype=np.float64)
+    out[..., 2:] = (out[..., 2:] + np.pi) % (2 * np.pi) - np.pi
+    return out
+
+
 def read_sequences(folder) -> list[LampSequence]:
     """Every sequence of a ``keyfill simulate`` dataset folder, in run order."""
     from keyfill.sim.dataset import read_dataset
@@ -113,21 +128,31 @@ class Normalizer:
         return cls(mean, std)
 
     def encode(self, span: np.ndarray) -> np.ndarray:
-        """``(T, 6)`` frames starting at the first key -> standardised, ``base_x`` relative to frame 0."""
+        """``(T, 6)`` frames starting at the first key -> standardised, relative to frame 0 (see :func:`origin`)."""
         return (relative(span) - self.mean) / self.std
 
-    def decode(self, z: np.ndarray, origin_x: float) -> np.ndarray:
-        """Inverse of :meth:`encode`, with frame 0's ``base_x`` equal to ``origin_x``."""
-        out = np.asarray(z, dtype=np.float64) * self.std + self.mean
-        out[..., 0] += origin_x
-        return out
+    def decode(self, z: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`encode` for a sequence whose :func:`origin` is ``origin``."""
+        return np.asarray(z, dtype=np.float64) * self.std + self.mean + origin
+
+
+def origin(first: np.ndarray) -> np.ndarray:
+    """``(6,)`` what :func:`relative` subtracts, from the first frame ``first (6,)``.
+
+    ``base_x`` itself, and for each angle the whole turns that bring it into
+    ``[-pi, pi)``: a joint that has spun once is in the same pose, and a file
+    of keys (rotations) cannot tell the two apart.
+    """
+    out = np.zeros(NUM_VARIABLES)
+    out[0] = first[0]
+    out[2:] = 2 * np.pi * np.floor((np.asarray(first[2:]) + np.pi) / (2 * np.pi))
+    return out
 
 
 def relative(span: np.ndarray) -> np.ndarray:
-    """``span (T, 6)`` with ``base_x`` taken relative to frame 0's."""
-    out = np.array(span, dtype=np.float64)
-    out[:, 0] -= out[0, 0]
-    return out
+    """``span (T, 6)`` minus its :func:`origin`: ``base_x`` from frame 0's, angles less frame 0's whole turns."""
+    span = np.asarray(span, dtype=np.float64)
+    return span - origin(span[0])
 
 
 @dataclass

@@ -1,0 +1,185 @@
+"""ARNN on the hopping lamp: inference speed, and the quality rows of Zhang & van de Panne 2018, Tables 1-2.
+
+Inference (``--inference``), each the median of ``--repeat`` calls in one
+process on a 3-hop sequence (87 frames, 9 keys), with the model loaded once:
+
+* ``network``: :meth:`LampModel.predict`, encoding, the 86 autoregressive
+  steps in ``inference_mode`` and decoding;
+* ``complete``: ``keyfill.learn.methods.complete(..., "arnn")``, the whole
+  method of ``keyfill complete``: reading the keys' variables, the network,
+  the exact-keys correction, the output Motion;
+* ``cubic``: the same call with the cubic spline, as a peer in the same run;
+* ``cli``: ``keyfill complete KEYS -o OUT --method arnn`` as a new process
+  (Python start, imports, model file, USD read and write), median of 5.
+
+The goal is under 20 ms for ``complete``.
+
+Quality (``--tables DATA``): every ``--model LABEL=PATH`` and the spline
+baselines scored by :func:`keyfill.learn.lamp_eval.evaluate` on the test
+split of the dataset (the last 20 % of its sequences) with all keys and with
+1-2 keys deleted; a markdown table with key, frame and total loss, the frame
+loss relative to cubic, and each model's training time from its config.
+
+    .venv/bin/python benchmarks/bench_arnn.py --inference
+    .venv/bin/python benchmarks/bench_arnn.py --tables data/hops \\
+        --model "ARNN, curriculum=data/models/arnn" --model "ARNN, no curriculum=data/models/arnn-nocurr"
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+GOAL_MS = 20.0
+
+
+def median_ms(fn, repeat: int) -> float:
+    for _ in range(5):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return 1e3 * statistics.median(times)
+
+
+def machine() -> str:
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return f"{platform.machine()}, {os.cpu_count()} cores, load {load:.2f}, torch {torch.__version__}, " \
+           f"{torch.get_num_threads()} thread(s)"
+
+
+def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
+    from keyfill import io
+    from keyfill.learn import arnn
+    from keyfill.learn.lamp_features import LampSequence
+    from keyfill.learn.methods import CompleteOptions, complete
+    from keyfill.sim.lamp import to_variables
+
+    motion = io.load(keys_file)
+    keys = motion.keys
+    path = model or str(arnn.DEFAULT_MODEL)
+    loaded = arnn.load(path)
+    values = np.zeros((motion.num_frames, 6))
+    values[keys.frames] = to_variables(motion.frames(keys.frames))
+    seq = LampSequence(values, keys.frames)
+    options = CompleteOptions(model=path)
+    out = {
+        "frames": motion.num_frames,
+        "keys": len(keys),
+        "load_ms": median_ms(lambda: arnn.load(path), max(5, repeat // 10)),
+        "network_ms": median_ms(lambda: loaded.predict([seq]), repeat),
+        "complete_ms": median_ms(lambda: complete(motion, keys, "arnn", options), repeat),
+        "cubic_ms": median_ms(lambda: complete(motion, keys, "cubic"), repeat),
+    }
+    exe = shutil.which("keyfill", path=str(Path(sys.executable).parent)) or "keyfill"
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [exe, "complete", str(keys_file), "-o", str(Path(tmp) / "out.usda"), "--method", "arnn"]
+        if model:
+            cmd += ["--model", model]
+        times = []
+        for _ in range(6):
+            t = time.perf_counter()
+            subprocess.run(cmd, check=True, capture_output=True)
+            times.append(time.perf_counter() - t)
+        out["cli_ms"] = 1e3 * statistics.median(times[1:])
+    return out
+
+
+def tables(data: str, models: list[tuple[str, str]], seed: int) -> list[dict]:
+    from keyfill.learn import arnn
+    from keyfill.learn.lamp_eval import evaluate
+    from keyfill.learn.lamp_features import read_sequences
+    from keyfill.learn.train_arnn import split
+
+    test = split(read_sequences(data))["test"]
+    rows = []
+    for label, path in models:
+        model = arnn.load(path)
+        rep = evaluate(label, test, model, seed=seed)
+        training = model.config.get("training", {})
+        rows.append({"label": label, "path": path, "arch": model.arch,
+                     "curriculum": training.get("settings", {}).get("curriculum"),
+                     "epochs": training.get("epochs"), "train_minutes": round(training.get("seconds", 0) / 60, 1),
+                     **{c: s.as_dict() for c, s in rep.scores.items()}})
+        rep = evaluate(label + " + exact keys", test, model, exact_keys=True, seed=seed)
+        rows.append({"label": rep.method, "path": path, **{c: s.as_dict() for c, s in rep.scores.items()}})
+    for name in ("cubic", "linear"):
+        rep = evaluate(name, test, seed=seed)
+        rows.append({"label": name, **{c: s.as_dict() for c, s in rep.scores.items()}})
+    return rows
+
+
+def markdown(rows: list[dict], test_sequences: int) -> str:
+    cubic = next(r for r in rows if r["label"] == "cubic")
+    head = ("| method | key | frame | total | frame / cubic | key (1-2 deleted) | frame (1-2 deleted) | "
+            "total (1-2 deleted) | frame / cubic (1-2 deleted) | training |\n|---|---|---|---|---|---|---|---|---|---|")
+    lines = [head]
+    for r in rows:
+        a, d = r["all_keys"], r["deleted_keys"]
+        train = f"{r['epochs']} epochs, {r['train_minutes']} min" if r.get("epochs") else ""
+        lines.append(
+            f"| {r['label']} | {a['key']:.5f} | {a['frame']:.5f} | {a['total']:.5f} | "
+            f"{a['frame'] / cubic['all_keys']['frame']:.2f} | {d['key']:.5f} | {d['frame']:.5f} | {d['total']:.5f} | "
+            f"{d['frame'] / cubic['deleted_keys']['frame']:.2f} | {train} |"
+        )
+    return "\n".join(lines) + f"\n\n({test_sequences} test sequences; losses on standardised variables)"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--inference", action="store_true", help="time completions of one 3-hop sequence")
+    ap.add_argument("--keys", type=Path, default=ROOT / "examples" / "lamp" / "keys.usda",
+                    help="lamp key file for --inference")
+    ap.add_argument("--tables", metavar="DATA", help="score models on the test split of this dataset folder")
+    ap.add_argument("--model", action="append", default=[], metavar="LABEL=PATH",
+                    help="a model for --tables (repeatable); for --inference, the model to time")
+    ap.add_argument("--repeat", type=int, default=100)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the key deletions")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    report = {"machine": machine()}
+    if args.inference:
+        model = args.model[0].split("=", 1)[-1] if args.model else None
+        report["inference"] = inference(args.keys, model, args.repeat)
+    if args.tables:
+        models = [tuple(m.split("=", 1)) for m in args.model]
+        report["tables"] = tables(args.tables, models, args.seed)
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return
+    print(report["machine"])
+    if "inference" in report:
+        r = report["inference"]
+        print(f"3-hop sequence, {r['frames']} frames, {r['keys']} keys (medians):")
+        print(f"  network  {r['network_ms']:7.2f} ms")
+        print(f"  complete {r['complete_ms']:7.2f} ms   goal {GOAL_MS:.0f} ms -> {r['complete_ms'] / GOAL_MS:.2f} of it")
+        print(f"  cubic    {r['cubic_ms']:7.2f} ms   (peer, same run)")
+        print(f"  load     {r['load_ms']:7.2f} ms   (model folder, once per process)")
+        print(f"  cli      {r['cli_ms']:7.0f} ms   (keyfill complete as a new process)")
+    if "tables" in report:
+        from keyfill.learn.lamp_features import read_sequences
+        from keyfill.learn.train_arnn import split
+
+        n = len(split(read_sequences(args.tables))["test"])
+        print(markdown(report["tables"], n))
+
+
+if __name__ == "__main__":
+    main()

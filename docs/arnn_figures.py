@@ -1,0 +1,128 @@
+"""Make the ARNN pictures of docs/arnn.md (like Zhang & van de Panne 2018, Figures 8-11) with keyfill's CLI.
+
+From one sequence of the test split of a ``keyfill simulate`` dataset it
+writes key files (sparse USD: samples at the keys only), completes them with
+``keyfill complete`` (``--method arnn`` with the shipped model, and
+``--method cubic``) and draws them with ``keyfill plot``:
+
+* ``arnn_reconstruction.png`` (Figure 8): the sequence's own 9 keys;
+* ``arnn_height_edit.png`` (Figure 9): the in-air key of the second hop
+  raised or lowered to 0.7x, 1.5x and 1.8x its base height;
+* ``arnn_timing_edit.png`` (Figure 10): every in-air key moved ``--shift``
+  frames earlier or later (same poses, new times);
+* ``arnn_sparse_keys.png`` (Figure 11): the in-air and landing keys of the
+  second hop removed.
+
+Completed files keep their keys, which ``keyfill plot`` draws as open circles.
+
+    .venv/bin/python docs/arnn_figures.py --data data/hops            (writes docs/img/arnn_*.png)
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from keyfill import io
+from keyfill.learn.lamp_features import read_sequences
+from keyfill.learn.train_arnn import split
+from keyfill.motion import Keys
+from keyfill.sim.dataset import read_dataset
+from keyfill.sim.lamp import from_variables
+
+HERE = Path(__file__).parent
+KEYFILL = str(Path(sys.executable).parent / "keyfill")
+
+
+def keyfill(*args) -> None:
+    subprocess.run([KEYFILL, "-q", *map(str, args)], check=True)
+
+
+def write_keys(values: np.ndarray, keys: np.ndarray, fps: float, path: Path) -> Path:
+    """A sparse USD key file: the lamp variables ``values`` at frames ``keys`` (other frames are not written)."""
+    io.save(from_variables(values, fps, keys=Keys(keys)), path, sparse=True)
+    return path
+
+
+def complete(keys_file: Path, out: Path, method: str, model: str | None) -> Path:
+    extra = ["--model", model] if model and method == "arnn" else []
+    keyfill("complete", keys_file, "-o", out, "--method", method, *extra)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default="data/hops", help="dataset folder made by keyfill simulate")
+    ap.add_argument("--sequence", help="sequence id (default: the first test sequence whose in-air keys allow --shift)")
+    ap.add_argument("--model", help="model folder (default: the shipped lamp model)")
+    ap.add_argument("--shift", type=int, default=5, help="frames to move the in-air keys for the timing edit")
+    ap.add_argument("--out", type=Path, default=HERE / "img")
+    args = ap.parse_args()
+
+    test = split(read_sequences(args.data))["test"]
+    hops = 3
+
+    def shiftable(s) -> bool:
+        k = s.keys.reshape(hops, 3)  # liftoff, in-air, landing per hop
+        return bool(np.all(k[:, 1] - args.shift > k[:, 0]) and np.all(k[:, 1] + args.shift < k[:, 2]))
+
+    if args.sequence:
+        seq = next(s for s in test if s.name == args.sequence)
+    else:
+        seq = next(s for s in test if len(s.keys) == 3 * hops and shiftable(s))
+    fps = next(s.motion.fps for s in read_dataset(args.data) if s.id == seq.name)
+    values, keys = seq.values, seq.keys
+    args.out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        truth = tmp / "truth.usda"
+        io.save(from_variables(values, fps, keys=Keys(keys)), truth)
+
+        # Figure 8: reconstruction from the sequence's own keys
+        k = write_keys(values, keys, fps, tmp / "keys.usda")
+        arnn, cubic = complete(k, tmp / "arnn.usda", "arnn", args.model), complete(k, tmp / "cubic.usda", "cubic", None)
+        keyfill("plot", truth, cubic, arnn, "--labels", f"truth ({seq.name}),cubic,arnn",
+                "-o", args.out / "arnn_reconstruction.png")
+
+        # Figure 9: height edits of the second hop's in-air key
+        air = keys[4]
+        files, labels = [truth], [f"truth ({seq.name})"]
+        for scale in (0.7, 1.5, 1.8):
+            edited = values.copy()
+            edited[air, 1] *= scale
+            k = write_keys(edited, keys, fps, tmp / f"height_{scale}.usda")
+            files.append(complete(k, tmp / f"height_{scale}_arnn.usda", "arnn", args.model))
+            labels.append(f"arnn: apex height x{scale}")
+        keyfill("plot", *files, "--labels", ",".join(labels), "-o", args.out / "arnn_height_edit.png")
+
+        # Figure 10: timing edits, every in-air key earlier or later with the same pose
+        files, labels = [truth], [f"truth ({seq.name})"]
+        for shift in (-args.shift, 0, args.shift):
+            new = keys.copy()
+            new[1::3] += shift
+            moved = np.zeros_like(values)
+            moved[new] = values[keys]
+            k = write_keys(moved, new, fps, tmp / f"timing_{shift}.usda")
+            files.append(complete(k, tmp / f"timing_{shift}_arnn.usda", "arnn", args.model))
+            labels.append(f"arnn: in-air keys {shift:+d} frames" if shift else "arnn: original timing")
+        keyfill("plot", *files, "--labels", ",".join(labels), "-o", args.out / "arnn_timing_edit.png")
+
+        # Figure 11: sparse keys, the second hop's in-air and landing keys removed
+        sparse = np.delete(keys, [4, 5])
+        k = write_keys(values, sparse, fps, tmp / "sparse.usda")
+        arnn, cubic = (complete(k, tmp / "sparse_arnn.usda", "arnn", args.model),
+                       complete(k, tmp / "sparse_cubic.usda", "cubic", None))
+        keyfill("plot", truth, cubic, arnn, "--labels", f"truth ({seq.name} with all keys),cubic,arnn",
+                "-o", args.out / "arnn_sparse_keys.png")
+    # the variables at the keys, to check the edits by eye
+    print(f"{seq.name}: keys {keys.tolist()}, in-air key of hop 2 at frame {air}, base_y {values[air, 1]:.3f} m")
+    print(f"wrote {', '.join(str(args.out / n) for n in ('arnn_reconstruction.png', 'arnn_height_edit.png', 'arnn_timing_edit.png', 'arnn_sparse_keys.png'))}")
+
+
+if __name__ == "__main__":
+    main()

@@ -41,9 +41,10 @@ the paper's reduction to ``theta_k+, theta_k+1-``); ``--unified`` keeps
 unified keys unified, which also changes (and samples) the neighbouring
 segments.
 
-Run (about 3 minutes on 2 cores)::
+Run (about 3 minutes on 2 cores; it sets one BLAS thread before numpy loads)::
 
-    .venv/bin/python benchmarks/bench_tangent_qp.py --edits 100 --json out/bench_tangent_qp.json
+    .venv/bin/python benchmarks/bench_tangent_qp.py --edits 100 --json out/bench_tangent_qp.json \
+        --markdown out/bench_tangent_qp.md
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
 from keyfill.kinematics import fk
 
@@ -239,6 +240,11 @@ class Keys:
         return [int(f) for f in self.frames]
 
 
+def _turns_off(angles: np.ndarray) -> np.ndarray:
+    """Distance of ``angles`` (radians) from the nearest whole number of turns."""
+    return np.abs((angles + np.pi) % (2 * np.pi) - np.pi)
+
+
 @dataclass(frozen=True, eq=False)
 class Motion:
     """Skeletal animation as arrays.
@@ -296,6 +302,45 @@ class Motion:
     def world_positions(self) -> np.ndarray:
         """World joint positions ``(F, J, 3)``."""
         return self.world()[1]
+
+    def euler_angles(self) -> np.ndarray:
+        """``(F, J, 3)`` radians: each joint's rotation as its channels hold it.
+
+        Angles are intrinsic in the joint's :attr:`Skeleton.euler_orders`, and
+        continuous over time as animation curves should be: no whole-turn jumps
+        and no flips between the two Euler solutions of a rotation. For a joint
+        with fewer than three rotation channels the missing (trailing) angles
+        are zero; a rotation about an axis without a channel raises
+        :class:`DataError` naming the joint and frame.
+        """
+        sk = self.skeleton
+        F, J = self.num_frames, sk.num_joints
+        orders = sk.euler_orders
+        n_rot = np.array([sum(c in ROTATION_CHANNELS for c in chans) for chans in sk.channels])
+        angles = np.empty((F, J, 3))
+        for order in set(orders):
+            js = [j for j in range(J) if orders[j] == order]
+            angles[:, js] = R.quat_to_euler(self.rotations[:, js], order)
+        if F == 0:
+            return angles
+        full = n_rot == 3
+        angles[:, full] = R.euler_continuous_np(angles[:, full])
+        for j in np.flatnonzero(~full):
+            n, a = n_rot[j], angles[:, j]
+            # Of the two Euler solutions, take the one whose missing angles are zero.
+            alt = np.stack([a[:, 0] + np.pi, np.pi - a[:, 1], a[:, 2] + np.pi], axis=-1)
+            use_alt = _turns_off(alt[:, n:]).sum(axis=1) < _turns_off(a[:, n:]).sum(axis=1)
+            a = np.where(use_alt[:, None], alt, a)
+            missing = _turns_off(a[:, n:])
+            if missing.size and missing.max() > 1e-6:
+                f = int(np.argmax(missing.max(axis=1)))
+                chans = " ".join(sk.channels[j]) or "none"
+                raise DataError(
+                    f"joint {sk.names[j]!r} rotates about an axis that its channels ({chans}) cannot hold, at frame {f}"
+                )
+            a[:, n:] = 0.0
+            angles[:, j] = np.unwrap(a, axis=0)
+        return angles
 
     def replace(self, **changes) -> "Motion":
         return dataclasses.replace(self, **changes)

@@ -22,9 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from keyfill import rotations as R
 from keyfill.edit.curves import Control, Curves
-from keyfill.errors import DataError
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Keys, Motion
 
 #: weight of the Catmull-Rom prior relative to one frame's squared error
@@ -53,23 +51,7 @@ def control_values(motion: Motion, controls) -> np.ndarray:
     sk = motion.skeleton
     orders = sk.euler_orders
     F = motion.num_frames
-    angles = np.zeros((F, sk.num_joints, 3))
-    for j in range(sk.num_joints):
-        n_rot = sum(c in ROTATION_CHANNELS for c in sk.channels[j])
-        if n_rot == 0:
-            continue
-        a = R.quat_to_euler(motion.rotations[:, j], orders[j])
-        if n_rot == 3:
-            a = R.euler_continuous_np(a)
-        else:
-            a = np.unwrap(a, axis=0)
-            missing = np.abs(a[:, n_rot:]).max()
-            if missing > 1e-6:
-                raise DataError(
-                    f"joint {sk.names[j]!r} rotates about an axis it has no channel for "
-                    f"({np.degrees(missing):.3g} degrees); its curves cannot hold this motion"
-                )
-        angles[:, j] = a
+    angles = motion.euler_angles()
     out = np.empty((F, len(controls)))
     for i, c in enumerate(controls):
         if c.is_rotation:

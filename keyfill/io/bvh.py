@@ -24,7 +24,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError
-from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion, Skeleton, check_channels
+from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton, check_channels
 
 NUMBER_FORMAT = "%.12g"
 _MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
@@ -352,39 +352,19 @@ def read(path: str | Path, label=None) -> Motion:
 def pose_to_channels(motion: Motion) -> np.ndarray:
     """``(F, C)`` BVH channel values (degrees, file units) of ``motion`` in its skeleton's layout.
 
-    Raises :class:`DataError` when the motion does something the channels cannot
-    hold (a rotation about an axis without a channel, a translation of a joint
+    Angles come from :meth:`Motion.euler_angles` (continuous curves). Raises
+    :class:`DataError` when the motion does something the channels cannot hold
+    (a rotation about an axis without a channel, a translation of a joint
     without position channels).
     """
     sk = motion.skeleton
-    F, J = motion.num_frames, sk.num_joints
+    F = motion.num_frames
     orders = sk.euler_orders
-    angles = np.empty((F, J, 3))
-    for order in set(orders):
-        js = [j for j in range(J) if orders[j] == order]
-        angles[:, js] = R.quat_to_euler(motion.rotations[:, js], order)
+    degrees = np.rad2deg(motion.euler_angles())
     scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
     columns = []
     for j, chans in enumerate(sk.channels):
-        rot_axes = [c[0] for c in chans if c in ROTATION_CHANNELS]
         pos_axes = [c[0] for c in chans if c in POSITION_CHANNELS]
-        a = angles[:, j]
-        if len(rot_axes) == 3:
-            a = R.euler_continuous_np(a)
-        else:
-            # Of the two Euler solutions, use the one whose missing angles are zero.
-            alt = np.stack([a[:, 0] + np.pi, np.pi - a[:, 1], a[:, 2] + np.pi], axis=-1)
-            wrapped = lambda x: np.abs((x + np.pi) % (2 * np.pi) - np.pi)  # noqa: E731
-            use_alt = wrapped(alt[:, len(rot_axes) :]).sum(axis=1) < wrapped(a[:, len(rot_axes) :]).sum(axis=1)
-            a = np.where(use_alt[:, None], alt, a)
-            missing = wrapped(a[:, len(rot_axes) :])
-            if F and missing.max() > 1e-6:
-                f = int(np.argmax(missing.max(axis=1)))
-                raise DataError(
-                    f"joint {sk.names[j]!r} rotates about an axis that its BVH channels "
-                    f"({' '.join(chans) or 'none'}) cannot hold, at frame {f}"
-                )
-            a = np.unwrap(a, axis=0) if F else a
         fixed = [i for i in range(3) if "XYZ"[i] not in pos_axes]
         if F and fixed:
             dev = np.abs(motion.positions[:, j, fixed] - sk.offsets[j, fixed])
@@ -394,12 +374,11 @@ def pose_to_channels(motion: Motion) -> np.ndarray:
                     f"joint {sk.names[j]!r} moves away from its OFFSET at frame {f} but has no position "
                     f"channel for that axis ({' '.join(chans) or 'no channels'})"
                 )
-        deg = np.rad2deg(a)
         for c in chans:
             if c in POSITION_CHANNELS:
                 columns.append(motion.positions[:, j, "XYZ".index(c[0])])
             else:
-                columns.append(deg[:, orders[j].index(c[0])])
+                columns.append(degrees[:, j, orders[j].index(c[0])])
     if not columns:
         return np.zeros((F, 0))
     return np.stack(columns, axis=1)

@@ -24,7 +24,6 @@ from typing import Sequence
 
 import numpy as np
 
-from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
 from keyfill.motion import POSITION_CHANNELS, Motion
 from keyfill.viz import PLOT_SUFFIXES, check_suffix, frame_range, lamp_module, unit_label
@@ -60,18 +59,9 @@ class Curves:
 def channel_curves(motion: Motion) -> Curves:
     """Every BVH channel of ``motion`` over time, in the skeleton's channel order."""
     sk = motion.skeleton
-    F, J = motion.num_frames, sk.num_joints
+    F = motion.num_frames
     orders = sk.euler_orders
-    angles = np.zeros((F, J, 3))
-    for order in sorted(set(orders)):
-        js = [j for j in range(J) if orders[j] == order and any(c.endswith("rotation") for c in sk.channels[j])]
-        if js:
-            angles[:, js] = R.quat_to_euler(motion.rotations[:, js], order)
-    n_rot = np.array([sum(c.endswith("rotation") for c in chans) for chans in sk.channels])
-    if F:  # continuous curves over time, all joints at once (as the BVH writer makes them)
-        angles[:, n_rot == 3] = R.euler_continuous_np(angles[:, n_rot == 3])
-        some = (n_rot > 0) & (n_rot < 3)
-        angles[:, some] = np.unwrap(angles[:, some], axis=0)
+    angles = motion.euler_angles()  # continuous curves, as the BVH writer writes them
     length = unit_label(sk.meters_per_unit)
     scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
     names, units, joints, kinds, columns, animated = [], [], [], [], [], []

@@ -37,7 +37,7 @@ import numpy as np
 
 from keyfill.errors import DataError, FormatError
 from keyfill.kinematics import fk
-from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Keys, Motion, Skeleton
+from keyfill.motion import POSITION_CHANNELS, Keys, Motion, Skeleton
 
 CUSTOM_KEY = "keyfill"
 _DEFAULT_ROOT_CHANNELS = POSITION_CHANNELS + ("Zrotation", "Xrotation", "Yrotation")

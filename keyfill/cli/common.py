@@ -86,3 +86,29 @@ def output_format(path: str, fmt: str | None) -> str | None:
     if path == "-" and fmt is None:
         raise UsageError("writing to '-' needs --format (bvh, usda or usdc)")
     return fmt
+
+
+def load_labelled(files, labels: str | None, in_fmt: str | None, keys_text: str | None, key_every: int | None):
+    """Read the FILES of a picture command: ``(motions, legend names)``.
+
+    Names are the file stems or ``--labels`` (one per file). Keys given with
+    ``--keys`` / ``--key-every`` replace each file's own keys. A file with no
+    frames is a :class:`DataError`.
+    """
+    from keyfill import io
+    from keyfill.errors import DataError
+
+    names = [Path(f).stem if f != "-" else "stdin" for f in files]
+    if labels is not None:
+        names = [t.strip() for t in labels.split(",")]
+        if len(names) != len(files):
+            raise UsageError(f"--labels gives {len(names)} names for {len(files)} files")
+    motions = []
+    for f in files:
+        motion = io.load(f, in_fmt)
+        if motion.num_frames == 0:
+            raise DataError(f"{f}: the motion has no frames")
+        if keys_text is not None or key_every is not None:
+            motion = motion.replace(keys=resolve_keys(motion, keys_text, key_every, min_keys=1))
+        motions.append(motion)
+    return motions, names

@@ -1,4 +1,8 @@
-"""``keyfill edit-tangents``: reshape the motion between keys by optimising Bezier tangents."""
+"""``keyfill edit-tangents``: reshape the motion between keys by optimising Bezier tangents.
+
+Also holds what ``keyfill pose`` shares with it: the output options, the
+run of an edit file and the report line.
+"""
 
 from __future__ import annotations
 
@@ -27,60 +31,42 @@ def describe(report) -> str:
     return where + text
 
 
-@click.command("edit-tangents")
-@click.argument("curves_path", metavar="CURVES", type=click.Path(dir_okay=False))
-@click.option(
-    "--edit",
-    "edit_path",
-    required=True,
-    type=click.Path(dir_okay=False),
-    help="Edit file (TOML): points to move, pins, contacts, limits, stiffness, timing edits.",
-)
-@click.option(
-    "-o",
-    "--output",
-    "dst",
-    required=True,
-    type=click.Path(dir_okay=False),
-    help="Output: a curves file (.usda, .usdc, .usd) or the baked motion (.bvh).",
-)
-@click.option(
-    "--solver",
-    default="daqp",
-    show_default=True,
-    help="QP backend: any solver installed for qpsolvers (daqp, quadprog, piqp, ...).",
-)
-@click.option(
-    "--best-effort",
-    is_flag=True,
-    help="Keep the closest result of an edit that cannot reach its target instead of failing.",
-)
-@click.option("--json", "as_json", is_flag=True, help="Print a per-edit report as JSON on stdout.")
-def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
-    """Move points of the character between keys by changing only curve tangents.
+def output_options(f):
+    """``-o``, ``--solver``, ``--best-effort`` and ``--json``, shared with ``keyfill pose``."""
+    f = click.option("--json", "as_json", is_flag=True, help="Print a per-edit report as JSON on stdout.")(f)
+    f = click.option(
+        "--best-effort",
+        is_flag=True,
+        help="Keep the closest result of an edit that cannot reach its target instead of failing.",
+    )(f)
+    f = click.option(
+        "--solver",
+        default="daqp",
+        show_default=True,
+        help="QP backend: any solver installed for qpsolvers (daqp, quadprog, piqp, ...).",
+    )(f)
+    return click.option(
+        "-o",
+        "--output",
+        "dst",
+        required=True,
+        type=click.Path(dir_okay=False),
+        help="Output: a curves file (.usda, .usdc, .usd) or the baked motion (.bvh).",
+    )(f)
 
-    CURVES is a keyfill curves file (make one with `keyfill convert dense.bvh
-    curves.usda --curves --keys 0,12,30`). Each edit of the TOML file drags a
-    point (joint + offset) at a frame between two keys toward a target while
-    pins, contacts, joint limits and stiffness hold (Ciccone et al. 2019).
-    Key times and values never change and no key is added. An edit that
-    cannot reach its target exits 1 naming the constraints in the way and
-    writes nothing, unless --best-effort. See docs/editing.md for the format.
 
-    \b
-    Examples:
-      keyfill edit-tangents walk.usda --edit reach.toml -o walk_edited.usda
-      keyfill edit-tangents walk.usda --edit reach.toml -o walk_edited.bvh --json
-    """
+def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, frame=None) -> None:
+    """Read the curves, apply the edit file (``mode`` "tangents" or "pose"), write and report."""
     from keyfill.edit import curvefile, edits, solve
     from keyfill.edit.qp import check_solver
     from keyfill.errors import InfeasibleError
 
     check_solver(solver)
     curves = curvefile.read(curves_path)
-    edit_file = edits.load(edit_path, curves, mode="tangents")
+    edit_file = edits.load(edit_path, curves, mode=mode, frame=frame)
+    apply = solve.edit_tangents if mode == "tangents" else solve.pose
     try:
-        result, reports = solve.edit_tangents(curves, edit_file, solver=solver, best_effort=best_effort)
+        result, reports = apply(curves, edit_file, solver=solver, best_effort=best_effort)
     except InfeasibleError as e:
         raise InfeasibleError(f"{e}; nothing written (--best-effort keeps the closest result)") from None
     curvefile.save(result, dst)
@@ -97,3 +83,32 @@ def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
     for r in reports:
         say(describe(r))
     say(f"wrote {dst}")
+
+
+@click.command("edit-tangents")
+@click.argument("curves_path", metavar="CURVES", type=click.Path(dir_okay=False))
+@click.option(
+    "--edit",
+    "edit_path",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Edit file (TOML): points to move, pins, contacts, limits, stiffness, timing edits.",
+)
+@output_options
+def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
+    """Move points of the character between keys by changing only curve tangents.
+
+    CURVES is a keyfill curves file (make one with `keyfill convert dense.bvh
+    curves.usda --curves --keys 0,12,30`). Each edit of the TOML file drags a
+    point (joint + offset) at a frame between two keys toward a target while
+    pins, contacts, joint limits and stiffness hold (Ciccone et al. 2019).
+    Key times and values never change and no key is added. An edit that
+    cannot reach its target exits 1 naming the constraints in the way and
+    writes nothing, unless --best-effort. See docs/editing.md for the format.
+
+    \b
+    Examples:
+      keyfill edit-tangents walk.usda --edit reach.toml -o walk_edited.usda
+      keyfill edit-tangents walk.usda --edit reach.toml -o walk_edited.bvh --json
+    """
+    run_edits("tangents", curves_path, edit_path, dst, solver, best_effort, as_json)

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, say
+from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labelled, say
 
 
 @click.command()
@@ -44,26 +43,11 @@ def plot(files, output, joints, channels, frames, positions, labels, keys_text, 
       keyfill plot walk.bvh --joints Hips,LowerLeg_L --channels Xrotation -o knee.pdf
       keyfill plot walk.bvh --positions --joints Hand_L --frames 0:120 -o hand.png
     """
-    from keyfill import io
-    from keyfill.cli.common import resolve_keys
-    from keyfill.errors import DataError, UsageError
     from keyfill.viz import PLOT_SUFFIXES, check_suffix
     from keyfill.viz.curves import plot as draw
 
     check_suffix(output, PLOT_SUFFIXES)
-    names = [Path(f).stem if f != "-" else "stdin" for f in files]
-    if labels is not None:
-        names = [t.strip() for t in labels.split(",")]
-        if len(names) != len(files):
-            raise UsageError(f"--labels gives {len(names)} names for {len(files)} files")
-    motions = []
-    for f in files:
-        motion = io.load(f, in_fmt)
-        if motion.num_frames == 0:
-            raise DataError(f"{f}: the motion has no frames")
-        if keys_text is not None or key_every is not None:
-            motion = motion.replace(keys=resolve_keys(motion, keys_text, key_every, min_keys=1))
-        motions.append(motion)
+    motions, names = load_labelled(files, labels, in_fmt, keys_text, key_every)
     info = draw(motions, names, output, joints=joints, channels=channels, frames=frames, positions=positions)
     if as_json:
         emit_json(info.as_dict())

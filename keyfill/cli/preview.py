@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, progress, say
+from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labelled, progress, say
 
 
 def _size(ctx, param, value):
@@ -57,26 +56,11 @@ def preview(files, output, view, frames, step, trail, fps, size, labels, keys_te
       keyfill preview before.usda after.usda --labels before,after --trail Hand_L -o hand_path.png
       keyfill preview examples/lamp/truth.usda --trail head -o lamp.gif --fps 15
     """
-    from keyfill import io
-    from keyfill.cli.common import resolve_keys
-    from keyfill.errors import DataError, UsageError
     from keyfill.viz import PREVIEW_SUFFIXES, check_suffix
     from keyfill.viz.stick import preview as draw
 
     check_suffix(output, PREVIEW_SUFFIXES)
-    names = [Path(f).stem if f != "-" else "stdin" for f in files]
-    if labels is not None:
-        names = [t.strip() for t in labels.split(",")]
-        if len(names) != len(files):
-            raise UsageError(f"--labels gives {len(names)} names for {len(files)} files")
-    motions = []
-    for f in files:
-        motion = io.load(f, in_fmt)
-        if motion.num_frames == 0:
-            raise DataError(f"{f}: the motion has no frames")
-        if keys_text is not None or key_every is not None:
-            motion = motion.replace(keys=resolve_keys(motion, keys_text, key_every, min_keys=1))
-        motions.append(motion)
+    motions, names = load_labelled(files, labels, in_fmt, keys_text, key_every)
     info = draw(motions, names, output, view=view, frames=frames, step=step, trail=trail, fps=fps, size=size,
                 progress=progress)
     if as_json:

@@ -169,6 +169,11 @@ def test_bad_training_options(dataset, capsys, tmp_path):
     assert code == 2 and "--epochs must be at least 1" in err
     code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "m", "--resume")
     assert code == 2 and "--resume: no checkpoint" in err
+    code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "missing" / "m")
+    assert code == 2 and "does not exist" in err
+    (tmp_path / "notes").mkdir()
+    code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "notes")
+    assert code == 2 and "is not a keyfill model; refusing to replace it" in err
 
 
 def test_evaluate_keys_protocol(model, dataset, capsys):

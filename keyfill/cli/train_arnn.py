@@ -84,6 +84,7 @@ def arnn(data, output, arch, epochs, batch_size, lr, curriculum, max_deleted, ke
         "arch": arch,
         "epochs": result.epochs,
         "seconds": round(result.seconds, 1),
+        "cpu_seconds": round(result.cpu_seconds, 1),
         "weights": result.weights,
         "held_out": result.val,
         "log": str(result.log),
@@ -94,5 +95,5 @@ def arnn(data, output, arch, epochs, batch_size, lr, curriculum, max_deleted, ke
     else:
         v = result.val
         say(f"wrote {result.path}: {arch}, {result.weights} weights, {result.epochs} epochs in "
-            f"{result.seconds / 60:.1f} min; held-out total loss {v['total']:.5f} (all keys), "
+            f"{result.seconds / 60:.1f} min ({result.cpu_seconds / 60:.1f} min of CPU); held-out total loss {v['total']:.5f} (all keys), "
             f"{v['deleted_total']:.5f} (1-2 keys deleted); log {result.log}")

@@ -406,9 +406,10 @@ def complete(motion, keys, options):
     positions = motion.positions.copy()
     positions[:, 0, :2] = out[:, :2]
     pred = motion.replace(rotations=from_variables(out, motion.fps).rotations, positions=positions, keys=keys)
-    residual = np.abs(span[k - k[0]] - key_values).max(axis=0)
+    residual = np.abs(wrap_angles(span[k - k[0]] - key_values)).max(axis=0)  # angles modulo a turn
     residual = {"position_m": float(residual[:2].max()), "angle_rad": float(residual[2:].max())}
-    info = {"model": str(path), "arch": model.arch, "exact_keys": bool(options.exact_keys)}
+    label = f"built-in {DEFAULT_MODEL.name}" if options.model is None else str(path)
+    info = {"model": label, "arch": model.arch, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
         pred, _ = snap_to_keys(pred, motion, keys)
         info["key_residual_removed"] = residual

@@ -33,7 +33,7 @@ the same data, settings, seed and thread count the model is the same bytes,
 also after ``resume``. Checkpoints (every ``checkpoint_every`` epochs) hold the
 weights, the optimiser, the generator state and the epoch; the log (JSONL, one
 row per epoch) holds the losses on the training batches and on a held-out
-split with all keys and with 1-2 keys deleted.
+split with all keys and with 1-2 keys deleted, and the wall and CPU seconds so far.
 """
 
 from __future__ import annotations
@@ -203,6 +203,7 @@ class Result:
     path: Path
     epochs: int
     seconds: float
+    cpu_seconds: float
     val: dict
     weights: int
     log: Path | None
@@ -233,6 +234,7 @@ def train(
     Raises :class:`TrainingDiverged` (keeping the last good checkpoint) when a loss is not finite.
     """
     settings.check()
+    _check_outputs(output, checkpoint, log)
     if not train_set:
         raise DataError("no training sequences")
     if not val_set:
@@ -249,7 +251,7 @@ def train(
     net = arnn.build(settings.arch, gen, **settings.sizes)
     opt = torch.optim.Adam(net.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
     schedule = Schedule(settings.epochs, settings.curriculum)
-    start, rows, seconds = 0, [], 0.0
+    start, rows, seconds, cpu = 0, [], 0.0, 0.0
     last_good = None
 
     if resume:
@@ -266,7 +268,7 @@ def train(
         load_state(net, state["net"], checkpoint)
         opt.load_state_dict(state["optim"])
         gen.set_state(state["generator"])
-        start, seconds = int(state["epoch"]), float(state["seconds"])
+        start, seconds, cpu = int(state["epoch"]), float(state["seconds"]), float(state["cpu_seconds"])
         rows = _read_log(log, start) if log is not None else []
         last_good = (checkpoint, start)
 
@@ -274,7 +276,7 @@ def train(
         _write_log(log, rows)
     N = len(train_set)
     for epoch in range(start, settings.epochs):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         tf, omega = schedule.teacher_forcing(epoch), schedule.omega(epoch)
         for group in opt.param_groups:
             group["lr"] = settings.lr * schedule.lr_scale(epoch)
@@ -301,6 +303,7 @@ def train(
         sums /= N
         held_out = validate(net, val, len(val_set))
         seconds += time.perf_counter() - t0
+        cpu += time.process_time() - c0
         row = {
             "epoch": epoch + 1,
             "teacher_forcing": round(tf, 6),
@@ -312,6 +315,7 @@ def train(
             "train_total": sums[1] + sums[2],
             **{f"val_{k}": v for k, v in held_out.items()},
             "seconds": round(seconds, 3),
+            "cpu_seconds": round(cpu, 3),
         }
         if not all(math.isfinite(v) for v in row.values()):
             raise _diverged(epoch, "the held-out loss is not finite", last_good)
@@ -321,7 +325,7 @@ def train(
         if on_epoch is not None:
             on_epoch(row)
         if checkpoint is not None and ((epoch + 1) % settings.checkpoint_every == 0 or epoch + 1 == settings.epochs):
-            write_checkpoint(checkpoint, net, opt, gen, epoch + 1, seconds, settings, fingerprint)
+            write_checkpoint(checkpoint, net, opt, gen, epoch + 1, (seconds, cpu), settings, fingerprint)
             last_good = (checkpoint, epoch + 1)
 
     final = rows[-1] if rows else {}
@@ -332,6 +336,7 @@ def train(
         "val_sequences": len(val_set),
         "epochs": settings.epochs,
         "seconds": round(seconds, 1),
+        "cpu_seconds": round(cpu, 1),
         "threads": torch.get_num_threads(),
         "val": {k[4:]: v for k, v in final.items() if k.startswith("val_")},
     }
@@ -339,8 +344,21 @@ def train(
 
     config = arnn.model_config(net, normalizer, settings.sizes, training)
     path = save_model(output, arnn.KIND, net.state_dict(), config)
-    return Result(path, settings.epochs, seconds, training["val"], arnn.num_weights(net),
+    return Result(path, settings.epochs, seconds, cpu, training["val"], arnn.num_weights(net),
                   Path(log) if log is not None else None)
+
+
+def _check_outputs(output, checkpoint, log) -> None:
+    """Refuse outputs that could not be written, before training rather than after."""
+    from keyfill.learn.modelfile import CONFIG
+
+    for path in (output, checkpoint, log):
+        if path is not None:
+            parent = Path(path).parent
+            if not parent.is_dir():
+                raise UsageError(f"{path}: the folder {str(parent)!r} does not exist")
+    if Path(output).exists() and not (Path(output) / CONFIG).is_file():
+        raise UsageError(f"{output}: exists and is not a keyfill model; refusing to replace it")
 
 
 def _diverged(epoch: int, what: str, last_good) -> TrainingDiverged:
@@ -371,7 +389,8 @@ def validate(net: arnn.Completer, val: Batch, n_all: int) -> dict:
 # --- checkpoints and the log -------------------------------------------------------------------------
 
 
-def write_checkpoint(path, net, opt, gen, epoch: int, seconds: float, settings: Settings, data: str) -> None:
+def write_checkpoint(path, net, opt, gen, epoch: int, seconds: tuple[float, float], settings: Settings,
+                     data: str) -> None:
     """Atomically write a checkpoint (tensors, numbers and strings only: read back with ``weights_only=True``)."""
     from keyfill.io import atomic_output
 
@@ -381,7 +400,8 @@ def write_checkpoint(path, net, opt, gen, epoch: int, seconds: float, settings: 
         "optim": opt.state_dict(),
         "generator": gen.get_state(),
         "epoch": epoch,
-        "seconds": seconds,
+        "seconds": seconds[0],
+        "cpu_seconds": seconds[1],
         "settings": json.dumps(asdict(settings), sort_keys=True),
         "data": data,
     }

@@ -204,3 +204,36 @@ def test_large_file_parses_in_bulk(tmp_path: Path):
     again = bvh.parse(text)
     assert again.num_frames == 10_000
     assert_same_motion(big, again, rot_tol=1e-9, pos_tol=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    columns=st.lists(
+        st.one_of(
+            st.floats(-1e6, 1e6, allow_nan=False),  # a column that may be constant
+            st.tuples(st.floats(-1e3, 1e3, allow_nan=False), st.floats(-1e-9, 1e-9, allow_nan=False)),
+            st.just("signed zeros"),
+        ),
+        min_size=1,
+        max_size=8,
+    ),
+    frames=st.integers(1, 6),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_line_template_prints_every_value_as_percent_12g(columns, frames, seed):
+    """Constant columns folded into the line template print exactly as per-value %.12g would."""
+    rng = np.random.default_rng(seed)
+    cols = []
+    for c in columns:
+        if c == "signed zeros":  # 0.0 and -0.0 print differently
+            cols.append(np.copysign(np.zeros(frames), rng.choice([1.0, -1.0], frames)))
+        elif isinstance(c, tuple):  # nearly constant: tiny noise, possibly flipping the sign of zero
+            base, eps = c
+            cols.append(base + eps * rng.standard_normal(frames) * rng.integers(0, 2, frames))
+        else:
+            cols.append(np.full(frames, c) * rng.choice([1.0, -1.0]) if rng.random() < 0.2 else np.full(frames, c))
+    values = np.stack(cols, axis=1)
+    line, varying = bvh._line_template(values)
+    got = [line % tuple(row) for row in values[:, varying].tolist()]
+    want = [" ".join(bvh.NUMBER_FORMAT % v for v in row) for row in values.tolist()]
+    assert got == want

@@ -17,7 +17,10 @@ demo: $(STAMP)
 	@mkdir -p $(OUT)
 	$(BIN)/keyfill complete examples/mixamo_keys.usda -o $(OUT)/mixamo_cubic.usda --method cubic
 	$(BIN)/keyfill convert $(OUT)/mixamo_cubic.usda $(OUT)/mixamo_cubic.bvh
-	@echo "demo: completed examples/mixamo_keys.usda; results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh)"
+	$(BIN)/keyfill complete examples/lamp/keys.usda -o $(OUT)/lamp_arnn.usda --method arnn
+	$(BIN)/keyfill complete examples/lamp/keys.usda -o $(OUT)/lamp_cubic.usda --method cubic
+	$(BIN)/keyfill plot examples/lamp/truth.usda $(OUT)/lamp_cubic.usda $(OUT)/lamp_arnn.usda --labels truth,cubic,arnn -o $(OUT)/lamp_arnn.png
+	@echo "demo: completed examples/mixamo_keys.usda (cubic) and examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -4,9 +4,12 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.keyfill-installed
+# Blender's bpy wheel (for `make test-interop`) lives in its own venv: it pins its own numpy.
+BLENDER_VENV := .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop benchmarks clean
+.PHONY: demo test test-slow test-interop clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -28,8 +31,13 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
 
-test-interop: $(STAMP)
+$(BLENDER_STAMP):
+	$(PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check bpy==5.0.1
+	@touch $(BLENDER_STAMP)
+
+test-interop: $(STAMP) $(BLENDER_STAMP)
 	$(BIN)/python -m pytest -q -m interop
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) $(BLENDER_VENV) out .pytest_cache

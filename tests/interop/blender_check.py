@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 BLENDER_PYTHON = ROOT / ".venv-blender" / "bin" / "python"
 SCRIPT = Path(__file__).with_name("blender_world_positions.py")
 #: how to install the side venv (also quoted in skip messages)
-INSTALL = "python3.11 -m venv .venv-blender && .venv-blender/bin/pip install bpy"
+INSTALL = "`make test-interop`, which installs bpy==5.0.1 there"
 
 
 def blender_missing() -> str | None:

@@ -16,11 +16,12 @@ unknown frames, 1 target key: 41 frames in, 30 of them generated):
   rotations, frame restored).
 
 The model is the paper's size (8 layers, d_model 256, FFN 512, 8 heads) with
-random weights unless ``--model`` names a trained file: the time does not
-depend on the weights. Threads: torch's default (one per core) and 1.
+random weights unless ``--model`` names a trained model folder: the time does
+not depend on the weights, only on the model's size. Threads: torch's default
+(one per core) and 1.
 
     .venv/bin/python benchmarks/bench_transformer.py
-    .venv/bin/python benchmarks/bench_transformer.py --model runs/bandai2/model.safetensors --repeat 200 --json
+    .venv/bin/python benchmarks/bench_transformer.py --model data/models/bandai2-transformer --repeat 200 --json
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ def median_ms(fn, repeat: int) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--model", help="a trained model file (default: paper-size model with random weights)")
+    ap.add_argument("--model", help="a trained model folder (default: paper-size model with random weights)")
     ap.add_argument("--repeat", type=int, default=100, help="timed calls per figure (default 100)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
@@ -93,13 +94,16 @@ def main(argv=None) -> int:
             x = torch.randn(batch, frames, model.features.size)
             kinds = torch.as_tensor(T.frame_kinds(frames, keys)).expand(batch, frames)
 
-            def network():
+            def network(x=x, kinds=kinds):
                 with torch.inference_mode():
                     model.network(x, kinds)
 
+            def complete(q=q, r=r):
+                model.complete_windows(q, r, keys)
+
             results[(threads, batch)] = {
                 "network_ms": median_ms(network, args.repeat),
-                "complete_ms": median_ms(lambda: model.complete_windows(q, r, keys), args.repeat),
+                "complete_ms": median_ms(complete, args.repeat),
             }
     torch.set_num_threads(default_threads)
     load_after = os.getloadavg()

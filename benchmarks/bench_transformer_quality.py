@@ -1,12 +1,12 @@
 """Quality of a trained transformer on Bandai-Namco dataset-2 against the baselines and SSMCT's goal.
 
-The table of docs/benchmarks.md (transformer section), from a model trained with
-the `normal` style held out::
+The table of docs/benchmarks/transformer.md, from a model trained with the
+`normal` style held out::
 
-    nice -n 10 .venv/bin/keyfill train transformer data/bandai2/bandai_namco_motiondataset2/data \\
-        --exclude '*_normal_*' -o runs/bandai2/model.safetensors \\
-        --config benchmarks/bench_transformer_bandai2.json --seed 0 --threads 1
-    .venv/bin/python benchmarks/bench_transformer_quality.py runs/bandai2/model.safetensors
+    .venv/bin/keyfill train transformer data/bandai2/bandai_namco_motiondataset2/data \\
+        --exclude '*_normal_*' -o data/models/bandai2-transformer \\
+        --config benchmarks/bench_transformer_bandai2.json --seed 0
+    .venv/bin/python benchmarks/bench_transformer_quality.py data/models/bandai2-transformer
 
 1. LaFAN1 in-betweening (Harvey et al. 2020) on the `normal` clips (test
    windows 65/40), statistics from the other styles (50/20), root folded into
@@ -54,7 +54,7 @@ def ssmct_ratio(metric: str, n: int) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("model", help="a model trained with the normal style held out")
+    ap.add_argument("model", help="a model folder trained with the normal style held out")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
     try:

@@ -5,13 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synthetic_corpus import write_corpus
 
 from keyfill import rotations as R
 from keyfill.cli.main import main
 from keyfill.errors import DataError, UsageError
 from keyfill.learn import benchmark as B
 from keyfill.learn.corpus import load_corpus
-from synthetic_corpus import write_corpus
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 EXPECTED = SHARED / "golden" / "bandai1_lafan_protocol_expected.json"
@@ -72,6 +72,7 @@ def test_baselines_on_any_key_layout():
     np.testing.assert_array_equal(pr[:, 12], r[:, 10])  # after the last key: hold it
     zq, zr = B.zero_velocity(None, q, r, keys)
     np.testing.assert_array_equal(zr[:, 5:10], np.repeat(r[:, 4:5], 5, axis=1))
+    np.testing.assert_array_equal(zq[:, 5:10], np.repeat(q[:, 4:5], 5, axis=1))
     np.testing.assert_array_equal(zr[:, [1, 4, 10, 11]], r[:, [1, 4, 10, 10]])
 
 

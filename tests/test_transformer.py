@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from synthetic_corpus import walker_motion, walker_skeleton, write_corpus
 
 from keyfill import io
 from keyfill import rotations as R
@@ -13,7 +14,6 @@ from keyfill.errors import ModelError, UsageError
 from keyfill.learn import transformer as T
 from keyfill.learn.corpus import load_corpus
 from keyfill.learn.train_transformer import TrainConfig, learning_rate, make_batch, sample_layout, train
-from synthetic_corpus import walker_motion, walker_skeleton, write_corpus
 
 TINY = T.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0, max_frames=65)
 TINY_TRAINING = TrainConfig(epochs=2, batch_size=16, lr=2e-3, warmup_epochs=0.2, decay_every=1, window=65,
@@ -48,7 +48,7 @@ def corpus(corpus_dir):
 
 @pytest.fixture(scope="module")
 def trained(corpus, tmp_path_factory):
-    out = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    out = tmp_path_factory.mktemp("model") / "tiny"
     model = train(corpus, out, TINY, TINY_TRAINING, seed=0)
     return out, model
 
@@ -78,6 +78,25 @@ def test_mixture_embedding_selects_position_and_kind_rows():
             want = net.position.weight[t] + net.keyframe.weight[kinds[b, t]]
             assert torch.equal(emb[b, t], want)
     assert not torch.equal(net.keyframe.weight[T.KEY], net.keyframe.weight[T.UNKNOWN])
+
+
+def test_only_key_and_unknown_frames_carry_loss(corpus):
+    torch.manual_seed(0)
+    model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    q, r, _, _ = corpus.windows(65, 20)
+    x, y, gq, gr, kinds = make_batch(model, q[:4], r[:4], np.append(np.arange(10), 30), 36)
+    assert (kinds[:, :10] == T.KEY).all() and (kinds[:, 10:30] == T.UNKNOWN).all() and (kinds[:, 30] == T.KEY).all()
+    assert (kinds[:, 31:] == T.IGNORED).all()
+    with torch.no_grad():
+        pred = model.network(x, kinds)
+        base = T.losses(model.features, pred, y, gq, gr, kinds, TINY)["total"]
+        moved = pred.clone()
+        moved[:, 31:] += 3.0  # ignored frames: no effect
+        assert torch.equal(T.losses(model.features, moved, y, gq, gr, kinds, TINY)["total"], base)
+        for frame in (5, 20, 30):  # key and unknown frames count
+            moved = pred.clone()
+            moved[:, frame] += 3.0
+            assert T.losses(model.features, moved, y, gq, gr, kinds, TINY)["total"] > base + 1e-3
 
 
 def test_sampled_layouts_fit_the_window():
@@ -136,24 +155,25 @@ def test_a_few_training_steps_reduce_the_loss(corpus, coordinates, residual, ste
 
 def test_training_is_deterministic_and_resumable(corpus, tmp_path):
     cfg = TrainConfig(**{**TINY_TRAINING.__dict__, "epochs": 2, "val_fraction": 0.0})
-    a = train(corpus, tmp_path / "a.safetensors", TINY, cfg, seed=5)
-    b = train(corpus, tmp_path / "b.safetensors", TINY, TrainConfig(**{**cfg.__dict__, "epochs": 1}), seed=5)
-    b = train(corpus, tmp_path / "b.safetensors", TINY, cfg, seed=5, resume=True)
+    a = train(corpus, tmp_path / "a", TINY, cfg, seed=5)
+    b = train(corpus, tmp_path / "b", TINY, TrainConfig(**{**cfg.__dict__, "epochs": 1}), seed=5)
+    b = train(corpus, tmp_path / "b", TINY, cfg, seed=5, resume=True)
     for (k, va), vb in zip(a.network.state_dict().items(), b.network.state_dict().values()):
         assert torch.equal(va, vb), k
-    assert (tmp_path / "a.safetensors").read_bytes() == (tmp_path / "b.safetensors").read_bytes()
+    for name in ("config.json", "weights.safetensors"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
     log = [json.loads(line) for line in (tmp_path / "b.log.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in log] == [1, 2]
     with pytest.raises(UsageError, match="--seed 5, now 6"):
-        train(corpus, tmp_path / "b.safetensors", TINY, cfg, seed=6, resume=True)
+        train(corpus, tmp_path / "b", TINY, cfg, seed=6, resume=True)
 
 
 def test_training_logs_validation_scores(trained):
     out, model = trained
-    log = [json.loads(line) for line in out.with_suffix(".log.jsonl").read_text().splitlines()]
+    log = [json.loads(line) for line in out.with_name("tiny.log.jsonl").read_text().splitlines()]
     assert len(log) == 2 and {"val_L2P_5", "val_L2Q_15", "val_NPSS_15", "val_L2P_15_vs_interp"} <= set(log[-1])
     assert model.info["validation_clips"] == 2
-    assert out.with_suffix(".ckpt").is_file()
+    assert out.with_name("tiny.checkpoint.pt").is_file()
 
 
 # --- using a model -------------------------------------------------------------------
@@ -194,6 +214,22 @@ def test_save_and_load_give_the_same_completion(trained, corpus):
     assert again.skeleton.names == corpus.skeleton.names and again.folded
 
 
+@pytest.mark.parametrize("keys", [list(range(10)) + [40], list(range(0, 60, 6)), list(range(10)) + list(range(45, 60))],
+                         ids=["inbetween", "infill", "blend"])
+def test_keys_are_exact_in_every_layout(trained, keys):
+    from keyfill.learn.methods import CompleteOptions, complete
+    from keyfill.motion import Keys
+
+    out, _ = trained
+    motion = walker_motion(walker_skeleton(), 60, np.random.default_rng(4))
+    result = complete(motion, Keys(np.array(keys)), "transformer", CompleteOptions(model=str(out)))
+    got = result.motion
+    np.testing.assert_allclose(got.positions[keys], motion.positions[keys], atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(got.rotations[keys] * motion.rotations[keys], -1)), 1.0, atol=1e-12)
+    between = np.setdiff1d(np.arange(keys[0], keys[-1] + 1), keys)
+    assert not np.allclose(got.positions[between, 1], motion.positions[between, 1], atol=1e-3)  # generated
+
+
 def test_spans_cut_long_key_ranges():
     assert T.spans([0, 10, 30, 60, 90], 65) == [(0, 60), (60, 90)]
     assert T.spans([0, 64], 65) == [(0, 64)]
@@ -230,46 +266,101 @@ def test_model_for_another_skeleton_is_refused(trained, tmp_path, capsys):
     assert not (tmp_path / "o.bvh").exists()
 
 
-def test_damaged_or_foreign_files_are_refused(trained, tmp_path):
-    out, _ = trained
-    junk = tmp_path / "junk.safetensors"
-    junk.write_bytes(b"\x00" * 100)
-    with pytest.raises(ModelError, match="not a keyfill model"):
-        T.load_model(junk)
-    cut = tmp_path / "cut.safetensors"
-    cut.write_bytes(out.read_bytes()[: len(out.read_bytes()) // 2])
-    with pytest.raises(ModelError, match="damaged|not a keyfill model"):
-        T.load_model(cut)
-    from safetensors.torch import save_file
+def test_the_model_is_a_keyfill_model_folder(trained, corpus):
+    out, model = trained
+    assert sorted(p.name for p in out.iterdir()) == ["config.json", "weights.safetensors"]
+    config = json.loads((out / "config.json").read_text())
+    assert config["format"] == "keyfill-model" and config["kind"] == "transformer"
+    assert config["skeleton"]["names"] == list(corpus.skeleton.names) and config["folded_root"]
+    assert config["architecture"]["layers"] == TINY.layers and config["training"]["epochs"] == 2
+    from keyfill.learn.modelfile import check_skeleton
 
-    plain = tmp_path / "plain.safetensors"
-    save_file({"w": torch.zeros(2)}, str(plain))
-    with pytest.raises(ModelError, match="not a keyfill model \\(no keyfill metadata\\)"):
-        T.load_model(plain)
-    pickle = tmp_path / "model.pt"
-    torch.save({"x": 1}, pickle)
-    with pytest.raises(ModelError, match="not a keyfill model"):
-        T.load_model(pickle)
+    check_skeleton(config, corpus.skeleton, out)  # the check every learned method shares
+    model.save(out)  # saving again replaces the model with the same bytes
+    assert json.loads((out / "config.json").read_text()) == config
+
+
+def test_damaged_or_foreign_models_are_refused(trained, tmp_path):
+    import shutil
+
+    out, _ = trained
+    with pytest.raises(ModelError, match="no such model"):
+        T.load_model(tmp_path / "missing")
+    junk = tmp_path / "junk.safetensors"  # a model file of the old one-file format, or any file
+    junk.write_bytes(b"\x00" * 100)
+    with pytest.raises(ModelError, match="not a keyfill model \\(expected a folder with config.json"):
+        T.load_model(junk)
+    cut = tmp_path / "cut"
+    shutil.copytree(out, cut)
+    weights = (cut / "weights.safetensors").read_bytes()
+    (cut / "weights.safetensors").write_bytes(weights[: len(weights) // 2])
+    with pytest.raises(ModelError, match="damaged or truncated weights"):
+        T.load_model(cut)
+    bad = tmp_path / "bad"
+    shutil.copytree(out, bad)
+    config = json.loads((bad / "config.json").read_text())
+    del config["statistics"]
+    (bad / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ModelError, match="bad: damaged transformer model config"):
+        T.load_model(bad)
+    config = json.loads((out / "config.json").read_text())
+    (bad / "config.json").write_text(json.dumps({**config, "kind": "arnn"}))
+    with pytest.raises(ModelError, match="a 'arnn' model, not a 'transformer' model"):
+        T.load_model(bad)
+    config["architecture"]["layers"] = 3
+    (bad / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ModelError, match="the weights do not fit the model's configuration"):
+        T.load_model(bad)
+
+
+def test_a_model_of_another_kind_is_one_clear_error(trained, tmp_path, capsys):
+    from keyfill.learn.arnn import DEFAULT_MODEL
+
+    out, _ = trained
+    src = tmp_path / "walk.bvh"
+    io.save(walker_motion(walker_skeleton(), 40, np.random.default_rng(2)), src)
+    args = ["complete", str(src), "-o", str(tmp_path / "o.bvh"), "--keys", "0,20,39"]
+    assert main([*args, "--method", "transformer", "--model", str(DEFAULT_MODEL)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"keyfill: error: {DEFAULT_MODEL}: a model of kind 'arnn', not 'transformer'; complete with --method arnn"
+    assert main([*args, "--method", "arnn", "--model", str(out)]) == 2
+    assert capsys.readouterr().err.strip().endswith("a model of kind 'transformer', not 'arnn'; complete with --method transformer")
+    assert main(["evaluate", str(out), str(tmp_path), "--protocol", "keys"]) == 2
+    assert capsys.readouterr().err.strip() == (f"keyfill: error: {out}: a model of kind 'transformer' is scored "
+                                               "with --protocol lafan1, not keys")
+    assert main(["evaluate", str(DEFAULT_MODEL), str(tmp_path), "--protocol", "lafan1"]) == 2
+    assert "a model of kind 'arnn' is scored with --protocol keys, not lafan1" in capsys.readouterr().err
+    assert not (tmp_path / "o.bvh").exists()
 
 
 def test_cli_train_transformer(corpus_dir, tmp_path, capsys):
     config = tmp_path / "tiny.json"
     config.write_text(json.dumps({"model": {k: v for k, v in TINY.__dict__.items()},
                                   "training": {**TINY_TRAINING.__dict__, "epochs": 1}}))
-    out = tmp_path / "m.safetensors"
-    code = main(["-q", "train", "transformer", str(corpus_dir), "-o", str(out), "--config", str(config),
+    out = tmp_path / "m"
+    code = main(["-q", "train", "transformer", str(corpus_dir), "-o", str(out) + "/", "--config", str(config),
                  "--exclude", "*_calm_*", "--json"])
     assert code == 0, capsys.readouterr().err
     info = json.loads(capsys.readouterr().out)
-    assert info["corpus_clips"] == 8 and info["epochs"] == 1 and out.is_file()
+    assert info["corpus_clips"] == 8 and info["epochs"] == 1 and (out / "config.json").is_file()
+    assert info["checkpoint"] == str(tmp_path / "m.checkpoint.pt") and info["log"] == str(tmp_path / "m.log.jsonl")
+    assert (tmp_path / "m.checkpoint.pt").is_file() and (tmp_path / "m.log.jsonl").is_file()
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert main(["train", "transformer", str(empty), "-o", str(tmp_path / "x.safetensors")]) == 1
+    assert main(["train", "transformer", str(empty), "-o", str(tmp_path / "x")]) == 1
     assert "keyfill: error: no BVH files in" in capsys.readouterr().err
     bad = tmp_path / "bad.json"
     bad.write_text('{"model": {"layers": 2, "colour": 3}}')
-    assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x.safetensors"), "--config", str(bad)]) == 2
+    assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x"), "--config", str(bad)]) == 2
     assert "colour" in capsys.readouterr().err
+    # an output that is not a model is refused before any training, and left alone
+    (empty / "notes.txt").write_text("mine")
+    assert main(["train", "transformer", str(corpus_dir), "-o", str(empty), "--config", str(config)]) == 2
+    assert capsys.readouterr().err.strip() == (f"keyfill: error: {empty}: exists and is not a keyfill model; "
+                                               "refusing to replace it")
+    assert [p.name for p in empty.iterdir()] == ["notes.txt"] and not (tmp_path / "empty.log.jsonl").exists()
+    assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "nowhere" / "m")]) == 2
+    assert "the output folder" in capsys.readouterr().err
 
 
 def test_cli_evaluate_a_model(trained, corpus_dir, capsys):

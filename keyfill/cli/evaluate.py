@@ -40,6 +40,34 @@ def _lafan1(method_or_model, data, test_pattern, train_pattern, lengths, fold_ro
 
 #: protocol name -> function; a new protocol is one more entry and one library call.
 PROTOCOLS = {"lafan1": _lafan1}
+#: model kind (``config.json`` of a model folder) -> the protocol that scores it
+PROTOCOL_OF_KIND = {"transformer": "lafan1", "arnn": "keys"}
+#: method names of both protocols (never read as paths)
+METHOD_NAMES = ("zero-velocity", "linear", "interpolation", "cubic", "cubic-variables", "arnn")
+
+
+def _model_kind(method_or_model: str) -> str | None:
+    """The kind of the model folder METHOD_OR_MODEL, or None for a method name or a missing path."""
+    from pathlib import Path
+
+    if method_or_model in METHOD_NAMES or not Path(method_or_model).exists():
+        return None
+    from keyfill.learn.modelfile import read_config
+
+    return read_config(method_or_model)["kind"]
+
+
+def _protocol(method_or_model: str, data, protocol: str | None) -> str:
+    """The protocol to run: as asked, else the one for the model's kind, else the one for DATA."""
+    kind = _model_kind(method_or_model)
+    if kind is not None and kind not in PROTOCOL_OF_KIND:
+        raise UsageError(f"{method_or_model}: keyfill evaluate cannot score {kind!r} models")
+    want = PROTOCOL_OF_KIND.get(kind)
+    if protocol is None:
+        protocol = want or ("keys" if _is_lamp_dataset(data) else "lafan1")
+    if want is not None and protocol != want:
+        raise UsageError(f"{method_or_model}: a model of kind {kind!r} is scored with --protocol {want}, not {protocol}")
+    return protocol
 
 
 def _is_lamp_dataset(data) -> bool:
@@ -94,22 +122,23 @@ def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengt
     """Score METHOD_OR_MODEL on the BVH clips in DATA (files or folders).
 
     METHOD_OR_MODEL is zero-velocity, linear (the protocol's interpolation:
-    LERP of the root, SLERP of rotations), cubic, or the path of a model file
-    written by 'keyfill train'. Test and training clips are chosen by file
-    name; the table shows L2Q, L2P and NPSS over the transition frames, and the
-    scores relative to interpolation.
+    LERP of the root, SLERP of rotations), cubic, or a model folder written by
+    'keyfill train' (a transformer model is scored with the lafan1 protocol,
+    an ARNN model with the keys protocol). Test and training clips are chosen
+    by file name; the table shows L2Q, L2P and NPSS over the transition
+    frames, and the scores relative to interpolation.
 
     \b
     Examples:
       keyfill evaluate linear lafan1/ --lengths 5,15,30
-      keyfill evaluate model.safetensors bandai1/data --test-pattern '*_happy_*' \\
+      keyfill evaluate models/bandai1-transformer bandai1/data --test-pattern '*_happy_*' \\
           --test-pattern '*_tired_*' --fold-root
       keyfill evaluate cubic bandai2/data --test-pattern '*_normal_*' --json
       keyfill evaluate arnn data/hops          (lamp models: the keys protocol)
     """
-    if protocol == "keys" or (protocol is None and _is_lamp_dataset(data)):
+    protocol = _protocol(method_or_model, data, protocol)
+    if protocol == "keys":
         return _keys(method_or_model, data, baselines, as_json)
-    protocol = protocol or "lafan1"
     from keyfill.learn import benchmark
 
     results, info = PROTOCOLS[protocol](method_or_model, data, test_pattern, train_pattern, _lengths(lengths),

@@ -19,6 +19,7 @@ def train():
 
     \b
     Examples:
-      keyfill train transformer bandai2/data --exclude '*_normal_*' -o model.safetensors
-      keyfill train transformer clips/ -o model.safetensors --config small.json --epochs 5
+      keyfill train transformer bandai2/data --exclude '*_normal_*' -o models/bandai2-transformer
+      keyfill train transformer clips/ -o models/small --config small.json --epochs 5
+      keyfill train arnn data/hops -o models/lamp-arnn
     """

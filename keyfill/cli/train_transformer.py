@@ -9,13 +9,14 @@ from keyfill.cli.common import emit_json, progress, say
 
 @click.command()
 @click.argument("data", nargs=-1, required=True, type=click.Path(exists=True))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Model file to write (.safetensors); a checkpoint (.ckpt) and a log (.log.jsonl) go beside it.")
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
+              help="Model folder to write (config.json + weights.safetensors; replaced if it is a model). "
+                   "The checkpoint OUTPUT.checkpoint.pt and the log OUTPUT.log.jsonl go beside it.")
 @click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False),
               help='JSON file {"model": {...}, "training": {...}} overriding the defaults (see docs/transformer.md).')
 @click.option("--epochs", type=int, help="Number of epochs (overrides the config).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of every random choice (same seed, same model).")
-@click.option("--resume", is_flag=True, help="Continue from the checkpoint beside the output.")
+@click.option("--resume", is_flag=True, help="Continue from OUTPUT.checkpoint.pt (same data, settings and seed).")
 @click.option("--device", default="cpu", show_default=True, help="Torch device: cpu, cuda, cuda:1, ...")
 @click.option("--threads", type=int, help="CPU threads for torch (1 is fastest on a busy machine).")
 @click.option("--include", multiple=True, metavar="GLOB", help="Train only on files matching one of these patterns.")
@@ -33,16 +34,16 @@ def transformer(data, output, config_file, epochs, seed, resume, device, threads
 
     \b
     Examples:
-      keyfill train transformer bandai2/data --exclude '*_normal_*' -o runs/t/model.safetensors
-      keyfill train transformer clips/ -o model.safetensors --config small.json --epochs 3 --seed 1
-      keyfill train transformer clips/ -o model.safetensors --resume
+      keyfill train transformer bandai2/data --exclude '*_normal_*' -o models/bandai2-transformer
+      keyfill train transformer clips/ -o models/small --config small.json --epochs 3 --seed 1
+      keyfill train transformer clips/ -o models/small --config small.json --epochs 3 --seed 1 --resume
     """
     import dataclasses
 
     import torch
 
     from keyfill.learn.corpus import load_corpus
-    from keyfill.learn.train_transformer import read_config, select_clips, train
+    from keyfill.learn.train_transformer import read_config, select_clips, side_files, train
 
     if threads is not None:
         torch.set_num_threads(threads)
@@ -61,10 +62,12 @@ def transformer(data, output, config_file, epochs, seed, resume, device, threads
             f"({info['clips_too_short']} clips shorter than a window skipped), "
             f"validating on {info['validation_clips']} clips; mirroring {'on' if info['mirrored'] else 'off'}")
 
+    output = output.rstrip("/") or output
     model = train(corpus, output, model_cfg, train_cfg, seed=seed, device=device, resume=resume,
                   progress=lambda **kw: progress(**kw), report=None if as_json else report,
                   started=None if as_json else started)
+    checkpoint, log = side_files(output)
     if as_json:
-        emit_json({"output": output, **model.info})
+        emit_json({"output": output, "checkpoint": str(checkpoint), "log": str(log), **model.info})
     else:
-        say(f"wrote {output}")
+        say(f"wrote {output} (checkpoint {checkpoint}, log {log})")

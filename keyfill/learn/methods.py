@@ -71,12 +71,24 @@ def get(name: str):
     return getattr(importlib.import_module(module), attr)
 
 
+def _check_kind(model: str, method: str) -> None:
+    """A model folder made for another method is a usage error that names the right method."""
+    from keyfill.learn.modelfile import read_config
+
+    kind = read_config(model)["kind"]
+    if kind != method:
+        hint = f"; complete with --method {kind}" if kind in METHODS else ""
+        raise UsageError(f"{model}: a model of kind {kind!r}, not {method!r}{hint}")
+
+
 def complete(motion: Motion, keys: Keys, method: str = "cubic", options: CompleteOptions | None = None) -> Completion:
     """Fill the frames between ``keys`` of ``motion`` with ``method``."""
     options = options or CompleteOptions()
     keys = keys.check(motion.num_frames, min_keys=2)
     if method in SPLINES and options.model is not None:
         raise UsageError(f"--model applies to learned methods, not to {method!r}")
+    if options.model is not None:
+        _check_kind(options.model, method)
     result = get(method)(motion, keys, options)
     result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
     return result

@@ -34,9 +34,9 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -95,7 +95,7 @@ class TrainConfig:
     def __post_init__(self):
         bad = set(self.layouts) - set(LAYOUTS)
         if bad:
-            raise UsageError(f"unknown key layout {sorted(bad)[0]!r}; layouts are {', '.join(LAYOUTS)}")
+            raise UsageError(f"unknown key layout {min(bad)!r}; layouts are {', '.join(LAYOUTS)}")
         if self.window < 2 * benchmark.N_PAST + 1:
             raise UsageError(f"training windows of {self.window} frames are too short (at least 21)")
         if self.epochs < 1 or self.batch_size < 1:
@@ -114,7 +114,7 @@ def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfi
         raise UsageError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
     unknown = set(data) - {"model", "training"}
     if unknown:
-        raise UsageError(f"{path}: unknown section {sorted(unknown)[0]!r}; sections are 'model' and 'training'")
+        raise UsageError(f"{path}: unknown section {min(unknown)!r}; sections are 'model' and 'training'")
     try:
         model = ModelConfig(**data.get("model", {}))
         train = TrainConfig(**{k: tuple(v) if k == "val_lengths" else v for k, v in data.get("training", {}).items()})
@@ -172,7 +172,10 @@ def make_batch(model: CompletionModel, quats: np.ndarray, root: np.ndarray, keys
     q, r = apply_transform(q, r, turn, shift)
     pq, pr = benchmark.interpolation(None, q, r, keys)
     dev = model.device
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32, device=dev)  # noqa: E731
+
+    def t(a):
+        return torch.as_tensor(a, dtype=torch.float32, device=dev)
+
     gq, gr = t(q), t(r)
     x = model.features.encode(t(pq), t(pr))
     y = model.features.encode(gq, gr)
@@ -204,7 +207,7 @@ def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str) 
     """Hold out ``val_fraction`` of the clips (seeded) and cut the training windows."""
     rng = np.random.default_rng([seed, 7919])
     C = len(corpus)
-    n_val = int(round(cfg.val_fraction * C)) if C > 1 else 0
+    n_val = round(cfg.val_fraction * C) if C > 1 else 0
     order = rng.permutation(C)
     val_idx, train_idx = np.sort(order[:n_val]), np.sort(order[n_val:])
     train = corpus.subset(train_idx)
@@ -223,7 +226,7 @@ def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str) 
     info = {
         "train_clips": len(train),
         "validation_clips": int(n_val),
-        "train_windows": int(len(q)),
+        "train_windows": len(q),
         "clips_too_short": int(skipped),
     }
     return Split(q.astype(np.float32), r.astype(np.float32), validation, info)
@@ -241,16 +244,18 @@ def train(
     report: Callable[[dict], None] | None = None,
     started: Callable[[dict], None] | None = None,
 ) -> CompletionModel:
-    """Train a transformer on ``corpus`` and write it to ``output`` (``.safetensors``).
+    """Train a transformer on ``corpus`` and write it to the model folder ``output``.
 
-    Beside ``output`` it keeps ``<stem>.ckpt`` (the checkpoint after the last
-    finished epoch, read with ``torch.load(weights_only=True)``) and
-    ``<stem>.log.jsonl`` (one JSON line per epoch: losses, learning rate,
-    validation L2Q / L2P / NPSS, seconds).
+    Beside ``output`` it keeps ``<output>.checkpoint.pt`` (the checkpoint after
+    the last finished epoch, read with ``torch.load(weights_only=True)``) and
+    ``<output>.log.jsonl`` (one JSON line per epoch: losses, learning rate,
+    validation L2Q / L2P / NPSS, seconds), as ``keyfill train arnn`` does.
 
     Args:
         corpus: the training clips (validation clips are held out of them).
-        output: model file to write.
+        output: model folder to write (:mod:`keyfill.learn.modelfile`); an
+            existing model there is replaced, anything else is refused before
+            training starts.
         model_cfg, cfg: architecture and training settings.
         seed: the only source of randomness.
         device: torch device (``"cpu"``, ``"cuda"``).
@@ -263,10 +268,8 @@ def train(
 
     device = torch_device(device)
     output = Path(output)
-    if not output.parent.is_dir():
-        raise UsageError(f"{output}: the output folder {str(output.parent)!r} does not exist")
-    ckpt_path = output.with_suffix(".ckpt")
-    log_path = output.with_suffix(".log.jsonl")
+    ckpt_path, log_path = side_files(output)
+    _check_output(output)
     if model_cfg.max_frames < cfg.window:
         raise UsageError(f"the model's max_frames ({model_cfg.max_frames}) is shorter than the training window ({cfg.window})")
     data = split_corpus(corpus, cfg, seed, model_cfg.facing_axis)
@@ -353,6 +356,22 @@ def train(
     return model
 
 
+def side_files(output: str | os.PathLike) -> tuple[Path, Path]:
+    """``(checkpoint, log)`` kept beside the model folder ``output``: ``OUTPUT.checkpoint.pt``, ``OUTPUT.log.jsonl``."""
+    output = Path(output)
+    return output.with_name(output.name + ".checkpoint.pt"), output.with_name(output.name + ".log.jsonl")
+
+
+def _check_output(output: Path) -> None:
+    """Refuse an output that could not be written, before training rather than after."""
+    from keyfill.learn.modelfile import CONFIG
+
+    if not output.parent.is_dir():
+        raise UsageError(f"{output}: the output folder {str(output.parent)!r} does not exist")
+    if output.exists() and not (output / CONFIG).is_file():
+        raise UsageError(f"{output}: exists and is not a keyfill model; refusing to replace it")
+
+
 def _append_log(path: Path, record: dict) -> None:
     with open(path, "a") as fh:
         fh.write(json.dumps(record, sort_keys=True) + "\n")
@@ -383,10 +402,10 @@ def _load_checkpoint(path: Path, net, opt, model_cfg, cfg, seed) -> tuple[int, l
         raise UsageError(f"--resume: no checkpoint {path}")
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
-        if state.get("format") != "keyfill-transformer-checkpoint":
-            raise ValueError("not a keyfill transformer checkpoint")
-    except Exception as e:
-        raise ModelError(f"{path}: cannot resume from it ({e})") from None
+    except Exception as e:  # noqa: BLE001 - torch raises many types for damaged or foreign files
+        raise ModelError(f"{path}: cannot resume from it ({' '.join(str(e).split())[:200]})") from None
+    if not isinstance(state, dict) or state.get("format") != "keyfill-transformer-checkpoint":
+        raise ModelError(f"{path}: cannot resume from it (not a keyfill transformer checkpoint)")
     saved = json.loads(state["config"])
     now = json.loads(json.dumps({"model": dataclasses.asdict(model_cfg), "training": dataclasses.asdict(cfg)}))
     for part in ("model", "training"):

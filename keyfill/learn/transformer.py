@@ -34,31 +34,32 @@ positions and rotations against the true offsets), in local coordinates the FK
 loss (global positions by forward kinematics against the truth). Optionally
 (``fk_weight``, not in the paper) an FK loss on the decoded global output.
 
-A model file is one ``.safetensors`` file: the weights, and in its metadata a
-JSON description (architecture, the skeleton it serves: joint names, parents,
-offsets; the normalisation statistics). :func:`load_model` refuses anything
-else without executing code from it.
+A model is a keyfill model folder of kind ``"transformer"``
+(:mod:`keyfill.learn.modelfile`): ``weights.safetensors`` and a
+``config.json`` holding the architecture, the skeleton it serves (joint names,
+parents, offsets, channels, up axis), whether its corpus folded the top joint,
+the normalisation statistics and a training summary. :func:`load_model`
+refuses anything else without executing code from it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
+import itertools
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from keyfill import rotations as R
-from keyfill.errors import ModelError
+from keyfill.errors import KeyfillError, ModelError
 from keyfill.kinematics import fk
 from keyfill.learn.benchmark import axis_vector, facing_rotation, horizontal_axes, interpolation
 from keyfill.motion import Skeleton
 
 KEY, UNKNOWN, IGNORED = 0, 1, 2
-FORMAT = "keyfill-transformer"
-FORMAT_VERSION = 1
+#: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
+KIND = "transformer"
 
 
 @dataclass(frozen=True)
@@ -349,7 +350,7 @@ class CompletionModel:
     folded: bool = False
     info: dict = field(default_factory=dict)
 
-    def to(self, device: str) -> "CompletionModel":
+    def to(self, device: str) -> CompletionModel:
         self.network.to(device)
         return self
 
@@ -405,34 +406,25 @@ class CompletionModel:
 
     # --- files ---
 
-    def metadata(self) -> dict:
+    def model_config(self) -> dict:
+        """The ``config.json`` content of this model (see :mod:`keyfill.learn.modelfile`)."""
+        from keyfill.learn.modelfile import skeleton_to_json
+
         s = self.skeleton
         return {
-            "format": FORMAT,
-            "version": FORMAT_VERSION,
-            "config": dataclasses.asdict(self.config),
-            "skeleton": {
-                "names": list(s.names),
-                "parents": [int(p) for p in s.parents],
-                "offsets": s.offsets.tolist(),
-                "channels": [list(c) for c in s.channels],
-                "up_axis": s.up_axis,
-                "meters_per_unit": s.meters_per_unit,
-            },
+            "architecture": dataclasses.asdict(self.config),
+            "skeleton": {**skeleton_to_json(s), "channels": [list(c) for c in s.channels],
+                         "up_axis": s.up_axis, "meters_per_unit": s.meters_per_unit},
             "folded_root": self.folded,
             "statistics": {"pos_mean": self.features.pos_mean.tolist(), "pos_std": self.features.pos_std.tolist()},
-            "info": self.info,
+            "training": self.info,
         }
 
     def save(self, path: str | os.PathLike) -> None:
-        """Write the model as one ``.safetensors`` file (atomically)."""
-        from safetensors.torch import save_file
+        """Write the model folder ``path`` (atomically; replaces a model already there)."""
+        from keyfill.learn.modelfile import save_model
 
-        from keyfill.io import atomic_output
-
-        state = {k: v.detach().cpu().contiguous() for k, v in self.network.state_dict().items()}
-        with atomic_output(path) as tmp:
-            save_file(state, str(tmp), metadata={"keyfill": json.dumps(self.metadata())})
+        save_model(path, KIND, self.network.state_dict(), self.model_config())
 
 
 def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: bool, info=None) -> CompletionModel:
@@ -441,33 +433,6 @@ def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: b
     feat = Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
                     np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
     return CompletionModel(cfg, skeleton, feat, build_network(feat.size, cfg), folded, dict(info or {}))
-
-
-def read_metadata(path: str | os.PathLike) -> dict:
-    """The keyfill description stored in a model file, or a :class:`ModelError`."""
-    from safetensors import safe_open
-
-    p = Path(path)
-    if p.is_dir():
-        raise ModelError(f"{p}: is a folder; a transformer model is one .safetensors file")
-    if not p.is_file():
-        raise ModelError(f"{p}: no such model file")
-    try:
-        with safe_open(str(p), framework="pt") as f:
-            meta = f.metadata() or {}
-    except Exception as e:  # safetensors raises its own error types for damaged files
-        raise ModelError(f"{p}: not a keyfill model (not a readable safetensors file: {e})") from None
-    if "keyfill" not in meta:
-        raise ModelError(f"{p}: a safetensors file, but not a keyfill model (no keyfill metadata)")
-    try:
-        desc = json.loads(meta["keyfill"])
-    except json.JSONDecodeError:
-        raise ModelError(f"{p}: damaged keyfill metadata") from None
-    if desc.get("format") != FORMAT:
-        raise ModelError(f"{p}: a keyfill model of kind {desc.get('format')!r}, not a transformer")
-    if desc.get("version") != FORMAT_VERSION:
-        raise ModelError(f"{p}: transformer model version {desc.get('version')}; this keyfill reads version {FORMAT_VERSION}")
-    return desc
 
 
 def torch_device(name: str):
@@ -486,26 +451,23 @@ def torch_device(name: str):
 
 
 def load_model(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
-    """Read a model written by :meth:`CompletionModel.save` (no code is executed)."""
-    from safetensors.torch import load_file
+    """Read a model folder written by :meth:`CompletionModel.save` (no code is executed)."""
+    from keyfill.learn import modelfile
 
     dev = torch_device(device)
-    desc = read_metadata(path)
+    tensors, config = modelfile.load_model(path, kind=KIND)
     try:
-        cfg = ModelConfig(**desc["config"])
-        s = desc["skeleton"]
+        cfg = ModelConfig(**config["architecture"])
+        s = config["skeleton"]
         skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
                         channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
                         meters_per_unit=s["meters_per_unit"])
-        st = desc["statistics"]
-        model = new_model(skel, cfg, st["pos_mean"], st["pos_std"], bool(desc["folded_root"]), desc.get("info"))
-    except (KeyError, TypeError, ValueError) as e:
-        raise ModelError(f"{path}: damaged keyfill model description ({e})") from None
-    try:
-        state = load_file(str(path), device="cpu")
-        model.network.load_state_dict(state)
-    except Exception as e:
-        raise ModelError(f"{path}: damaged model weights ({e})") from None
+        st = config["statistics"]
+        model = new_model(skel, cfg, st["pos_mean"], st["pos_std"], bool(config["folded_root"]),
+                          config.get("training"))
+    except (KeyError, TypeError, ValueError, KeyfillError) as e:
+        raise ModelError(f"{modelfile.model_folder(path)}: damaged transformer model config ({e})") from None
+    modelfile.load_state(model.network, tensors, path)
     model.network.eval()
     return model.to(dev)
 
@@ -522,7 +484,7 @@ def spans(keys, max_frames: int) -> list[tuple[int, int]]:
     from keyfill.errors import UsageError
 
     keys = [int(k) for k in keys]
-    for a, b in zip(keys, keys[1:]):
+    for a, b in itertools.pairwise(keys):
         if b - a + 1 > max_frames:
             raise UsageError(
                 f"keys {a} and {b} are {b - a} frames apart; this model fills gaps of at most {max_frames - 2} frames"
@@ -589,7 +551,7 @@ def complete_method(motion, keys, options):
     from keyfill.learn.methods import Completion
 
     if options.model is None:
-        raise UsageError("the transformer method needs --model FILE (train one with 'keyfill train transformer')")
+        raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
     model = load_model(options.model, options.device)
     filled, info = complete_motion(model, motion, keys)
     info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}

@@ -116,6 +116,7 @@ def tables(data: str, models: list[tuple[str, str]], seed: int) -> list[dict]:
         rows.append({"label": label, "path": path, "arch": model.arch,
                      "curriculum": training.get("settings", {}).get("curriculum"),
                      "epochs": training.get("epochs"), "train_minutes": round(training.get("seconds", 0) / 60, 1),
+                     "train_cpu_minutes": round(training["cpu_seconds"] / 60, 1) if "cpu_seconds" in training else None,
                      **{c: s.as_dict() for c, s in rep.scores.items()}})
         rep = evaluate(label + " + exact keys", test, model, exact_keys=True, seed=seed)
         rows.append({"label": rep.method, "path": path, **{c: s.as_dict() for c, s in rep.scores.items()}})
@@ -132,7 +133,10 @@ def markdown(rows: list[dict], test_sequences: int) -> str:
     lines = [head]
     for r in rows:
         a, d = r["all_keys"], r["deleted_keys"]
-        train = f"{r['epochs']} epochs, {r['train_minutes']} min" if r.get("epochs") else ""
+        train = ""
+        if r.get("epochs"):
+            cpu = f"{r['train_cpu_minutes']} CPU-min, " if r.get("train_cpu_minutes") is not None else ""
+            train = f"{r['epochs']} epochs, {cpu}{r['train_minutes']} min wall"
         lines.append(
             f"| {r['label']} | {a['key']:.5f} | {a['frame']:.5f} | {a['total']:.5f} | "
             f"{a['frame'] / cubic['all_keys']['frame']:.2f} | {d['key']:.5f} | {d['frame']:.5f} | {d['total']:.5f} | "

@@ -228,7 +228,7 @@ def probe(scene: Scene, frame: float, rng, pins, contacts, locked, unified) -> n
 def run_cell(scene: Scene, name: str, dof: int, edits: int, rng, unified: bool) -> dict:
     times, cpu, failures, dofs, iters, moves = [], [], [], set(), [], []
     segs = segments_to_edit(scene.curves, scene.length)
-    for n in range(edits):
+    for _ in range(edits):
         s = int(rng.choice(segs))
         a, b = scene.curves.times[s], scene.curves.times[s + 1]
         frame = float(rng.integers(int(a) + 1, int(b))) if b - a > 1 else 0.5 * (a + b)

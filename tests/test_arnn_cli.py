@@ -12,7 +12,6 @@ import torch
 from conftest import DATA
 from keyfill import io
 from keyfill.cli.main import main
-from keyfill.learn import arnn
 from keyfill.learn.modelfile import CONFIG, WEIGHTS
 from keyfill.motion import Keys
 from keyfill.sim.lamp import from_variables, to_variables

@@ -177,7 +177,7 @@ def test_channel_values_are_read_as_written(text):
         return
     written = bvh.pose_to_channels(m)
     col = 0
-    for j, chans in enumerate(m.skeleton.channels):
+    for chans in m.skeleton.channels:
         n = len(chans)
         block_raw, block_w = raw[:, col : col + n], written[:, col : col + n]
         rot_cols = [i for i, c in enumerate(chans) if c.endswith("rotation")]

@@ -188,7 +188,7 @@ def from_stage(stage, motion: Motion, label) -> Curves:
     times = None
     C = len(controls)
     per_control = []
-    for name, ctl, spline in zip(names, controls, splines):
+    for name, spline in zip(names, splines):
         knots = list(spline.GetKnots().values())
         t = np.array([k.GetTime() for k in knots], dtype=np.float64)
         if times is None:

@@ -273,7 +273,7 @@ def plot(
         for p in range(P):
             row, col = cells[p]
             ax = axes[row, col]
-            for n, (label, x, values, keys) in enumerate(series):
+            for n, (_, x, values, keys) in enumerate(series):
                 color = style.FILE_COLORS[n % len(style.FILE_COLORS)]
                 ax.plot(x, values[:, p], color=color, lw=1.3, zorder=2 + n)
                 if len(keys):

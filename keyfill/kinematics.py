@@ -38,8 +38,3 @@ def fk(rotations, positions, parents):
             world_rot.append(quat_mul(world_rot[p], r))
             world_pos.append(world_pos[p] + quat_rotate(world_rot[p], t))
     return xp.stack(world_rot, axis=-2), xp.stack(world_pos, axis=-2)
-
-
-def fk_positions(rotations, positions, parents):
-    """World joint positions ``(..., J, 3)``; see :func:`fk`."""
-    return fk(rotations, positions, parents)[1]

@@ -131,11 +131,6 @@ class Skeleton:
         return tuple(orders)
 
     @property
-    def has_position_channels(self) -> np.ndarray:
-        """``(J,)`` bool: the joint has at least one position channel."""
-        return np.array([any(c in POSITION_CHANNELS for c in ch) for ch in self.channels])
-
-    @property
     def num_channels(self) -> int:
         return sum(len(c) for c in self.channels)
 
@@ -147,14 +142,6 @@ class Skeleton:
         ident = np.zeros((self.num_joints, 4))
         ident[:, 0] = 1
         return fk(ident, self.offsets, self.parents)[1]
-
-    def same_as(self, other: "Skeleton", atol: float = 1e-6) -> bool:
-        """Same joints, hierarchy and rest offsets (channels and end sites may differ)."""
-        return (
-            self.names == other.names
-            and np.array_equal(self.parents, other.parents)
-            and np.allclose(self.offsets, other.offsets, atol=atol)
-        )
 
     def difference(self, other: "Skeleton", atol: float = 1e-6) -> str | None:
         """A one-line description of the first difference from ``other``, or None."""

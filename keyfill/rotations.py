@@ -28,7 +28,6 @@ import numpy as np
 
 EULER_ORDERS: tuple[str, ...] = tuple("".join(p) for p in itertools.permutations("XYZ"))
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
-_EPS = 1e-12
 
 
 def _xp(x):
@@ -38,12 +37,6 @@ def _xp(x):
 
         return torch
     return np
-
-
-def _safe_div(num, den, xp):
-    """``num / den`` where ``den`` may be zero (those entries come out 0)."""
-    tiny = xp.abs(den) < _EPS
-    return xp.where(tiny, 0 * num, num / xp.where(tiny, 1 + 0 * den, den))
 
 
 def check_order(order: str) -> str:

@@ -160,9 +160,6 @@ class Curves:
     def replace(self, **changes) -> Curves:
         return dataclasses.replace(self, **changes)
 
-    def control_names(self) -> list[str]:
-        return [c.name(self.skeleton) for c in self.controls]
-
     def control_index(self, name: str) -> int:
         """Index of control ``"Joint.Channel"``; the error lists the controls of that joint."""
         joint, _, channel = name.rpartition(".")

@@ -78,11 +78,6 @@ class Controller:
         p = self.poses + rng.normal(0.0, settings.init_angle_noise, (NUM_STATES, 3))
         return Controller(d, p).clipped(settings)
 
-    def state_at(self, t: float | np.ndarray) -> np.ndarray:
-        """Index of the active state at time ``t`` seconds after the start (cycling)."""
-        bounds = np.cumsum(self.durations)
-        return np.searchsorted(bounds, np.asarray(t) % self.cycle_time, side="right")
-
     def to_dict(self) -> dict:
         return {"durations": self.durations.tolist(), "poses": self.poses.tolist()}
 

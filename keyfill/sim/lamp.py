@@ -85,10 +85,6 @@ class Dimensions:
     head_mass: float = 0.25
     depth: float = 0.03
 
-    @property
-    def total_mass(self) -> float:
-        return self.base_mass + self.leg_mass + self.neck_mass + self.head_mass
-
 
 #: The lamp that ``keyfill simulate`` builds.
 DIMENSIONS = Dimensions()

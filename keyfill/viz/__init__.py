@@ -24,7 +24,6 @@ import importlib
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
-from keyfill.motion import Motion
 
 #: output suffix -> what the commands write there
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
@@ -73,11 +72,6 @@ def unit_label(meters_per_unit: float) -> str:
         if abs(meters_per_unit - size) <= 1e-9 * size:
             return name
     return f"units of {meters_per_unit:g} m"
-
-
-def select_frames(motion: Motion, index: np.ndarray) -> tuple[Motion, np.ndarray]:
-    """``motion`` cut to the frames ``index`` (contiguous), and the original frame numbers."""
-    return motion.frames(slice(int(index[0]), int(index[-1]) + 1)), index
 
 
 def check_suffix(path: str, allowed: tuple[str, ...], option: str = "-o") -> str:

@@ -1,6 +1,8 @@
 """Model files: round trip, atomic replacement, and refusal of anything not an intact keyfill model."""
 
 import json
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -38,6 +40,16 @@ def test_round_trip_and_replace(tmp_path, skeleton):
     save_model(path, "toy", net.state_dict(), {"skeleton": skeleton_to_json(skeleton), "hidden": 4})
     assert load_model(path / CONFIG)[1]["hidden"] == 4
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m"]
+
+
+def test_model_files_get_the_modes_of_new_files(tmp_path, skeleton):
+    umask = os.umask(0o022)
+    try:
+        path = save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton_to_json(skeleton)})
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o755
+    assert {p.name: stat.S_IMODE(p.stat().st_mode) for p in path.iterdir()} == {CONFIG: 0o644, WEIGHTS: 0o644}
 
 
 def test_refuses_other_skeleton_and_kind(tmp_path, skeleton):

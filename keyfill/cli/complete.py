@@ -15,7 +15,7 @@ from keyfill.learn.methods import METHODS
 @keys_options
 @click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
               help="In-betweening method.")
-@click.option("--model", type=click.Path(exists=True), help="Model file or folder for a learned method.")
+@click.option("--model", type=click.Path(exists=True), help="Model folder for a learned method (default: the model shipped for it, if any).")
 @click.option("--exact-keys/--no-exact-keys", default=True, show_default=True,
               help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")

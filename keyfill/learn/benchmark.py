@@ -234,7 +234,7 @@ def resolve_method(name_or_path: str, device: str = "cpu") -> tuple[str, Method]
     path = Path(name_or_path)
     if not path.exists():
         raise UsageError(
-            f"{name_or_path!r} is neither a method ({', '.join(sorted(METHOD_NAMES))}) nor a model file"
+            f"{name_or_path!r} is neither a method ({', '.join(sorted(METHOD_NAMES))}) nor a model folder"
         )
     from keyfill.learn.transformer import load_model
 

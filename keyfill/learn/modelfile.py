@@ -78,7 +78,12 @@ def save_model(path: str | os.PathLike, kind: str, tensors: dict, config: dict) 
         full = {"format": FORMAT, "version": VERSION, "kind": kind, **config}
         (tmp / CONFIG).write_text(json.dumps(full, indent=2, sort_keys=True) + "\n")
         save_file({k: v.detach().contiguous().cpu() for k, v in tensors.items()}, str(tmp / WEIGHTS))
-        os.chmod(tmp, 0o755)
+        # mkdtemp makes the folder owner-only and safetensors the weights; give
+        # both the modes of any new folder and file (subject to the umask).
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)
+        os.chmod(tmp / WEIGHTS, 0o666 & ~umask)
         old = None
         if path.exists():
             if not (path / CONFIG).is_file():

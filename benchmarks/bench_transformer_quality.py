@@ -1,6 +1,6 @@
 """Quality of a trained transformer on Bandai-Namco dataset-2 against the baselines and SSMCT's goal.
 
-The table of docs/benchmarks/transformer.md, from a model trained with the
+The tables of docs/benchmarks.md (transformer section), from a model trained with the
 `normal` style held out::
 
     .venv/bin/keyfill train transformer data/bandai2/bandai_namco_motiondataset2/data \\

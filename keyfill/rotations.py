@@ -167,16 +167,21 @@ def quat_continuous_np(q: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.moveaxis(q, 0, axis)
 
 
+def _quat_matrix_entry(q, r: int, c: int):
+    """Entry ``(r, c)`` of the rotation matrices of unit quaternions ``(..., 4)``."""
+    w, v = q[..., 0], (q[..., 1], q[..., 2], q[..., 3])
+    if r == c:
+        a, b = (i for i in range(3) if i != r)
+        return 1 - 2 * (v[a] * v[a] + v[b] * v[b])
+    sign = -1 if (c - r) % 3 == 1 else 1  # e.g. m01 = 2 (xy - wz), m10 = 2 (xy + wz)
+    return 2 * (v[r] * v[c] + sign * w * v[3 - r - c])
+
+
 def quat_to_matrix(q):
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
     xp = _xp(q)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    rows = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ]
-    return xp.stack([xp.stack(r, axis=-1) for r in rows], axis=-2)
+    rows = [xp.stack([_quat_matrix_entry(q, r, c) for c in range(3)], axis=-1) for r in range(3)]
+    return xp.stack(rows, axis=-2)
 
 
 def quat_from_matrix(m):
@@ -212,22 +217,44 @@ def quat_from_matrix(m):
 # --- Euler angles ------------------------------------------------------------
 
 
-def _axis_quat(angle, axis: int):
-    xp = _xp(angle)
-    half = 0.5 * angle
-    c, s = xp.cos(half), xp.sin(half)
-    zero = 0 * s
-    comps = [c, zero, zero, zero]
-    comps[axis + 1] = s
-    return xp.stack(comps, axis=-1)
-
-
 def euler_to_quat(angles, order: str):
-    """Unit quaternions ``(..., 4)`` from intrinsic Euler angles ``(..., 3)`` (radians)."""
-    order = check_order(order)
-    q = _axis_quat(angles[..., 0], _AXIS[order[0]])
-    q = quat_mul(q, _axis_quat(angles[..., 1], _AXIS[order[1]]))
-    return quat_mul(q, _axis_quat(angles[..., 2], _AXIS[order[2]]))
+    """Unit quaternions ``(..., 4)`` from intrinsic Euler angles ``(..., 3)`` (radians).
+
+    The product ``q_i(a) q_j(b) q_k(c)`` of the three axis rotations, written
+    out: the orders are permutations of XYZ, so ``i, j, k`` are distinct.
+    """
+    xp = _xp(angles)
+    i, j, k = (_AXIS[c] for c in check_order(order))
+    s = 1 if (j - i) % 3 == 1 else -1  # e_i x e_j = s e_k
+    half = 0.5 * angles
+    cos, sin = xp.cos(half), xp.sin(half)
+    ca, cb, cc = cos[..., 0], cos[..., 1], cos[..., 2]
+    sa, sb, sc = sin[..., 0], sin[..., 1], sin[..., 2]
+    # p = q_i(a) q_j(b), by axis
+    pw, pi, pj, pk = ca * cb, sa * cb, ca * sb, s * sa * sb
+    # p q_k(c)
+    v = [None, None, None]
+    v[i] = pi * cc + s * pj * sc
+    v[j] = pj * cc - s * pi * sc
+    v[k] = pk * cc + pw * sc
+    return xp.stack([pw * cc - pk * sc, *v], axis=-1)
+
+
+def _euler_from_entries(entry, order: str, xp):
+    """Intrinsic Euler angles ``(..., 3)`` from the matrix entries ``entry(r, c)``; see :func:`matrix_to_euler`."""
+    i, j, k = (_AXIS[c] for c in check_order(order))
+    s = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of XYZ: +1
+    m_ii, m_ij, m_ik = entry(i, i), entry(i, j), entry(i, k)
+    cos_b = xp.sqrt(m_ii**2 + m_ij**2)
+    b = xp.atan2(s * m_ik, cos_b)
+    locked = cos_b < 1e-9
+    a = xp.atan2(-s * entry(j, k), entry(k, k))
+    c = xp.atan2(-s * m_ij, m_ii)
+    # Gimbal lock: only a +- c is defined; put it all in a (c = 0).
+    a_locked = xp.atan2(s * entry(k, j), entry(j, j))
+    a = xp.where(locked, a_locked, a)
+    c = xp.where(locked, 0 * c, c)
+    return xp.stack([a, b, c], axis=-1)
 
 
 def matrix_to_euler(m, order: str):
@@ -236,20 +263,7 @@ def matrix_to_euler(m, order: str):
     The middle angle lies in ``[-pi/2, pi/2]``, the others in ``(-pi, pi]``. At
     gimbal lock (middle angle +-pi/2) the third angle is set to zero.
     """
-    xp = _xp(m)
-    order = check_order(order)
-    i, j, k = (_AXIS[c] for c in order)
-    s = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of XYZ: +1
-    cos_b = xp.sqrt(m[..., i, i] ** 2 + m[..., i, j] ** 2)
-    b = xp.atan2(s * m[..., i, k], cos_b)
-    locked = cos_b < 1e-9
-    a = xp.atan2(-s * m[..., j, k], m[..., k, k])
-    c = xp.atan2(-s * m[..., i, j], m[..., i, i])
-    # Gimbal lock: only a +- c is defined; put it all in a (c = 0).
-    a_locked = xp.atan2(s * m[..., k, j], m[..., j, j])
-    a = xp.where(locked, a_locked, a)
-    c = xp.where(locked, 0 * c, c)
-    return xp.stack([a, b, c], axis=-1)
+    return _euler_from_entries(lambda r, c: m[..., r, c], order, _xp(m))
 
 
 def euler_to_matrix(angles, order: str):
@@ -258,8 +272,12 @@ def euler_to_matrix(angles, order: str):
 
 
 def quat_to_euler(q, order: str):
-    """Intrinsic Euler angles ``(..., 3)`` in radians of unit quaternions ``(..., 4)``."""
-    return matrix_to_euler(quat_to_matrix(q), order)
+    """Intrinsic Euler angles ``(..., 3)`` in radians of unit quaternions ``(..., 4)``.
+
+    The same as ``matrix_to_euler(quat_to_matrix(q), order)``, computing only
+    the matrix entries it needs.
+    """
+    return _euler_from_entries(lambda r, c: _quat_matrix_entry(q, r, c), order, _xp(q))
 
 
 def euler_continuous_np(angles: np.ndarray, axis: int = 0) -> np.ndarray:

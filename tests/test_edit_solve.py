@@ -63,6 +63,25 @@ def guarded(curves, tmp_path_factory):
     return ef, out, reports
 
 
+@pytest.mark.parametrize("mode", ["tangents", "pose"])
+def test_a_point_nothing_can_move_is_refused(tmp_path, curves, mode):
+    """Every control that moves the hand is fixed by a pin on the hand itself."""
+    text = """
+pins = [{joint = "Hand_L"}]
+
+[[edit]]
+joint = "Hand_L"
+frame = 15
+move = [0, 5, 0]
+"""
+    if mode == "pose":
+        text = text.replace("frame = 15", "frame = 20")
+    ef = load(tmp_path, curves, text, mode=mode)
+    run = solve.edit_tangents if mode == "tangents" else solve.pose
+    with pytest.raises(InfeasibleError, match="nothing can move the point"):
+        run(curves, ef)
+
+
 def world(curves, points, times):
     from keyfill.edit.solve import _Work
 

@@ -414,8 +414,11 @@ class _Editor:
                     "(or move it there with keyfill pose first)"
                 )
 
-    def reduce(self, point: Point, pins, contacts):
-        """Section 3.3: the optimised controls ``C`` and the constraints kept."""
+    def reduce(self, edit, point: Point, pins, contacts):
+        """Section 3.3: the optimised controls ``C`` (never empty) and the constraints kept.
+
+        Raises :class:`InfeasibleError` naming ``edit`` when no control can move ``point``.
+        """
         rig = self.work.rig
         fixed = set(self.ef.locked)  # locked controls, and those a pin or contact of case 2 fixes
         Cs = rig.controls_of(point) - fixed
@@ -436,6 +439,11 @@ class _Editor:
             con.controls = Cj
             kept.append(con)
             C |= Cj
+        if not C:
+            raise InfeasibleError(
+                f"{self.edit_label(edit)}: nothing can move the point: every control that moves it is locked or "
+                "fixed by a pin"
+            )
         for con in kept:  # a later case 2 may have fixed some of a kept constraint's controls
             con.controls = con.controls - fixed
         return sorted(C), [con for con in kept if con.controls & C]
@@ -510,12 +518,7 @@ class _Editor:
         pins = list(self.ef.pins) + list(edit.pins)
         contacts = list(self.ef.contacts) + list(edit.contacts)
 
-        C, kept = self.reduce(point, pins, contacts)
-        if not C:
-            raise InfeasibleError(
-                f"{self.edit_label(edit)}: nothing can move the point: every control that moves it is locked or "
-                "fixed by a pin"
-            )
+        C, kept = self.reduce(edit, point, pins, contacts)
         Carr = np.array(C)
         nC = len(C)
         n = 4 * nC
@@ -894,12 +897,7 @@ class _Editor:
         # a contact through this key holds the point where it is at the key
         contacts = list(self.ef.contacts) + list(edit.contacts)
         pins += [c.point for c in contacts if c.start <= edit.time <= c.end]
-        C, kept = self.reduce(point, pins, [])
-        if not C:
-            raise InfeasibleError(
-                f"{self.edit_label(edit)}: nothing can move the point: every control that moves it is locked or "
-                "fixed by a pin"
-            )
+        C, kept = self.reduce(edit, point, pins, [])
         Carr = np.array(C)
         n = len(C)
         T = np.array([edit.time])

@@ -280,6 +280,17 @@ def test_the_model_is_a_keyfill_model_folder(trained, corpus):
     assert json.loads((out / "config.json").read_text()) == config
 
 
+def test_loading_a_model_leaves_the_global_random_stream_alone(trained):
+    from keyfill.learn import arnn
+
+    torch.manual_seed(7)
+    expected = torch.rand(3)
+    torch.manual_seed(7)
+    T.load_model(trained[0])
+    arnn.load(arnn.DEFAULT_MODEL)
+    assert torch.equal(torch.rand(3), expected)
+
+
 def test_damaged_or_foreign_models_are_refused(trained, tmp_path):
     import shutil
 

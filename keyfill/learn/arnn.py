@@ -337,14 +337,14 @@ def model_config(net: Completer, normalizer: Normalizer, sizes: dict, training: 
 
 def load(path: str | Path) -> LampModel:
     """Read a lamp model folder; :class:`ModelError` for anything that is not an intact ARNN-family model."""
-    from keyfill.learn.modelfile import load_model, load_state
+    from keyfill.learn.modelfile import build_for_loading, load_model, load_state
 
     tensors, config = load_model(path, kind=KIND)
     try:
         arch = config["arch"]
         sizes = dict(config.get("sizes", {}))
         normalizer = Normalizer.from_json(config["normalizer"])
-        net = build(arch, **sizes)
+        net = build_for_loading(lambda: build(arch, **sizes))
     except (KeyError, TypeError, ValueError, UsageError) as e:
         raise ModelError(f"{path}: damaged ARNN model config ({e})") from None
     load_state(net, tensors, path)

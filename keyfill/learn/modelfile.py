@@ -149,6 +149,16 @@ def load_model(path: str | os.PathLike, kind: str | None = None) -> tuple[dict, 
     return tensors, config
 
 
+def build_for_loading(factory):
+    """``factory()``, a network whose weights are about to be loaded, built without
+    drawing from torch's global generator (its initial weights are thrown away, so
+    loading a model leaves the caller's random stream as it was)."""
+    import torch
+
+    with torch.random.fork_rng(devices=[]):
+        return factory()
+
+
 def load_state(module, tensors: dict, path: str | os.PathLike) -> None:
     """``module.load_state_dict(tensors)``, with a :class:`ModelError` when the tensors do not fit."""
     try:

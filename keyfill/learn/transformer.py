@@ -463,8 +463,8 @@ def load_model(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
                         channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
                         meters_per_unit=s["meters_per_unit"])
         st = config["statistics"]
-        model = new_model(skel, cfg, st["pos_mean"], st["pos_std"], bool(config["folded_root"]),
-                          config.get("training"))
+        model = modelfile.build_for_loading(lambda: new_model(skel, cfg, st["pos_mean"], st["pos_std"],
+                                                              bool(config["folded_root"]), config.get("training")))
     except (KeyError, TypeError, ValueError, KeyfillError) as e:
         raise ModelError(f"{modelfile.model_folder(path)}: damaged transformer model config ({e})") from None
     modelfile.load_state(model.network, tensors, path)

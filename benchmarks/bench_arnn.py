@@ -32,30 +32,17 @@ import json
 import os
 import platform
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
+from timing import timed_ms
 
 ROOT = Path(__file__).resolve().parents[1]
 GOAL_MS = 20.0
-
-
-def timed_ms(fn, repeat: int) -> dict:
-    """Median and best of ``repeat`` calls (after 5 warm-up calls), in ms."""
-    for _ in range(5):
-        fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return {"median": 1e3 * statistics.median(times), "best": 1e3 * min(times)}
 
 
 def machine() -> str:
@@ -92,12 +79,7 @@ def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
         cmd = [exe, "complete", str(keys_file), "-o", str(Path(tmp) / "out.usda"), "--method", "arnn"]
         if model:
             cmd += ["--model", model]
-        times = []
-        for _ in range(6):
-            t = time.perf_counter()
-            subprocess.run(cmd, check=True, capture_output=True)
-            times.append(time.perf_counter() - t)
-        out["cli_ms"] = {"median": 1e3 * statistics.median(times[1:]), "best": 1e3 * min(times[1:])}
+        out["cli_ms"] = timed_ms(lambda: subprocess.run(cmd, check=True, capture_output=True), 5, warmup=1)
     return out
 
 

@@ -30,12 +30,11 @@ import argparse
 import json
 import os
 import platform
-import statistics
 import sys
-import time
 
 import numpy as np
 import torch
+from timing import timed_ms
 
 from keyfill import rotations as R
 from keyfill.learn import transformer as T
@@ -52,17 +51,6 @@ def bandai_like_skeleton() -> Skeleton:
     offsets = rng.normal(size=(22, 3)) * 10
     offsets[0] = 0
     return Skeleton([f"j{i}" for i in range(22)], parents, offsets, [()] * 22)
-
-
-def median_ms(fn, repeat: int) -> float:
-    for _ in range(5):
-        fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return 1000 * statistics.median(times)
 
 
 def main(argv=None) -> int:
@@ -102,8 +90,8 @@ def main(argv=None) -> int:
                 model.complete_windows(q, r, keys)
 
             results[(threads, batch)] = {
-                "network_ms": median_ms(network, args.repeat),
-                "complete_ms": median_ms(complete, args.repeat),
+                "network_ms": timed_ms(network, args.repeat)["median"],
+                "complete_ms": timed_ms(complete, args.repeat)["median"],
             }
     torch.set_num_threads(default_threads)
     load_after = os.getloadavg()

@@ -1,0 +1,18 @@
+"""Timing shared by the benchmark scripts: medians of repeated calls in one process."""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+
+def timed_ms(fn, repeat: int, warmup: int = 5) -> dict:
+    """Median and best of ``repeat`` calls of ``fn`` (after ``warmup`` untimed calls), in ms."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return {"median": 1e3 * statistics.median(times), "best": 1e3 * min(times)}

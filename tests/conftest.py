@@ -22,3 +22,14 @@ def shared_path(*parts: str) -> Path:
 def shared_fixtures() -> list[Path]:
     """All BVH files in ../shared/data/bvh_fixtures (skips when absent)."""
     return sorted(shared_path("bvh_fixtures").glob("*.bvh"))
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """One torch thread for a module: small models train fastest so, and two oversubscribe a busy 2-core machine."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -27,13 +27,7 @@ def lamp_sequences() -> list[LampSequence]:
     return [LampSequence(v, k, str(n)) for v, k, n in zip(d["values"], d["keys"], d["names"])]
 
 
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """One torch thread, as ``keyfill train arnn`` uses by default (two oversubscribe a busy 2-core machine)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

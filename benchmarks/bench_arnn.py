@@ -56,7 +56,7 @@ def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
     from keyfill.learn import arnn
     from keyfill.learn.lamp_features import LampSequence
     from keyfill.learn.methods import CompleteOptions, complete
-    from keyfill.sim.lamp import to_variables
+    from keyfill.characters.lamp import to_variables
 
     motion = io.load(keys_file)
     keys = motion.keys

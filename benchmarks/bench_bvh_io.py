@@ -108,7 +108,7 @@ def concatenated_bvh(min_bytes: int | None = None, frames: int | None = None) ->
             raise Skipped(f"the corpus has only {len(lines)} frames, {frames} asked for")
         lines = lines[:frames]
     text = header + b"MOTION\nFrames: %d\nFrame Time: %s\n" % (len(lines), frame_time) + b"\n".join(lines) + b"\n"
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     BENCH_DIR.mkdir(parents=True, exist_ok=True)
     with atomic_output(path) as tmp:

@@ -22,7 +22,7 @@ Characters:
   the rest of the body holds frame 0, so feet and head are true contacts.
   The DOF of a cell is set by locking all but the chosen controls, taken in
   turn from the groups that the configuration's chains do and do not share.
-* Lamp: the hopping lamp of keyfill.sim.lamp (6 controls = 24 DOF).
+* Lamp: the hopping lamp of keyfill.characters.lamp (6 controls = 24 DOF).
 
 Configurations (the six tables of the paper, in its reading order; the
 paper's text does not label them, so the goal is checked against the same
@@ -100,7 +100,7 @@ def bandai_motion():
 
 
 def lamp_motion():
-    from keyfill.sim.lamp import from_variables
+    from keyfill.characters.lamp import from_variables
 
     t = np.arange(31) / 30.0
     v = np.stack(

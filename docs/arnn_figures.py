@@ -35,8 +35,8 @@ from keyfill import io
 from keyfill.learn.lamp_features import read_sequences
 from keyfill.learn.train_arnn import split
 from keyfill.motion import Keys
-from keyfill.sim.dataset import read_dataset
-from keyfill.sim.lamp import from_variables
+from keyfill.io.hops import read_dataset
+from keyfill.characters.lamp import from_variables
 
 HERE = Path(__file__).parent
 KEYFILL = str(Path(sys.executable).parent / "keyfill")

@@ -14,7 +14,7 @@ from keyfill import io
 from keyfill.cli.main import main
 from keyfill.learn.modelfile import CONFIG, WEIGHTS
 from keyfill.motion import Keys
-from keyfill.sim.lamp import from_variables, to_variables
+from keyfill.characters.lamp import from_variables, to_variables
 
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -12,7 +12,7 @@ from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point, Rig
 from keyfill.kinematics import fk
 from keyfill.motion import Keys
-from keyfill.sim.lamp import from_variables
+from keyfill.characters.lamp import from_variables
 
 
 def lamp_curves():

@@ -16,8 +16,8 @@ import pytest
 from keyfill.cli.main import main
 from keyfill.errors import DataError
 from keyfill.sim import runner
-from keyfill.sim.dataset import read_dataset, read_manifest
-from keyfill.sim.lamp import is_lamp, to_variables
+from keyfill.io.hops import read_dataset, read_manifest
+from keyfill.characters.lamp import is_lamp, to_variables
 
 FAST = ["--iterations", "3"]
 

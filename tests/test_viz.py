@@ -18,7 +18,7 @@ from keyfill.cli.main import main
 from keyfill.errors import DataError, UsageError
 from keyfill.io import bvh
 from keyfill.motion import Keys, Motion, Skeleton
-from keyfill.sim import lamp
+from keyfill.characters import lamp
 from keyfill.viz import frame_range, gif
 from keyfill.viz.palette import Palette
 from keyfill.viz import curves as C

@@ -83,7 +83,7 @@ def _quiet_stderr():
 def write(curves: Curves, path: str | Path) -> None:
     """Write ``curves`` to a USD file (format from the suffix); see the module docstring.
 
-    Not atomic by itself: callers write through :func:`keyfill.io.atomic_output`.
+    Not atomic by itself: callers write through :func:`keyfill.files.atomic_output`.
     """
     from pxr import Sdf, Ts, Usd, UsdGeom
 
@@ -123,11 +123,12 @@ def write(curves: Curves, path: str | Path) -> None:
 def save(curves: Curves, path: str | Path) -> None:
     """Write ``curves`` atomically: a curves file for USD suffixes, the baked motion for ``.bvh``."""
     from keyfill import io
+    from keyfill.files import atomic_output
 
     if io.format_of(path) == "bvh":
         io.save(curves.bake(), path)
         return
-    with io.atomic_output(path) as tmp:
+    with atomic_output(path) as tmp:
         write(curves, tmp)
 
 

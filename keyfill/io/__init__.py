@@ -4,20 +4,19 @@ The format comes from the suffix (``.bvh``, ``.usda``, ``.usdc``, ``.usd``) or
 from ``format=`` (required for ``-``, standard input or output). Each format
 module offers ``read(path, label=None) -> Motion`` (``label`` names the file in
 error messages) and ``write(motion, path, **options)``. Saving is atomic: the file appears
-complete or not at all (see :func:`atomic_output`).
+complete or not at all (see :func:`keyfill.files.atomic_output`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Iterator
 
 from keyfill.errors import FormatError, UsageError
+from keyfill.files import atomic_output
 from keyfill.motion import Motion
 
 #: format name -> module implementing it
@@ -76,30 +75,3 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, **o
         return
     with atomic_output(path) as tmp:
         mod.write(motion, tmp, **options)
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds.
-
-    The temporary file keeps ``path``'s suffix (writers such as USD pick their
-    format from it). On any error it is removed, so no partial output remains.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise UsageError(f"{path}: the output folder {str(folder)!r} does not exist")
-    if path.is_dir():
-        raise UsageError(f"{path}: is a folder, not a file")
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise

@@ -322,7 +322,7 @@ def run(net: Completer, frames: torch.Tensor, is_key: torch.Tensor, teacher: boo
 def model_config(net: Completer, normalizer: Normalizer, sizes: dict, training: dict) -> dict:
     """The ``config.json`` content of a lamp model (see :mod:`keyfill.learn.modelfile`)."""
     from keyfill.learn.modelfile import skeleton_to_json
-    from keyfill.sim.lamp import VARIABLE_NAMES, lamp_skeleton
+    from keyfill.characters.lamp import VARIABLE_NAMES, lamp_skeleton
 
     return {
         "arch": net.arch,
@@ -377,7 +377,7 @@ def complete(motion, keys, options):
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.methods import Completion
     from keyfill.learn.modelfile import check_skeleton
-    from keyfill.sim.lamp import from_variables, is_lamp, to_variables
+    from keyfill.characters.lamp import from_variables, is_lamp, to_variables
 
     if options.model is None:
         if not is_lamp(motion.skeleton):

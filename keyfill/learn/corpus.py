@@ -365,7 +365,7 @@ def _cache_key(files: list[Path], fold: bool | None) -> str:
 
 
 def _write_cache(corpus: Corpus, path: Path) -> None:
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     s = corpus.skeleton
     meta = {

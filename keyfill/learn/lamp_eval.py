@@ -95,7 +95,7 @@ def keys_as_read(sequence: LampSequence) -> LampSequence:
 
 def score(sequences: list[LampSequence], predictions: list[np.ndarray], normalizer: Normalizer) -> Scores:
     """Scores of ``predictions`` (each ``(T, 6)``, first to last key) against ``sequences``."""
-    from keyfill.sim.lamp import VARIABLE_NAMES
+    from keyfill.characters.lamp import VARIABLE_NAMES
 
     key_err, frame_err, sq = [], [], []
     for s, p in zip(sequences, predictions):
@@ -118,7 +118,7 @@ def spline_predictions(method: str, sequences: list[LampSequence]) -> list[np.nd
     """Completions by a spline baseline through the ``Motion`` pipeline of ``keyfill complete``."""
     from keyfill.learn.methods import complete
     from keyfill.motion import Keys
-    from keyfill.sim.lamp import from_variables, to_variables
+    from keyfill.characters.lamp import from_variables, to_variables
 
     out = []
     for s in sequences:
@@ -160,7 +160,7 @@ def model_predictions(model, sequences: list[LampSequence], exact_keys: bool = F
         return preds
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.motion import Keys
-    from keyfill.sim.lamp import from_variables, to_variables
+    from keyfill.characters.lamp import from_variables, to_variables
 
     out = []
     for s, p in zip(sequences, preds):

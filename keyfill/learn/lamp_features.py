@@ -1,6 +1,6 @@
 """The hopping lamp's animation variables as network inputs and targets (ARNN, Zhang & van de Panne 2018).
 
-A lamp sequence is its ``(F, 6)`` animation variables (:mod:`keyfill.sim.lamp`:
+A lamp sequence is its ``(F, 6)`` animation variables (:mod:`keyfill.characters.lamp`:
 base_x, base_y, base_angle, leg_angle, neck_angle, head_angle; m and rad) and
 its key frames. The networks see it *encoded*:
 
@@ -68,7 +68,7 @@ class LampSequence:
 
 def sequence_from_motion(motion, keys=None, name: str = "") -> LampSequence:
     """A :class:`LampSequence` from a lamp :class:`~keyfill.motion.Motion` (keys: ``keys`` or ``motion.keys``)."""
-    from keyfill.sim.lamp import to_variables
+    from keyfill.characters.lamp import to_variables
 
     keys = keys if keys is not None else motion.keys
     if keys is None:
@@ -92,7 +92,7 @@ def wrap_angles(values: np.ndarray) -> np.ndarray:
 
 def read_sequences(folder) -> list[LampSequence]:
     """Every sequence of a ``keyfill simulate`` dataset folder, in run order."""
-    from keyfill.sim.dataset import read_dataset
+    from keyfill.io.hops import read_dataset
 
     return [sequence_from_motion(s.motion, name=s.id) for s in read_dataset(folder)]
 

@@ -392,7 +392,7 @@ def validate(net: arnn.Completer, val: Batch, n_all: int) -> dict:
 def write_checkpoint(path, net, opt, gen, epoch: int, seconds: tuple[float, float], settings: Settings,
                      data: str) -> None:
     """Atomically write a checkpoint (tensors, numbers and strings only: read back with ``weights_only=True``)."""
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     state = {
         "format": "keyfill-arnn-checkpoint",
@@ -430,7 +430,7 @@ def _read_log(path, upto_epoch: int) -> list[dict]:
 
 
 def _write_log(path, rows: list[dict]) -> None:
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     with atomic_output(path) as tmp:
         tmp.write_text("".join(json.dumps(r) + "\n" for r in rows))

@@ -380,7 +380,7 @@ def _append_log(path: Path, record: dict) -> None:
 def _save_checkpoint(path: Path, net, opt, model_cfg, cfg, seed, epoch, history) -> None:
     import torch
 
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     state = {
         "format": "keyfill-transformer-checkpoint",

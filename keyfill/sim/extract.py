@@ -27,7 +27,7 @@ import numpy as np
 
 from keyfill.motion import Keys, Motion
 from keyfill.sim.hops import Hops
-from keyfill.sim.lamp import from_variables
+from keyfill.characters.lamp import from_variables
 from keyfill.sim.physics import Episode
 from keyfill.sim.settings import Settings
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from keyfill.sim.lamp import Dimensions
+from keyfill.characters.lamp import Dimensions
 from keyfill.sim.physics import Episode
 from keyfill.sim.settings import Settings
 
@@ -31,7 +31,7 @@ def _corners(length: float, width: float) -> np.ndarray:
 def link_clearances(states: np.ndarray, dims: Dimensions) -> np.ndarray:
     """Height of the lowest corner of each link above the ground, ``(N, 4)`` (base, leg, neck, head), m.
 
-    ``states`` are ``(N, 6)`` animation variables (see :mod:`keyfill.sim.lamp`).
+    ``states`` are ``(N, 6)`` animation variables (see :mod:`keyfill.characters.lamp`).
     """
     base = np.array([[-0.5, 0.0], [0.5, 0.0], [-0.5, 1.0], [0.5, 1.0]]) * [dims.base_length, dims.base_height]
     links = [

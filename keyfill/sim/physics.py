@@ -1,6 +1,6 @@
 """The lamp in pybullet: build it once, then simulate many controllers cheaply.
 
-Model (dimensions in :data:`keyfill.sim.lamp.DIMENSIONS`, parameters in
+Model (dimensions in :data:`keyfill.characters.lamp.DIMENSIONS`, parameters in
 :class:`keyfill.sim.settings.Settings`):
 
 * Four box links (base, leg, neck, head) in a chain of revolute hinges about Z.
@@ -8,7 +8,7 @@ Model (dimensions in :data:`keyfill.sim.lamp.DIMENSIONS`, parameters in
   soft constraint: the base hangs from a fixed world link through a
   prismatic X joint, a prismatic Y joint and a revolute Z joint (two
   massless-in-effect slider links of 1 g). The six joint positions are then
-  exactly the lamp's six animation variables (:mod:`keyfill.sim.lamp`).
+  exactly the lamp's six animation variables (:mod:`keyfill.characters.lamp`).
 * Gravity along -Y; a ground plane at y = 0; Coulomb friction ``friction``
   on base and ground, no restitution.
 * Joint limits on the three hinges (URDF ``<limit>``, enforced by Bullet).
@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from keyfill.sim.controller import Controller
-from keyfill.sim.lamp import Dimensions
+from keyfill.characters.lamp import Dimensions
 from keyfill.sim.settings import Settings
 
 

@@ -1,6 +1,6 @@
 """Building a hop dataset: many annealing runs, in parallel, resumable.
 
-:func:`simulate` fills a folder (format in :mod:`keyfill.sim.dataset`) with
+:func:`simulate` fills a folder (format in :mod:`keyfill.io.hops`) with
 the first ``count`` accepted runs in run order. Run ``r`` depends only on
 ``(seed, r)``, so the folder comes out byte-identical whether the runs go to
 one process, several local processes (``workers``) or a Dask cluster
@@ -29,7 +29,7 @@ from typing import Callable
 
 from keyfill.errors import DataError, KeyfillError, UsageError
 from keyfill.motion import Motion
-from keyfill.sim import dataset as ds
+from keyfill.io import hops as ds
 from keyfill.sim.extract import extract
 from keyfill.sim.search import anneal, run_generator
 from keyfill.sim.settings import DEFAULT_SETTINGS, Settings
@@ -168,7 +168,7 @@ def prepare_folder(folder: Path, config: dict, force: bool) -> None:
             if p.is_file() and _ours(p.name):
                 p.unlink()
     folder.mkdir(parents=True, exist_ok=True)
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     with atomic_output(cfg_path) as tmp:
         tmp.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n", encoding="utf-8")
@@ -209,7 +209,7 @@ def _finished_runs(folder: Path) -> tuple[dict[int, dict], dict[int, dict]]:
 
 def _rewrite(folder: Path, lines: dict[int, dict], records: dict[int, dict]) -> None:
     """``runs.jsonl`` and ``manifest.jsonl`` in run order (atomically)."""
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
 
     for name, items in ((ds.RUNS_FILE, lines), (ds.MANIFEST_FILE, records)):
         with atomic_output(folder / name) as tmp:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from keyfill.sim.lamp import DIMENSIONS, Dimensions
+from keyfill.characters.lamp import DIMENSIONS, Dimensions
 
 #: Bumped whenever the simulation changes in a way that changes its output.
 SIM_VERSION = 1

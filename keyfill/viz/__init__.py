@@ -19,8 +19,6 @@ with the submodules.
 
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
@@ -28,17 +26,6 @@ from keyfill.errors import DataError, UsageError
 #: output suffix -> what the commands write there
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 PREVIEW_SUFFIXES = (".gif", ".png")
-
-
-def lamp_module():
-    """:mod:`keyfill.sim.lamp` (the hopping lamp's skeleton and variables), or None when absent."""
-    try:
-        lamp = importlib.import_module("keyfill.sim.lamp")
-    except ImportError:
-        return None
-    if all(hasattr(lamp, a) for a in ("is_lamp", "to_variables", "VARIABLES", "DIMENSIONS")):
-        return lamp
-    return None
 
 
 def frame_range(text: str | None, num_frames: int, label: str = "the motion") -> np.ndarray:

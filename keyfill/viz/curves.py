@@ -9,7 +9,7 @@ What a panel shows (Zhang & van de Panne 2018, Figures 5 and 8-13):
   carry no animation and are left out;
 * with ``positions=True``, world positions ``JOINT.x``, ``JOINT.y``, ``JOINT.z``
   from forward kinematics, in the file's units;
-* for the hopping lamp (:mod:`keyfill.sim.lamp`), its six animation
+* for the hopping lamp (:mod:`keyfill.characters.lamp`), its six animation
   variables by their own names, angles in degrees.
 
 The x axis is the frame number in the file (a ``--frames`` range keeps the
@@ -26,7 +26,8 @@ import numpy as np
 
 from keyfill.errors import DataError, UsageError
 from keyfill.motion import POSITION_CHANNELS, Motion
-from keyfill.viz import PLOT_SUFFIXES, check_suffix, frame_range, lamp_module, unit_label
+from keyfill.characters import lamp
+from keyfill.viz import PLOT_SUFFIXES, check_suffix, frame_range, unit_label
 
 #: with more candidate panels than this and no --joints/--channels, only the
 #: first moving joint is shown (a human has 60-130 channels)
@@ -104,8 +105,7 @@ def position_curves(motion: Motion) -> Curves:
 
 def lamp_curves(motion: Motion) -> Curves | None:
     """The hopping lamp's six animation variables (angles in degrees), or None for other motions."""
-    lamp = lamp_module()
-    if lamp is None or not lamp.is_lamp(motion.skeleton):
+    if not lamp.is_lamp(motion.skeleton):
         return None
     values = np.asarray(lamp.to_variables(motion), dtype=np.float64).reshape(motion.num_frames, -1)
     names = tuple(v.name for v in lamp.VARIABLES)
@@ -231,14 +231,13 @@ def plot(
     ``frames`` is ``"A:B"`` (see :func:`keyfill.viz.frame_range`). The file is
     written atomically.
     """
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
     from keyfill.viz import style
 
     fmt = check_suffix(str(output), PLOT_SUFFIXES).lstrip(".")
     if len(labels) != len(motions):
         raise UsageError(f"{len(labels)} labels for {len(motions)} files")
-    lamp = lamp_module()
-    use_lamp = (not joints and not positions and lamp is not None
+    use_lamp = (not joints and not positions
                 and all(lamp.is_lamp(m.skeleton) for m in motions))
     series = []  # (label, frame numbers (F,), values (F, P), key indices into the frames)
     for n, (motion, label) in enumerate(zip(motions, labels)):

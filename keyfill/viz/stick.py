@@ -6,7 +6,7 @@ the joint's own translation is animated (a root-motion joint such as Bandai's
 ``Hips`` under a static ``joint_Root`` is not tied to its parent by a bone).
 Left limbs (names with ``Left``, ``_L``, ``L_``, ...) are drawn lighter than the
 rest, so crossing legs stay readable in a side view. The hopping lamp
-(:mod:`keyfill.sim.lamp`) also gets its base plate and lampshade.
+(:mod:`keyfill.characters.lamp`) also gets its base plate and lampshade.
 
 Views, with the up axis from ``Skeleton.up_axis`` and the horizontal axis ``h``
 the ground axis along which the motion travels farther (positive towards where
@@ -41,7 +41,8 @@ import numpy as np
 from keyfill.errors import DataError, UsageError
 from keyfill.motion import Motion
 from keyfill.rotations import quat_rotate
-from keyfill.viz import PREVIEW_SUFFIXES, check_suffix, frame_range, lamp_module
+from keyfill.characters import lamp
+from keyfill.viz import PREVIEW_SUFFIXES, check_suffix, frame_range
 
 VIEWS = ("side", "front", "top", "3d")
 #: (azimuth, elevation) in degrees of each view, relative to the side view
@@ -117,8 +118,7 @@ def figure_points(motion: Motion) -> Figure3D:
         if np.linalg.norm(off) > tiny:
             bones.append((j, J + e))
             sides.append(limb_side(sk.names[j]))
-    lamp = lamp_module()
-    if lamp is not None and lamp.is_lamp(sk) and sk.end_sites and sk.end_sites[0][0] == 3:  # the head's tip
+    if lamp.is_lamp(sk) and sk.end_sites and sk.end_sites[0][0] == 3:  # the head's tip
         points, extra = _lamp_outline(lamp.DIMENSIONS, world_rot, points)
         bones = [b for b in bones if b != (3, J)] + extra
         sides += [0] * (len(bones) - len(sides))
@@ -515,7 +515,7 @@ def preview(
     """
     from PIL import Image
 
-    from keyfill.io import atomic_output
+    from keyfill.files import atomic_output
     from keyfill.viz import gif
     from keyfill.viz.palette import Palette
 

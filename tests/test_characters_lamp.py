@@ -8,7 +8,7 @@ import pytest
 from keyfill import io
 from keyfill.errors import DataError
 from keyfill.motion import Keys, Motion
-from keyfill.sim.lamp import DIMENSIONS, VARIABLE_NAMES, VARIABLES, from_variables, is_lamp, lamp_skeleton, to_variables
+from keyfill.characters.lamp import DIMENSIONS, VARIABLE_NAMES, VARIABLES, from_variables, is_lamp, lamp_skeleton, to_variables
 
 
 def random_variables(rng: np.random.Generator, frames: int = 12) -> np.ndarray:

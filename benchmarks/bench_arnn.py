@@ -5,7 +5,7 @@ process on a 3-hop sequence (87 frames, 9 keys), with the model loaded once:
 
 * ``network``: :meth:`LampModel.predict`, encoding, the 86 autoregressive
   steps in ``inference_mode`` and decoding;
-* ``complete``: ``keyfill.learn.methods.complete(..., "arnn")``, the whole
+* ``complete``: ``keyfill.learn.registry.complete(..., "arnn")``, the whole
   method of ``keyfill complete``: reading the keys' variables, the network,
   the exact-keys correction, the output Motion;
 * ``cubic``: the same call with the cubic spline, as a peer in the same run;
@@ -55,7 +55,8 @@ def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
     from keyfill import io
     from keyfill.learn import arnn
     from keyfill.learn.lamp_features import LampSequence
-    from keyfill.learn.methods import CompleteOptions, complete
+    from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.registry import complete
     from keyfill.characters.lamp import to_variables
 
     motion = io.load(keys_file)

@@ -9,7 +9,7 @@ as a subprocess, process start included, with a key every 10 frames::
 and the median of ``--repeat`` runs, after one cold and one warm-up run, is
 compared with the goal (under 1 s); the cold first run is reported too.
 The split comes from the same work done in this process with library calls
-(``io.load``, ``learn.methods.complete``, ``io.save``; medians too), and the
+(``io.load``, ``learn.registry.complete``, ``io.save``; medians too), and the
 start-up from ``keyfill complete --help`` (interpreter, imports, click).
 
     .venv/bin/python benchmarks/bench_complete.py
@@ -56,7 +56,7 @@ def timed_run(cmd: list[str]) -> tuple[float, float]:
 
 def run(repeat: int, out_dir: Path) -> dict:
     from keyfill import io
-    from keyfill.learn.methods import complete
+    from keyfill.learn.registry import complete
     from keyfill.motion import Keys
 
     src = concatenated_bvh(frames=FRAMES)

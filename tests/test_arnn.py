@@ -17,9 +17,8 @@ from keyfill.learn.lamp_eval import deleted_keys, evaluate
 from keyfill.learn.lamp_features import (
     LampSequence, Normalizer, conditioning, delete_keys, make_batch, origin, relative,
 )
-from keyfill.learn.train_arnn import (
-    Schedule, Settings, TrainingDiverged, loss_terms, sigmoid_ramp, split, train,
-)
+from keyfill.learn.train_arnn import Schedule, Settings, loss_terms, sigmoid_ramp, split, train
+from keyfill.learn.training import TrainingDiverged, read_checkpoint
 
 
 def lamp_sequences() -> list[LampSequence]:
@@ -273,7 +272,7 @@ def test_nan_loss_keeps_the_last_good_checkpoint(tmp_path, sequences, monkeypatc
     with pytest.raises(TrainingDiverged, match=r"training diverged at epoch 3: the loss is nan; the last good "
                                                r"checkpoint, .*m.ckpt \(epoch 2\), is kept: resume"):
         train(parts["train"], parts["val"], settings, tmp_path / "m", checkpoint=tmp_path / "m.ckpt")
-    assert T.read_checkpoint(tmp_path / "m.ckpt")["epoch"] == 2 and not (tmp_path / "m").exists()
+    assert read_checkpoint(tmp_path / "m.ckpt")["epoch"] == 2 and not (tmp_path / "m").exists()
 
 
 def test_split_is_the_papers_240_60(sequences):

@@ -200,7 +200,7 @@ def test_hidden_frames_do_not_change_the_prediction(trained, corpus):
 
 def test_save_and_load_give_the_same_completion(trained, corpus):
     out, model = trained
-    again = T.load_model(out)
+    again = T.load(out)
     q, r = corpus.clip(2)
     keys = [0, 7, 19, 30]
     np.testing.assert_array_equal(model.complete_windows(q[None, :31], r[None, :31], keys)[0],
@@ -211,7 +211,8 @@ def test_save_and_load_give_the_same_completion(trained, corpus):
 @pytest.mark.parametrize("keys", [list(range(10)) + [40], list(range(0, 60, 6)), list(range(10)) + list(range(45, 60))],
                          ids=["inbetween", "infill", "blend"])
 def test_keys_are_exact_in_every_layout(trained, keys):
-    from keyfill.learn.methods import CompleteOptions, complete
+    from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.registry import complete
     from keyfill.motion import Keys
 
     out, _ = trained
@@ -280,7 +281,7 @@ def test_loading_a_model_leaves_the_global_random_stream_alone(trained):
     torch.manual_seed(7)
     expected = torch.rand(3)
     torch.manual_seed(7)
-    T.load_model(trained[0])
+    T.load(trained[0])
     arnn.load(arnn.DEFAULT_MODEL)
     assert torch.equal(torch.rand(3), expected)
 
@@ -290,32 +291,32 @@ def test_damaged_or_foreign_models_are_refused(trained, tmp_path):
 
     out, _ = trained
     with pytest.raises(ModelError, match="no such model"):
-        T.load_model(tmp_path / "missing")
+        T.load(tmp_path / "missing")
     junk = tmp_path / "junk.safetensors"  # a model file of the old one-file format, or any file
     junk.write_bytes(b"\x00" * 100)
     with pytest.raises(ModelError, match="not a keyfill model \\(expected a folder with config.json"):
-        T.load_model(junk)
+        T.load(junk)
     cut = tmp_path / "cut"
     shutil.copytree(out, cut)
     weights = (cut / "weights.safetensors").read_bytes()
     (cut / "weights.safetensors").write_bytes(weights[: len(weights) // 2])
     with pytest.raises(ModelError, match="damaged or truncated weights"):
-        T.load_model(cut)
+        T.load(cut)
     bad = tmp_path / "bad"
     shutil.copytree(out, bad)
     config = json.loads((bad / "config.json").read_text())
     del config["statistics"]
     (bad / "config.json").write_text(json.dumps(config))
     with pytest.raises(ModelError, match="bad: damaged transformer model config"):
-        T.load_model(bad)
+        T.load(bad)
     config = json.loads((out / "config.json").read_text())
     (bad / "config.json").write_text(json.dumps({**config, "kind": "arnn"}))
     with pytest.raises(ModelError, match="a 'arnn' model, not a 'transformer' model"):
-        T.load_model(bad)
+        T.load(bad)
     config["architecture"]["layers"] = 3
     (bad / "config.json").write_text(json.dumps(config))
     with pytest.raises(ModelError, match="the weights do not fit the model's configuration"):
-        T.load_model(bad)
+        T.load(bad)
 
 
 def test_a_model_of_another_kind_is_one_clear_error(trained, tmp_path, capsys):
@@ -400,6 +401,6 @@ def test_a_missing_gpu_is_a_usage_error(trained):
     if torch.cuda.is_available():
         pytest.skip("this machine has a GPU")
     with pytest.raises(UsageError, match="no CUDA GPU"):
-        T.load_model(out, device="cuda")
+        T.load(out, device="cuda")
     with pytest.raises(UsageError, match="unknown torch device"):
-        T.load_model(out, device="gpu0")
+        T.load(out, device="gpu0")

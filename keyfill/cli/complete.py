@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, output_format, resolve_keys, say
-from keyfill.learn.methods import METHODS
+from keyfill.learn.registry import METHODS
 
 
 @click.command()
@@ -33,9 +33,7 @@ def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, de
 
     \b
     Methods:
-      linear   lerp of translations, slerp of rotations
-      cubic    C1 cubic splines (log-map cubic for rotations)
-    and the learned methods whose models are installed (see --method).
+    {methods}
 
     \b
     Examples:
@@ -44,8 +42,8 @@ def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, de
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
     """
     from keyfill import io
-    from keyfill.learn.methods import CompleteOptions
-    from keyfill.learn.methods import complete as run
+    from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.registry import complete as run
 
     motion = io.load(src, in_fmt)
     keys = resolve_keys(motion, keys_text, key_every)
@@ -56,3 +54,7 @@ def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, de
         emit_json({"input": src, "output": dst, **result.info})
     elif dst != "-":
         say(f"wrote {dst}: {motion.num_frames} frames completed from {len(keys)} keys with {method}")
+
+
+complete.help = complete.help.replace(  # the docstring's indentation, so click's dedent keeps the block
+    "    {methods}", "\n".join(f"      {m.name:<12} {m.summary}" for m in METHODS.values()))

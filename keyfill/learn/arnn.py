@@ -335,8 +335,13 @@ def model_config(net: Completer, normalizer: Normalizer, sizes: dict, training: 
     }
 
 
-def load(path: str | Path) -> LampModel:
-    """Read a lamp model folder; :class:`ModelError` for anything that is not an intact ARNN-family model."""
+def load(path: str | Path, device: str = "cpu") -> LampModel:
+    """Read a lamp model folder; :class:`ModelError` for anything that is not an intact ARNN-family model.
+
+    The lamp networks run on the CPU (``device`` must be ``"cpu"``).
+    """
+    if device != "cpu":
+        raise UsageError("the lamp networks run on the CPU (--device cpu)")
     from keyfill.learn.modelfile import build_for_loading, load_model, load_state
 
     tensors, config = load_model(path, kind=KIND)
@@ -375,7 +380,7 @@ def complete(motion, keys, options):
     :func:`keyfill.learn.exact_keys.snap_to_keys` and its size reported.
     """
     from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.methods import Completion
+    from keyfill.learn.completion import Completion
     from keyfill.learn.modelfile import check_skeleton
     from keyfill.characters.lamp import from_variables, is_lamp, to_variables
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from keyfill import rotations as R
+from keyfill.learn.completion import Completion
 from keyfill.motion import Keys, Motion
 
 
@@ -107,3 +108,13 @@ def cubic(motion: Motion, keys: Keys) -> Motion:
     v = h01 * phi[s] + h10 * hf * omega[s] + h11 * hf * end_tangent[s]
     rot = R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v)))
     return _keep_keys(rot, pos, motion, keys)
+
+
+def complete_linear(motion: Motion, keys: Keys, options) -> Completion:
+    """``keyfill complete --method linear`` (:func:`linear`; ``options`` has nothing it uses)."""
+    return Completion(linear(motion, keys), {"exact_keys": True})
+
+
+def complete_cubic(motion: Motion, keys: Keys, options) -> Completion:
+    """``keyfill complete --method cubic`` (:func:`cubic`; ``options`` has nothing it uses)."""
+    return Completion(cubic(motion, keys), {"exact_keys": True})

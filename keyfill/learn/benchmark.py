@@ -5,7 +5,7 @@ The protocol, as the reference code runs it:
 1. Clips are split by file name into a training and a test set.
 2. Windows: training statistics from windows of 50 frames at offset 20; test
    windows of 65 frames at offset 40 (see :meth:`Corpus.windows`).
-3. Each window is normalised (:func:`align_windows`): the root's mean
+3. Each window is normalised (:func:`keyfill.learn.facing.align_windows`): the root's mean
    horizontal (XZ for Y-up) position over the window is subtracted, and the
    window is turned about the up axis so that the root's facing direction on
    frame 9, its local facing axis (``+Y`` in the reference) projected on the
@@ -41,10 +41,10 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
-from keyfill.kinematics import fk
 from keyfill.learn import metrics
 from keyfill.learn.baselines import segment_coordinates
 from keyfill.learn.corpus import Corpus, load_corpus
+from keyfill.learn.facing import align_windows, global_pose
 from keyfill.motion import Keys, Motion, Skeleton
 
 N_PAST = 10  #: context frames
@@ -54,85 +54,8 @@ TEST_WINDOW, TEST_OFFSET = 65, 40
 LENGTHS = (5, 15, 30, 45)
 LAFAN1_TEST_PATTERNS = ("*subject5*",)  #: LaFAN1's test split: subject 5
 
+
 Method = Callable[[Skeleton, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
-
-_AXES = {"X": 0, "Y": 1, "Z": 2}
-
-
-def axis_vector(text: str) -> np.ndarray:
-    """``"+Y"``, ``"-z"``, ``"X"`` -> a unit vector ``(3,)``."""
-    t = text.strip().upper()
-    sign = -1.0 if t.startswith("-") else 1.0
-    name = t.lstrip("+-")
-    if name not in _AXES:
-        raise UsageError(f"a facing axis is X, Y or Z with an optional sign (e.g. +Y, -Z), not {text!r}")
-    v = np.zeros(3)
-    v[_AXES[name]] = sign
-    return v
-
-
-def horizontal_axes(up_axis: str) -> tuple[int, int]:
-    """The two ground-plane coordinates for an up axis (``"Y"`` -> ``(0, 2)``)."""
-    return (0, 2) if up_axis == "Y" else (0, 1)
-
-
-def facing_rotation(root_quats: np.ndarray, facing_axis: np.ndarray, up_axis: str = "Y") -> np.ndarray:
-    """The rotations about the up axis that take +X to the ground projection of the facing axis.
-
-    ``root_quats (..., 4)`` -> ``(..., 4)`` unit quaternions (the inverse turns a
-    pose to face +X), computed as the reference's ``quat_between``.
-    """
-    fwd = R.quat_rotate(root_quats, np.broadcast_to(facing_axis, root_quats.shape[:-1] + (3,)))
-    fwd = fwd.copy()
-    fwd[..., _AXES[up_axis]] = 0.0
-    norm = np.linalg.norm(fwd, axis=-1, keepdims=True)
-    fwd = fwd / np.where(norm > 0, norm, 1.0)
-    x = np.array([1.0, 0.0, 0.0])
-    q = np.concatenate([1.0 + fwd[..., :1], np.cross(np.broadcast_to(x, fwd.shape), fwd)], axis=-1)
-    # Facing exactly -X: half a turn about the up axis.
-    half = np.zeros(4)
-    half[1 + _AXES[up_axis]] = 1.0
-    q = np.where(np.linalg.norm(q, axis=-1, keepdims=True) < 1e-9, half, q)
-    return R.quat_normalize(q)
-
-
-def align_windows(
-    quats: np.ndarray,
-    root: np.ndarray,
-    facing_axis: np.ndarray | str = "+Y",
-    up_axis: str = "Y",
-    frame: int = N_PAST - 1,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Centre each window on the ground and turn it to face +X on ``frame``.
-
-    Args:
-        quats: ``(W, T, J, 4)`` local quaternions.
-        root: ``(W, T, 3)`` root positions.
-        facing_axis: the root's local axis that points forward (``"+Y"`` as the reference).
-        up_axis: ``"Y"`` or ``"Z"``.
-        frame: the frame whose facing direction is aligned.
-
-    Returns:
-        New ``(quats, root)``: only the root rotation and position change.
-    """
-    if isinstance(facing_axis, str):
-        facing_axis = axis_vector(facing_axis)
-    root = np.array(root, dtype=np.float64)
-    h = list(horizontal_axes(up_axis))
-    root[..., h] -= root[..., h].mean(axis=1, keepdims=True)
-    turn = R.quat_conjugate(facing_rotation(quats[:, frame, 0], facing_axis, up_axis))[:, None]  # (W, 1, 4)
-    quats = np.array(quats, dtype=np.float64)
-    quats[:, :, 0] = R.quat_mul(turn, quats[:, :, 0])
-    root = R.quat_rotate(turn, root)
-    return quats, root
-
-
-def global_pose(quats: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
-    """Global ``(quats (..., J, 4), positions (..., J, 3))`` from local quats, root and constant offsets."""
-    pos = np.broadcast_to(offsets, root.shape[:-1] + offsets.shape).copy()
-    pos[..., 0, :] = root
-    return fk(quats, pos, parents)
-
 
 @dataclass(frozen=True)
 class Statistics:
@@ -227,18 +150,16 @@ METHOD_NAMES = {"zero-velocity": "zero-velocity", "linear": "interpolation", "in
 
 
 def resolve_method(name_or_path: str, device: str = "cpu") -> tuple[str, Method]:
-    """``(label, method)`` for a baseline name or the path of a model file."""
+    """``(label, method)`` for a baseline name, a learned method's name (its shipped model) or a model folder."""
     if name_or_path in METHOD_NAMES:
         label = METHOD_NAMES[name_or_path]
         return label, BASELINES[label]
-    path = Path(name_or_path)
-    if not path.exists():
-        raise UsageError(
-            f"{name_or_path!r} is neither a method ({', '.join(sorted(METHOD_NAMES))}) nor a model folder"
-        )
-    from keyfill.learn.transformer import load_model
+    from keyfill.learn import registry
 
-    return path.name, load_model(path, device).benchmark_method()
+    if name_or_path not in registry.METHODS and not Path(name_or_path).exists():
+        raise UsageError(f"{name_or_path!r} is neither a method ({', '.join(sorted(METHOD_NAMES))}) nor a model folder")
+    label, _, model = registry.load_model(name_or_path, device)
+    return Path(label).name, model.benchmark_method()
 
 
 def window_motion(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, fps: float = 30.0) -> Motion:
@@ -431,3 +352,44 @@ def format_table(results: dict[str, dict[int, dict[str, float]]], reference: str
                     block(m, [results[name][n][m] / results[reference][n][m] for n in lengths])
                     for m in ("L2Q", "L2P", "NPSS")))
     return "\n".join(lines)
+
+
+def run(
+    method_or_model: str,
+    data: Sequence[str | Path],
+    test_patterns: Sequence[str] = (),
+    train_patterns: Sequence[str] = (),
+    lengths: Sequence[int] = LENGTHS,
+    fold: bool | None = None,
+    facing_axis: str = "+Y",
+    baselines: bool = True,
+    device: str = "cpu",
+    progress=None,
+):
+    """The LaFAN1 protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.evaluation.Evaluation`.
+
+    ``method_or_model`` is a baseline (zero-velocity, linear, interpolation, cubic), a learned method's
+    name (its shipped model) or a model folder; the baselines zero-velocity and interpolation are scored
+    beside it unless ``baselines`` is False.
+    """
+    from keyfill.learn.evaluation import Evaluation
+
+    label, method = resolve_method(method_or_model, device)
+    methods = {label: method}
+    if baselines:
+        for name in ("zero-velocity", "interpolation"):
+            methods.setdefault(name, BASELINES[name])
+    proto = lafan1(data, test_patterns or LAFAN1_TEST_PATTERNS, train_patterns,
+                   fold=fold if fold is not None else getattr(method, "folded", None),
+                   facing_axis=facing_axis, progress=progress)
+    results = evaluate(methods, proto.test, proto.stats, lengths)
+    info = proto.info
+    lines = [f"lafan1: {info['test_windows']} test windows from {info['test_clips']} clips, "
+             f"statistics from {info['train_windows']} windows of {info['train_clips']} clips"]
+    if info.get("test_clips_too_short", 0) + info.get("train_clips_too_short", 0):
+        lines.append(f"skipped {info['test_clips_too_short']} test and {info['train_clips_too_short']} training "
+                     f"clips shorter than a window")
+    return Evaluation("lafan1", method_or_model, info,
+                      {m: {str(n): v for n, v in r.items()} for m, r in results.items()},
+                      lines, format_table(results))
+

@@ -26,7 +26,7 @@ Loading 2,500 Bandai clips takes about 20 s; the arrays are cached under
 later loads take well under a second.
 
 Corpora from ``../shared/data/corpora`` are found (and unpacked once into the
-repository's git-ignored ``data/`` folder) by :func:`locate`.
+checkout's git-ignored ``data/`` folder, see :func:`data_dir`) by :func:`locate`.
 """
 
 from __future__ import annotations
@@ -72,24 +72,41 @@ CORPORA = {
 # --- where data lives ------------------------------------------------------------
 
 
-def repo_root() -> Path:
-    """The folder that holds the ``keyfill`` package (the repository in a checkout)."""
-    return Path(__file__).resolve().parents[2]
+def checkout() -> Path | None:
+    """The source checkout that holds the ``keyfill`` package, or None when keyfill is installed as a wheel."""
+    root = Path(__file__).resolve().parents[2]
+    return root if (root / "pyproject.toml").is_file() and (root / "keyfill").is_dir() else None
 
 
 def shared_data_dir() -> Path:
-    """``../shared/data`` beside the repository (``KEYFILL_SHARED_DATA`` overrides it)."""
-    return Path(os.environ.get("KEYFILL_SHARED_DATA", repo_root().parent / "shared" / "data"))
+    """``../shared/data`` beside the checkout (``KEYFILL_SHARED_DATA`` overrides it; needed for a wheel install)."""
+    if "KEYFILL_SHARED_DATA" in os.environ:
+        return Path(os.environ["KEYFILL_SHARED_DATA"])
+    root = checkout()
+    return root.parent / "shared" / "data" if root is not None else Path("shared") / "data"
 
 
 def data_dir() -> Path:
-    """The git-ignored ``data/`` folder of the repository (``KEYFILL_DATA`` overrides it)."""
-    return Path(os.environ.get("KEYFILL_DATA", repo_root() / "data"))
+    """Where corpora are unpacked: ``KEYFILL_DATA``, else the checkout's git-ignored ``data/``, else the user's
+    data folder (``platformdirs``, e.g. ``~/.local/share/keyfill``) for a wheel install."""
+    if "KEYFILL_DATA" in os.environ:
+        return Path(os.environ["KEYFILL_DATA"])
+    root = checkout()
+    if root is not None:
+        return root / "data"
+    import platformdirs
+
+    return Path(platformdirs.user_data_dir("keyfill"))
 
 
 def cache_dir() -> Path:
-    """Where preprocessed corpora are cached (``KEYFILL_CACHE`` overrides ``data/cache``)."""
-    return Path(os.environ.get("KEYFILL_CACHE", data_dir() / "cache"))
+    """Where preprocessed corpora are cached: ``KEYFILL_CACHE``, else the user's cache folder
+    (``platformdirs``: ``$XDG_CACHE_HOME/keyfill`` or ``~/.cache/keyfill`` on Linux). Never inside the package."""
+    if "KEYFILL_CACHE" in os.environ:
+        return Path(os.environ["KEYFILL_CACHE"])
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("keyfill"))
 
 
 def locate(name: str) -> Path:

@@ -24,7 +24,7 @@ through each animation variable (keys read like the ARNN's, tangents as in
 :func:`keyfill.learn.baselines.cubic`).
 
 Methods: the spline baselines (``linear``, ``cubic``; they go through
-:func:`keyfill.learn.methods.complete` like ``keyfill complete`` does, and hit
+:func:`keyfill.learn.registry.complete` like ``keyfill complete`` does, and hit
 their keys exactly) and trained lamp models (raw network output, or with the
 exact-keys correction that ``keyfill complete`` applies by default).
 """
@@ -116,7 +116,7 @@ def score(sequences: list[LampSequence], predictions: list[np.ndarray], normaliz
 
 def spline_predictions(method: str, sequences: list[LampSequence]) -> list[np.ndarray]:
     """Completions by a spline baseline through the ``Motion`` pipeline of ``keyfill complete``."""
-    from keyfill.learn.methods import complete
+    from keyfill.learn.registry import complete
     from keyfill.motion import Keys
     from keyfill.characters.lamp import from_variables, to_variables
 
@@ -200,22 +200,14 @@ def evaluate(method: str, sequences: list[LampSequence], model=None, exact_keys:
 
 
 def resolve(method_or_model: str):
-    """``(label, model or None)`` for ``linear``, ``cubic``, ``arnn`` (the built-in model) or a model folder."""
-    from pathlib import Path
-
-    from keyfill.errors import UsageError
+    """``(label, model or None)`` for ``linear``, ``cubic``, ``cubic-variables``, ``arnn`` (the shipped model)
+    or a model folder."""
+    from keyfill.learn import registry
 
     if method_or_model in ("linear", "cubic", "cubic-variables"):
         return method_or_model, None
-    from keyfill.learn import arnn
-
-    if method_or_model == "arnn":
-        return "arnn", arnn.load(arnn.DEFAULT_MODEL)
-    if Path(method_or_model).exists():
-        model = arnn.load(method_or_model)
-        return f"{model.arch} ({method_or_model})", model
-    raise UsageError(f"{method_or_model!r} is neither a method (linear, cubic, cubic-variables, arnn) "
-                     f"nor a model folder")
+    label, _, model = registry.load_model(method_or_model)
+    return (label if label in registry.METHODS else f"{model.arch} ({method_or_model})"), model
 
 
 def protocol(method_or_model: str, folder, baselines: bool = True, seed: int = 0) -> tuple[list[Report], dict]:
@@ -244,6 +236,24 @@ def protocol(method_or_model: str, folder, baselines: bool = True, seed: int = 0
     info = {"data": str(folder), "sequences": len(sequences), "test_sequences": len(test),
             "test_first": test[0].name, "test_last": test[-1].name, "deletion_seed": seed}
     return reports, info
+
+
+def run(method_or_model: str, data, baselines: bool = True, **lafan1_options):
+    """The keys protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.evaluation.Evaluation`.
+
+    ``data`` is one folder made by ``keyfill simulate``; ``lafan1_options`` (test patterns, lengths, ...) do not apply.
+    """
+    from keyfill.errors import UsageError
+    from keyfill.learn.evaluation import Evaluation
+
+    if len(data) != 1:
+        raise UsageError("the keys protocol takes one dataset folder made by 'keyfill simulate'")
+    reports, info = protocol(method_or_model, data[0], baselines=baselines)
+    line = (f"keys: {info['test_sequences']} test sequences of {info['data']} ({info['test_first']} .. "
+            f"{info['test_last']}), completed with all keys and with 1-2 keys deleted; losses on standardised "
+            f"variables (total = key + frame)")
+    return Evaluation("keys", method_or_model, info, {r.method: r.as_dict() for r in reports}, [line],
+                      format_table(reports))
 
 
 def format_table(reports: list[Report]) -> str:

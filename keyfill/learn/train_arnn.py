@@ -39,10 +39,8 @@ split with all keys and with 1-2 keys deleted, and the wall and CPU seconds so f
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -50,8 +48,10 @@ from typing import Callable
 import numpy as np
 import torch
 
-from keyfill.errors import DataError, KeyfillError, UsageError
+from keyfill.errors import DataError, UsageError
 from keyfill.learn import arnn
+from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs
+from keyfill.learn.training import train as run_training
 from keyfill.learn.lamp_features import Batch, LampSequence, Normalizer, delete_keys, make_batch
 
 #: weight of the key loss in Eq. 4
@@ -126,23 +126,6 @@ class Settings:
         return self
 
 
-@dataclass(frozen=True)
-class Losses:
-    """Losses on standardised variables, as in the paper's tables.
-
-    ``key``: mean squared error at the keys given to the network (except the
-    first, which is the starting frame), per key and variable; ``frame``: mean
-    squared error over every predicted frame; ``total = key + frame``.
-    """
-
-    key: float
-    frame: float
-
-    @property
-    def total(self) -> float:
-        return self.key + self.frame
-
-
 def loss_terms(pred: torch.Tensor, frames: torch.Tensor, is_key: torch.Tensor, valid: torch.Tensor):
     """The two terms of Eq. 4 and the table losses.
 
@@ -192,10 +175,6 @@ def _fingerprint(batch: Batch) -> str:
     return h.hexdigest()[:16]
 
 
-class TrainingDiverged(KeyfillError):
-    """The loss became NaN or infinite."""
-
-
 @dataclass
 class Result:
     """What :func:`train` did."""
@@ -209,6 +188,142 @@ class Result:
     log: Path | None
 
 
+class ArnnTask(TrainingTask):
+    """The lamp networks as a task of the one training loop (:mod:`keyfill.learn.training`).
+
+    Every random draw (the initial weights, batch order, key deletion, teacher
+    forcing, dropout) comes from the generator the loop builds the network
+    from, in that order, so one process gives the same bytes as before the
+    loop existed. With N processes, dropout draws from a per-process generator
+    seeded by ``(seed, rank, epoch)`` instead, so the shared batch draws stay
+    in step across processes.
+    """
+
+    kind = arnn.KIND
+
+    def __init__(self, train_set: list[LampSequence], val_set: list[LampSequence], settings: Settings,
+                 source: str = ""):
+        settings.check()
+        if not train_set:
+            raise DataError("no training sequences")
+        if not val_set:
+            raise DataError("no held-out sequences to watch training with")
+        self.settings = settings
+        self.epochs = settings.epochs
+        self.checkpoint_every = settings.checkpoint_every
+        self.clip = settings.clip
+        self.source = source
+        self.n_train, self.n_val = len(train_set), len(val_set)
+        self.normalizer = Normalizer.fit(train_set)
+        self.data = make_batch(train_set, self.normalizer)
+        self.val = make_batch(val_set + val_set, self.normalizer)
+        self.val.is_key[len(val_set):] = delete_keys(self.val.is_key[len(val_set):], self.val.valid[len(val_set):],
+                                                     torch.Generator().manual_seed(12345), max_deleted=2,
+                                                     min_deleted=1)
+        self.schedule = Schedule(settings.epochs, settings.curriculum)
+        self.rank, self.world = 0, 1
+
+    def config(self) -> dict:
+        return asdict(self.settings)
+
+    def fingerprint(self) -> str:
+        return _fingerprint(self.data)
+
+    def begin(self, rank: int, world: int, device: str) -> None:
+        if device != "cpu":
+            raise UsageError("the lamp networks train on the CPU (--device cpu)")
+        self.rank, self.world = rank, world
+
+    def build(self, generator):
+        self.gen = generator
+        self.net = arnn.build(self.settings.arch, generator, **self.settings.sizes)
+        return {"net": self.net}
+
+    def optimizers(self, nets):
+        return {"net": torch.optim.Adam(nets["net"].parameters(), lr=self.settings.lr, betas=(0.9, 0.999), eps=1e-8)}
+
+    def learning_rates(self, epoch, step, steps):
+        return {"net": self.settings.lr * self.schedule.lr_scale(epoch)}
+
+    def steps(self, epoch):
+        return math.ceil(self.n_train / self.settings.batch_size)
+
+    def batches(self, epoch):
+        """``(batch, keys after deletion, teacher-forced?)`` of each step, in the order of the paper's curriculum."""
+        tf = self.schedule.teacher_forcing(epoch)
+        self.dropout = self.gen if self.world == 1 else \
+            torch.Generator().manual_seed(int(np.random.SeedSequence([self.settings.seed, self.rank, epoch]).generate_state(1)[0]))
+        order = torch.randperm(self.n_train, generator=self.gen)
+        for i in range(0, self.n_train, self.settings.batch_size):
+            b = self.data.select(order[i: i + self.settings.batch_size])
+            is_key = delete_keys(b.is_key, b.valid, self.gen, self.settings.max_deleted)
+            yield b, is_key, bool(torch.rand((), generator=self.gen) < tf)
+
+    def shard(self, batch, rank, world):
+        b, is_key, teacher = batch
+        rows = torch.arange(rank, len(b), world)
+        return _Shard(b.select(rows), is_key[rows], teacher)
+
+    def step(self, batch, update):
+        b, is_key, teacher = batch
+        omega = self.schedule.omega(update.epoch)
+        pred = arnn.run(self.net, b.frames, is_key, teacher=teacher, generator=self.dropout)
+        key_sum, frame_mse, key_mse = loss_terms(pred, b.frames, is_key, b.valid)
+        key_term = key_sum if self.settings.key_loss == "sum" else key_mse
+        loss = KEY_WEIGHT * omega * key_term + frame_mse
+        update("net", loss)
+        return {"objective": loss.item(), "key": key_mse.item(), "frame": frame_mse.item()}, len(b)
+
+    def validate(self, epoch):
+        return validate(self.net, self.val, self.n_val)
+
+    def log_row(self, epoch, losses, validation):
+        return {
+            "teacher_forcing": round(self.schedule.teacher_forcing(epoch), 6),
+            "omega": round(self.schedule.omega(epoch), 6),
+            **{f"train_{k}": v for k, v in losses.items()},
+            "train_total": losses["key"] + losses["frame"],
+            **{f"val_{k}": v for k, v in validation.items()},
+        }
+
+    def state_dict(self):
+        return {"generator": self.gen.get_state()}
+
+    def load_state_dict(self, state):
+        self.gen.set_state(state["generator"])
+
+    def save(self, output, nets, history):
+        from keyfill.learn.modelfile import save_model
+
+        final = history[-1] if history else {}
+        seconds = final.get("seconds", 0.0)
+        cpu = final.get("cpu_seconds", 0.0)
+        training = {
+            "settings": asdict(self.settings),
+            "data": self.source,
+            "train_sequences": self.n_train,
+            "val_sequences": self.n_val,
+            "epochs": self.settings.epochs,
+            "seconds": round(seconds, 1),
+            "cpu_seconds": round(cpu, 1),
+            "threads": torch.get_num_threads(),
+            "val": {k[4:]: v for k, v in final.items() if k.startswith("val_")},
+        }
+        config = arnn.model_config(self.net, self.normalizer, self.settings.sizes, training)
+        path = save_model(output, arnn.KIND, self.net.state_dict(), config)
+        return Result(path, self.settings.epochs, seconds, cpu, training["val"], arnn.num_weights(self.net), None)
+
+
+class _Shard(tuple):
+    """A process's rows of a batch: ``(batch, keys, teacher-forced?)``; its length is its rows."""
+
+    def __new__(cls, b, is_key, teacher):
+        return super().__new__(cls, (b, is_key, teacher))
+
+    def __len__(self) -> int:
+        return len(self[0])
+
+
 def train(
     train_set: list[LampSequence],
     val_set: list[LampSequence],
@@ -219,8 +334,9 @@ def train(
     resume: bool = False,
     on_epoch: Callable[[dict], None] | None = None,
     source: str = "",
+    progress: Callable | None = None,
 ) -> Result:
-    """Train a network on ``train_set`` and write the model folder ``output``.
+    """Train a network on ``train_set`` and write the model folder ``output`` (through :func:`keyfill.learn.training.train`).
 
     Args:
         train_set, val_set: sequences with every frame and their keys (``val_set`` is only watched).
@@ -231,140 +347,18 @@ def train(
         on_epoch: called with each log row (e.g. to update a progress bar).
         source: a note on where the data came from, kept in the model config.
 
-    Raises :class:`TrainingDiverged` (keeping the last good checkpoint) when a loss is not finite.
+    Raises :class:`~keyfill.learn.training.TrainingDiverged` (keeping the last good checkpoint) when a loss is
+    not finite.
     """
     settings.check()
-    _check_outputs(output, checkpoint, log)
-    if not train_set:
-        raise DataError("no training sequences")
-    if not val_set:
-        raise DataError("no held-out sequences to watch training with")
-    normalizer = Normalizer.fit(train_set)
-    data = make_batch(train_set, normalizer)
-    val = make_batch(val_set + val_set, normalizer)
-    val_deleted = delete_keys(val.is_key[len(val_set):], val.valid[len(val_set):],
-                              torch.Generator().manual_seed(12345), max_deleted=2, min_deleted=1)
-    val.is_key[len(val_set):] = val_deleted
-    fingerprint = _fingerprint(data)
-
-    gen = torch.Generator().manual_seed(settings.seed)
-    net = arnn.build(settings.arch, gen, **settings.sizes)
-    opt = torch.optim.Adam(net.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
-    schedule = Schedule(settings.epochs, settings.curriculum)
-    start, rows, seconds, cpu = 0, [], 0.0, 0.0
-    last_good = None
-
-    if resume:
-        if checkpoint is None or not Path(checkpoint).is_file():
-            raise UsageError(f"--resume: no checkpoint at {checkpoint}")
-        state = read_checkpoint(checkpoint)
-        if state["settings"] != json.dumps(asdict(settings), sort_keys=True):
-            raise UsageError(f"{checkpoint}: was made with other settings ({state['settings']}); "
-                             f"give the same options to resume")
-        if state["data"] != fingerprint:
-            raise UsageError(f"{checkpoint}: was made with other training data")
-        from keyfill.learn.modelfile import load_state
-
-        load_state(net, state["net"], checkpoint)
-        opt.load_state_dict(state["optim"])
-        gen.set_state(state["generator"])
-        start, seconds, cpu = int(state["epoch"]), float(state["seconds"]), float(state["cpu_seconds"])
-        rows = _read_log(log, start) if log is not None else []
-        last_good = (checkpoint, start)
-
-    if log is not None:
-        _write_log(log, rows)
-    N = len(train_set)
-    for epoch in range(start, settings.epochs):
-        t0, c0 = time.perf_counter(), time.process_time()
-        tf, omega = schedule.teacher_forcing(epoch), schedule.omega(epoch)
-        for group in opt.param_groups:
-            group["lr"] = settings.lr * schedule.lr_scale(epoch)
-        net.train()
-        sums = np.zeros(3)
-        order = torch.randperm(N, generator=gen)
-        for i in range(0, N, settings.batch_size):
-            b = data.select(order[i: i + settings.batch_size])
-            is_key = delete_keys(b.is_key, b.valid, gen, settings.max_deleted)
-            teacher = bool(torch.rand((), generator=gen) < tf)
-            pred = arnn.run(net, b.frames, is_key, teacher=teacher, generator=gen)
-            key_sum, frame_mse, key_mse = loss_terms(pred, b.frames, is_key, b.valid)
-            key_term = key_sum if settings.key_loss == "sum" else key_mse
-            loss = KEY_WEIGHT * omega * key_term + frame_mse
-            if not torch.isfinite(loss):
-                raise _diverged(epoch, f"the loss is {loss.item()}", last_good)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            if settings.clip > 0:
-                torch.nn.utils.clip_grad_norm_(net.parameters(), settings.clip)
-            opt.step()
-            n = len(b)
-            sums += n * np.array([loss.item(), key_mse.item(), frame_mse.item()])
-        sums /= N
-        held_out = validate(net, val, len(val_set))
-        seconds += time.perf_counter() - t0
-        cpu += time.process_time() - c0
-        row = {
-            "epoch": epoch + 1,
-            "teacher_forcing": round(tf, 6),
-            "omega": round(omega, 6),
-            "lr": settings.lr * schedule.lr_scale(epoch),
-            "train_objective": sums[0],
-            "train_key": sums[1],
-            "train_frame": sums[2],
-            "train_total": sums[1] + sums[2],
-            **{f"val_{k}": v for k, v in held_out.items()},
-            "seconds": round(seconds, 3),
-            "cpu_seconds": round(cpu, 3),
-        }
-        if not all(math.isfinite(v) for v in row.values()):
-            raise _diverged(epoch, "the held-out loss is not finite", last_good)
-        rows.append(row)
-        if log is not None:
-            _append_log(log, row)
-        if on_epoch is not None:
-            on_epoch(row)
-        if checkpoint is not None and ((epoch + 1) % settings.checkpoint_every == 0 or epoch + 1 == settings.epochs):
-            write_checkpoint(checkpoint, net, opt, gen, epoch + 1, (seconds, cpu), settings, fingerprint)
-            last_good = (checkpoint, epoch + 1)
-
-    final = rows[-1] if rows else {}
-    training = {
-        "settings": asdict(settings),
-        "data": source,
-        "train_sequences": len(train_set),
-        "val_sequences": len(val_set),
-        "epochs": settings.epochs,
-        "seconds": round(seconds, 1),
-        "cpu_seconds": round(cpu, 1),
-        "threads": torch.get_num_threads(),
-        "val": {k[4:]: v for k, v in final.items() if k.startswith("val_")},
-    }
-    from keyfill.learn.modelfile import save_model
-
-    config = arnn.model_config(net, normalizer, settings.sizes, training)
-    path = save_model(output, arnn.KIND, net.state_dict(), config)
-    return Result(path, settings.epochs, seconds, cpu, training["val"], arnn.num_weights(net),
-                  Path(log) if log is not None else None)
-
-
-def _check_outputs(output, checkpoint, log) -> None:
-    """Refuse outputs that could not be written, before training rather than after."""
-    from keyfill.learn.modelfile import CONFIG
-
-    for path in (output, checkpoint, log):
-        if path is not None:
-            parent = Path(path).parent
-            if not parent.is_dir():
-                raise UsageError(f"{path}: the folder {str(parent)!r} does not exist")
-    if Path(output).exists() and not (Path(output) / CONFIG).is_file():
-        raise UsageError(f"{output}: exists and is not a keyfill model; refusing to replace it")
-
-
-def _diverged(epoch: int, what: str, last_good) -> TrainingDiverged:
-    where = (f"the last good checkpoint, {last_good[0]} (epoch {last_good[1]}), is kept: resume from it with "
-             f"--resume and a lower --lr" if last_good else "no checkpoint had been written yet; try a lower --lr")
-    return TrainingDiverged(f"training diverged at epoch {epoch + 1}: {what}; {where}")
+    check_outputs(output, checkpoint, log)
+    task = ArnnTask(train_set, val_set, settings, source)
+    outcome = run_training(task, output, seed=settings.seed, checkpoint=checkpoint, log=log, resume=resume,
+                           progress=progress, on_epoch=on_epoch)
+    result = outcome.model
+    if result is not None:
+        result.log = outcome.log
+    return result
 
 
 def validate(net: arnn.Completer, val: Batch, n_all: int) -> dict:
@@ -386,56 +380,78 @@ def validate(net: arnn.Completer, val: Batch, n_all: int) -> dict:
     return out
 
 
-# --- checkpoints and the log -------------------------------------------------------------------------
+# --- keyfill train arnn --------------------------------------------------------------------------------
 
 
-def write_checkpoint(path, net, opt, gen, epoch: int, seconds: tuple[float, float], settings: Settings,
-                     data: str) -> None:
-    """Atomically write a checkpoint (tensors, numbers and strings only: read back with ``weights_only=True``)."""
-    from keyfill.files import atomic_output
+def _make_task(common, options: dict, progress) -> ArnnTask:
+    """The task of ``keyfill train arnn``: DATA is one ``keyfill simulate`` folder, split by :func:`split`."""
+    from dataclasses import replace
 
-    state = {
-        "format": "keyfill-arnn-checkpoint",
-        "net": net.state_dict(),
-        "optim": opt.state_dict(),
-        "generator": gen.get_state(),
-        "epoch": epoch,
-        "seconds": seconds[0],
-        "cpu_seconds": seconds[1],
-        "settings": json.dumps(asdict(settings), sort_keys=True),
-        "data": data,
-    }
-    with atomic_output(path) as tmp:
-        torch.save(state, tmp)
+    from keyfill.learn.lamp_features import read_sequences
+
+    if len(common.data) != 1:
+        raise UsageError("keyfill train arnn takes one dataset folder made by 'keyfill simulate'")
+    given = {"epochs": common.epochs, "checkpoint_every": common.checkpoint_every}
+    settings = replace(Settings(), seed=common.seed, **options, **{k: v for k, v in given.items() if v is not None})
+    settings.check()
+    parts = split(read_sequences(common.data[0]))
+    task = ArnnTask(parts["train"], parts["val"], settings, source=str(common.data[0]))
+    task.n_test = len(parts["test"])
+    return task
 
 
-def read_checkpoint(path) -> dict:
-    """A checkpoint written by :func:`write_checkpoint`; never unpickles objects (``weights_only=True``)."""
-    from keyfill.errors import ModelError
-
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # torch raises many types for damaged or foreign files
-        raise ModelError(f"{path}: not a readable keyfill checkpoint ({' '.join(str(e).split())[:200]})") from None
-    if not isinstance(state, dict) or state.get("format") != "keyfill-arnn-checkpoint":
-        raise ModelError(f"{path}: not a keyfill ARNN checkpoint")
-    return state
+def _started(task: ArnnTask) -> str:
+    return (f"training {task.settings.arch} on {task.n_train} sequences of {task.source} ({task.n_val} held out, "
+            f"{task.n_test} left for testing), {task.epochs} epochs")
 
 
-def _read_log(path, upto_epoch: int) -> list[dict]:
-    if not Path(path).is_file():
-        return []
-    rows = [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
-    return [r for r in rows if r.get("epoch", 0) <= upto_epoch]
+def _finished(task: ArnnTask, outcome) -> tuple[dict, str]:
+    r = outcome.model
+    summary = {"model": str(r.path), "arch": task.settings.arch, "epochs": r.epochs, "seconds": round(r.seconds, 1),
+               "cpu_seconds": round(r.cpu_seconds, 1), "weights": r.weights, "held_out": r.val,
+               "log": str(outcome.log), "checkpoint": str(outcome.checkpoint)}
+    v = r.val
+    line = (f"wrote {r.path}: {task.settings.arch}, {r.weights} weights, {r.epochs} epochs in {r.seconds / 60:.1f} min "
+            f"({r.cpu_seconds / 60:.1f} min of CPU); held-out total loss {v['total']:.5f} (all keys), "
+            f"{v['deleted_total']:.5f} (1-2 keys deleted); log {outcome.log}")
+    return summary, line
 
 
-def _write_log(path, rows: list[dict]) -> None:
-    from keyfill.files import atomic_output
+TRAINING = TrainingSpec(
+    help="""Train a lamp in-betweening network on the dataset folder DATA.
 
-    with atomic_output(path) as tmp:
-        tmp.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    DATA is a folder made by 'keyfill simulate'. Its sequences are split by
+    position: the last 20 % are the test split (for 'keyfill evaluate'), the
+    10 % before them are held out and scored every epoch in the log, the rest
+    is trained on. Training follows Zhang & van de Panne 2018: the loss
+    100 w (key error) + frame MSE, scheduled sampling and a sigmoid key
+    weight w (--no-curriculum: none), 0-2 keys deleted at random each time a
+    sequence is used, Adam. Defaults: 400 epochs, a checkpoint every 50. The
+    same data, options, --seed and --threads give the same model bytes, also
+    across --resume.
 
+    \b
+    Examples:
+      keyfill train arnn data/hops -o models/lamp-arnn
+      keyfill train arnn data/hops -o models/nomem --arch no-memory --epochs 300
+      keyfill train arnn data/hops -o models/lamp-arnn --resume
+    """,
+    options=(
+        Option("arch", Settings.arch, "Network: the ARNN, or section 9's no-memory or segregated comparison networks.",
+               choices=arnn.ARCHITECTURES),
+        Option("batch_size", Settings.batch_size, "Sequences per gradient step.", type=int),
+        Option("lr", Settings.lr, "Adam learning rate.", type=float),
+        Option("curriculum", Settings.curriculum, "Scheduled sampling then a rising key weight (section 7.2); "
+               "without: free-running, weight 1.", flag=True),
+        Option("max_deleted", Settings.max_deleted, "Delete 0 to this many interior keys of a sequence each time "
+               "it is used.", type=int),
+        Option("key_loss", Settings.key_loss, "Key term of the loss: mean squared key error, or the paper's literal "
+               "sum over keys.", choices=("mean", "sum")),
+        Option("clip", Settings.clip, "Clip the gradient norm to this (0: no clipping).", type=float),
+    ),
+    make_task=_make_task,
+    started=_started,
+    finished=_finished,
+    threads=1,
+)
 
-def _append_log(path, row: dict) -> None:
-    with open(path, "a") as f:
-        f.write(json.dumps(row) + "\n")

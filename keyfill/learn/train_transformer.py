@@ -33,17 +33,20 @@ import glob
 import json
 import math
 import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from keyfill.errors import DataError, ModelError, UsageError
+from keyfill.errors import DataError, UsageError
 from keyfill.learn import benchmark
+from keyfill.learn.facing import align_windows, global_pose
+from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs, side_files
+from keyfill.learn.training import train as run_training
 from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.transformer import (
+    KIND,
     CompletionModel,
     ModelConfig,
     apply_transform,
@@ -232,6 +235,121 @@ def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str) 
     return Split(q.astype(np.float32), r.astype(np.float32), validation, info)
 
 
+class TransformerTask(TrainingTask):
+    """The transformer as a task of the one training loop (:mod:`keyfill.learn.training`).
+
+    The batches of epoch ``e`` draw from ``numpy.random.default_rng([seed, e])``
+    (layouts, order, mirroring) and reseed torch's global generator for the
+    epoch's dropout; the loop runs inside ``torch.random.fork_rng``, so the
+    caller's state is untouched. A resumed run therefore needs no random state
+    from the checkpoint.
+    """
+
+    kind = KIND
+    checkpoint_every = 1
+
+    def __init__(self, corpus: Corpus, model_cfg: ModelConfig, cfg: TrainConfig, seed: int = 0):
+        if model_cfg.max_frames < cfg.window:
+            raise UsageError(f"the model's max_frames ({model_cfg.max_frames}) is shorter than the training window "
+                             f"({cfg.window})")
+        self.corpus, self.model_cfg, self.cfg, self.seed = corpus, model_cfg, cfg, seed
+        self.epochs = cfg.epochs
+        self.clip = cfg.grad_clip
+        self.data = split_corpus(corpus, cfg, seed, model_cfg.facing_axis)
+        self.mirror = None
+        if cfg.mirror:
+            sample = np.random.default_rng([seed, 104729]).choice(len(corpus.quats), min(len(corpus.quats), 20000),
+                                                                  replace=False)
+            self.mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
+        self.info = {"seed": seed, "corpus_clips": len(corpus), **self.data.info, "mirrored": self.mirror is not None}
+        if self.data.validation is not None:
+            self.info["validation_windows"] = self.data.validation.info["test_windows"]
+        self.device = "cpu"
+
+    def config(self) -> dict:
+        model = {f"model.{k}": v for k, v in dataclasses.asdict(self.model_cfg).items()}
+        training = {f"training.{k}": v for k, v in dataclasses.asdict(self.cfg).items() if k != "epochs"}
+        return {**model, **training}
+
+    def fingerprint(self) -> str:
+        import hashlib
+
+        h = hashlib.sha256(repr((self.data.quats.shape, self.data.root.shape)).encode())
+        h.update(np.ascontiguousarray(self.data.quats[:, ::7]).tobytes())
+        h.update(np.ascontiguousarray(self.data.root).tobytes())
+        return h.hexdigest()[:16]
+
+    def begin(self, rank: int, world: int, device: str) -> None:
+        self.device = torch_device(device)
+
+    def build(self, generator):
+        up = self.corpus.skeleton.up_axis
+        aq, ar = align_windows(self.data.quats, self.data.root, self.model_cfg.facing_axis, up, benchmark.N_PAST - 1)
+        _, gpos = global_pose(aq, ar, self.corpus.skeleton.offsets, self.corpus.skeleton.parents)
+        flat = gpos.reshape(-1, gpos.shape[-2] * 3)
+        self.model = new_model(self.corpus.skeleton, self.model_cfg, flat.mean(0), flat.std(0), self.corpus.folded,
+                               self.info)
+        self.model.to(self.device)
+        return {"network": self.model.network}
+
+    def optimizers(self, nets):
+        import torch
+
+        return {"network": torch.optim.Adam(nets["network"].parameters(), lr=self.cfg.lr,
+                                            weight_decay=self.cfg.weight_decay)}
+
+    def steps(self, epoch: int) -> int:
+        return max(len(self.data.quats) // self.cfg.batch_size, 1)
+
+    def learning_rates(self, epoch, step, steps):
+        return {"network": learning_rate(self.cfg, epoch + step / steps)}
+
+    def batches(self, epoch):
+        """``(inputs, targets, gt_quats, gt_root, kinds)`` of each step: one key layout per batch."""
+        import torch
+
+        cfg = self.cfg
+        rng = np.random.default_rng([self.seed, epoch])
+        torch.manual_seed(int(rng.integers(2**62)))
+        order = rng.permutation(len(self.data.quats))
+        for step in range(self.steps(epoch)):
+            _, T, keys = sample_layout(rng, cfg.layouts, cfg.window)
+            idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
+            wq, wr = self.data.quats[idx, :T], self.data.root[idx, :T]
+            if self.mirror is not None:
+                flip = rng.random(len(idx)) < 0.5
+                wq, wr = wq.astype(np.float64), wr.astype(np.float64)
+                wq[flip], wr[flip] = self.mirror(wq[flip], wr[flip])
+            yield make_batch(self.model, wq, wr, keys, T)
+
+    def shard(self, batch, rank, world):
+        return tuple(t[rank::world] for t in batch)
+
+    def step(self, batch, update):
+        x, y, gq, gr, kinds = batch
+        out = losses(self.model.features, self.model.network(x, kinds), y, gq, gr, kinds, self.model_cfg)
+        update("network", out["total"])
+        return {k: float(v.detach()) for k, v in out.items()}, 1  # every step is a whole batch: equal weights
+
+    def validate(self, epoch):
+        record = {}
+        if self.data.validation is not None:
+            res = benchmark.evaluate({"model": self.model.benchmark_method(), "interpolation": benchmark.interpolation},
+                                     self.data.validation.test, self.data.validation.stats, self.cfg.val_lengths)
+            for n_, scores in res["model"].items():
+                for m, v in scores.items():
+                    record[f"val_{m}_{n_}"] = v
+                    record[f"val_{m}_{n_}_vs_interp"] = v / res["interpolation"][n_][m]
+        return record
+
+    def save(self, output, nets, history):
+        final = {k: v for k, v in (history[-1] if history else {}).items()
+                 if k not in ("seconds", "cpu_seconds")}  # files stay reproducible
+        self.model.info.update({"epochs": self.cfg.epochs, "training": dataclasses.asdict(self.cfg), "final": final})
+        self.model.save(output)
+        return self.model
+
+
 def train(
     corpus: Corpus,
     output: str | os.PathLike,
@@ -247,9 +365,9 @@ def train(
     """Train a transformer on ``corpus`` and write it to the model folder ``output``.
 
     Beside ``output`` it keeps ``<output>.checkpoint.pt`` (the checkpoint after
-    the last finished epoch, read with ``torch.load(weights_only=True)``) and
-    ``<output>.log.jsonl`` (one JSON line per epoch: losses, learning rate,
-    validation L2Q / L2P / NPSS, seconds), as ``keyfill train arnn`` does.
+    the last finished epoch) and ``<output>.log.jsonl`` (one JSON line per
+    epoch: losses, learning rate, validation L2Q / L2P / NPSS, seconds); see
+    :func:`keyfill.learn.training.train`.
 
     Args:
         corpus: the training clips (validation clips are held out of them).
@@ -264,156 +382,81 @@ def train(
         report: called with each epoch's log record (optional).
         started: called once with the data summary before the first step (optional).
     """
-    import torch
-
-    device = torch_device(device)
-    output = Path(output)
-    ckpt_path, log_path = side_files(output)
-    _check_output(output)
-    if model_cfg.max_frames < cfg.window:
-        raise UsageError(f"the model's max_frames ({model_cfg.max_frames}) is shorter than the training window ({cfg.window})")
-    data = split_corpus(corpus, cfg, seed, model_cfg.facing_axis)
-    up = corpus.skeleton.up_axis
-    aq, ar = benchmark.align_windows(data.quats, data.root, model_cfg.facing_axis, up)
-    _, gpos = benchmark.global_pose(aq, ar, corpus.skeleton.offsets, corpus.skeleton.parents)
-    flat = gpos.reshape(-1, gpos.shape[-2] * 3)
-    mirror = None
-    if cfg.mirror:
-        sample = np.random.default_rng([seed, 104729]).choice(len(corpus.quats), min(len(corpus.quats), 20000), replace=False)
-        mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
-    info = {"seed": seed, "corpus_clips": len(corpus), **data.info, "mirrored": mirror is not None}
-    if data.validation is not None:
-        info["validation_windows"] = data.validation.info["test_windows"]
+    torch_device(device)
+    checkpoint, log = side_files(output)
+    check_outputs(output, checkpoint, log)
+    task = TransformerTask(corpus, model_cfg, cfg, seed)
     if started is not None:
-        started(info)
-
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        model = new_model(corpus.skeleton, model_cfg, flat.mean(0), flat.std(0), corpus.folded, info)
-        model.to(device)
-        net = model.network
-        opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        start_epoch, history = 0, []
-        if resume:
-            start_epoch, history = _load_checkpoint(ckpt_path, net, opt, model_cfg, cfg, seed)
-        elif log_path.exists():
-            log_path.unlink()
-        n = len(data.quats)
-        steps = max(n // cfg.batch_size, 1)
-        for epoch in range(start_epoch, cfg.epochs):
-            t0 = time.perf_counter()
-            rng = np.random.default_rng([seed, epoch])
-            torch.manual_seed(int(rng.integers(2**62)))
-            order = rng.permutation(n)
-            net.train()
-            sums: dict[str, float] = {}
-            bar = progress(total=steps, desc=f"epoch {epoch + 1}/{cfg.epochs}") if progress else None
-            for step in range(steps):
-                lr = learning_rate(cfg, epoch + step / steps)
-                for g in opt.param_groups:
-                    g["lr"] = lr
-                _, T, keys = sample_layout(rng, cfg.layouts, cfg.window)
-                idx = order[step * cfg.batch_size : (step + 1) * cfg.batch_size]
-                wq, wr = data.quats[idx, :T], data.root[idx, :T]
-                if mirror is not None:
-                    flip = rng.random(len(idx)) < 0.5
-                    wq, wr = wq.astype(np.float64), wr.astype(np.float64)
-                    wq[flip], wr[flip] = mirror(wq[flip], wr[flip])
-                x, y, gq, gr, kinds = make_batch(model, wq, wr, keys, T)
-                out = losses(model.features, net(x, kinds), y, gq, gr, kinds, model_cfg)
-                opt.zero_grad(set_to_none=True)
-                out["total"].backward()
-                if cfg.grad_clip > 0:
-                    torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
-                opt.step()
-                if not math.isfinite(float(out["total"].detach())):
-                    raise ModelError(f"training diverged at epoch {epoch + 1}, step {step + 1} (loss is not finite); lower the learning rate")
-                for k, v in out.items():
-                    sums[k] = sums.get(k, 0.0) + float(v.detach())
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix(loss=f"{sums['total'] / (step + 1):.4f}")
-            if bar is not None:
-                bar.close()
-            record = {"epoch": epoch + 1, "lr": lr, **{f"loss_{k}": v / steps for k, v in sums.items()}}
-            net.eval()
-            if data.validation is not None:
-                res = benchmark.evaluate({"model": model.benchmark_method(), "interpolation": benchmark.interpolation},
-                                         data.validation.test, data.validation.stats, cfg.val_lengths)
-                for n_, scores in res["model"].items():
-                    for m, v in scores.items():
-                        record[f"val_{m}_{n_}"] = v
-                        record[f"val_{m}_{n_}_vs_interp"] = v / res["interpolation"][n_][m]
-            record["seconds"] = time.perf_counter() - t0
-            history.append(record)
-            _append_log(log_path, record)
-            _save_checkpoint(ckpt_path, net, opt, model_cfg, cfg, seed, epoch + 1, history)
-            if report is not None:
-                report(record)
-    final = {k: v for k, v in (history[-1] if history else {}).items() if k != "seconds"}  # files stay reproducible
-    model.info.update({"epochs": cfg.epochs, "training": dataclasses.asdict(cfg), "final": final})
-    model.save(output)
-    return model
+        started(task.info)
+    outcome = run_training(task, output, seed=seed, checkpoint=checkpoint, log=log, resume=resume, device=device,
+                           progress=progress, on_epoch=report)
+    return outcome.model if outcome.model is not None else task.model
 
 
-def side_files(output: str | os.PathLike) -> tuple[Path, Path]:
-    """``(checkpoint, log)`` kept beside the model folder ``output``: ``OUTPUT.checkpoint.pt``, ``OUTPUT.log.jsonl``."""
-    output = Path(output)
-    return output.with_name(output.name + ".checkpoint.pt"), output.with_name(output.name + ".log.jsonl")
+# --- keyfill train transformer -------------------------------------------------------------------------
 
 
-def _check_output(output: Path) -> None:
-    """Refuse an output that could not be written, before training rather than after."""
-    from keyfill.learn.modelfile import CONFIG
+def _make_task(common, options: dict, progress) -> TransformerTask:
+    """The task of ``keyfill train transformer``: the BVH clips in DATA, chosen by --include / --exclude."""
+    from keyfill.learn.corpus import load_corpus
 
-    if not output.parent.is_dir():
-        raise UsageError(f"{output}: the output folder {str(output.parent)!r} does not exist")
-    if output.exists() and not (output / CONFIG).is_file():
-        raise UsageError(f"{output}: exists and is not a keyfill model; refusing to replace it")
-
-
-def _append_log(path: Path, record: dict) -> None:
-    with open(path, "a") as fh:
-        fh.write(json.dumps(record, sort_keys=True) + "\n")
-
-
-def _save_checkpoint(path: Path, net, opt, model_cfg, cfg, seed, epoch, history) -> None:
-    import torch
-
-    from keyfill.files import atomic_output
-
-    state = {
-        "format": "keyfill-transformer-checkpoint",
-        "epoch": epoch,
-        "seed": seed,
-        "config": json.dumps({"model": dataclasses.asdict(model_cfg), "training": dataclasses.asdict(cfg)}),
-        "history": json.dumps(history),
-        "network": net.state_dict(),
-        "optimizer": opt.state_dict(),
-    }
-    with atomic_output(path) as tmp:
-        torch.save(state, tmp)
+    model_cfg, train_cfg = read_config(options["config"])
+    if common.epochs is not None:
+        train_cfg = dataclasses.replace(train_cfg, epochs=common.epochs)
+    if common.checkpoint_every is not None:
+        raise UsageError("the transformer writes a checkpoint after every epoch; --checkpoint-every does not apply")
+    corpus = load_corpus(common.data, fold=options["fold_root"],
+                         progress=lambda f: progress(f, desc="reading clips", unit="file"))
+    return TransformerTask(select_clips(corpus, options["include"], options["exclude"]), model_cfg, train_cfg,
+                           common.seed)
 
 
-def _load_checkpoint(path: Path, net, opt, model_cfg, cfg, seed) -> tuple[int, list]:
-    import torch
+def _started(task: TransformerTask) -> str:
+    info = task.info
+    return (f"training on {info['train_windows']} windows of {info['train_clips']} clips "
+            f"({info['clips_too_short']} clips shorter than a window skipped), "
+            f"validating on {info['validation_clips']} clips; mirroring {'on' if info['mirrored'] else 'off'}")
 
-    if not path.is_file():
-        raise UsageError(f"--resume: no checkpoint {path}")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - torch raises many types for damaged or foreign files
-        raise ModelError(f"{path}: cannot resume from it ({' '.join(str(e).split())[:200]})") from None
-    if not isinstance(state, dict) or state.get("format") != "keyfill-transformer-checkpoint":
-        raise ModelError(f"{path}: cannot resume from it (not a keyfill transformer checkpoint)")
-    saved = json.loads(state["config"])
-    now = json.loads(json.dumps({"model": dataclasses.asdict(model_cfg), "training": dataclasses.asdict(cfg)}))
-    for part in ("model", "training"):
-        for k, v in saved[part].items():
-            if k != "epochs" and now[part].get(k) != v:
-                raise UsageError(f"--resume: the checkpoint was trained with {part} {k}={v!r}, now {now[part].get(k)!r}")
-    if state["seed"] != seed:
-        raise UsageError(f"--resume: the checkpoint was trained with --seed {state['seed']}, now {seed}")
-    net.load_state_dict(state["network"])
-    opt.load_state_dict(state["optimizer"])
-    return int(state["epoch"]), json.loads(state["history"])
+
+def _epoch_line(row: dict) -> str:
+    vals = " ".join(f"L2P@{n} {row[f'val_L2P_{n}_vs_interp']:.3f}" for n in benchmark.LENGTHS
+                    if f"val_L2P_{n}_vs_interp" in row)
+    return f"epoch {row['epoch']}: loss {row['loss_total']:.4f}" + (f", vs interpolation {vals}" if vals else "")
+
+
+def _finished(task: TransformerTask, outcome) -> tuple[dict, str]:
+    model = outcome.model
+    summary = {"output": str(outcome.output), "checkpoint": str(outcome.checkpoint), "log": str(outcome.log),
+               **model.info}
+    return summary, f"wrote {outcome.output} (checkpoint {outcome.checkpoint}, log {outcome.log})"
+
+
+TRAINING = TrainingSpec(
+    help="""Train a motion-completion transformer on the BVH clips in DATA.
+
+    One model learns in-betweening (10 context frames and a target key),
+    in-filling (a key every k frames) and blending (a given head and tail).
+    After every epoch it is scored on held-out clips with the LaFAN1 protocol
+    and a checkpoint is written; --resume continues an interrupted run.
+
+    \b
+    Examples:
+      keyfill train transformer bandai2/data --exclude '*_normal_*' -o models/bandai2-transformer
+      keyfill train transformer clips/ -o models/small --config small.json --epochs 3 --seed 1
+      keyfill train transformer clips/ -o models/small --config small.json --epochs 3 --seed 1 --resume
+    """,
+    options=(
+        Option("config", None, 'JSON file {"model": {...}, "training": {...}} overriding the defaults '
+               "(see docs/transformer.md).", type="file"),
+        Option("include", (), "Train only on files matching one of these patterns.", multiple=True, metavar="GLOB"),
+        Option("exclude", (), "Leave out files matching these patterns (e.g. a test style).", multiple=True,
+               metavar="GLOB"),
+        Option("fold_root", None, "Fold a static top joint (like Bandai's joint_Root) into the hips. "
+               "Default: when it is static.", flag=True),
+    ),
+    make_task=_make_task,
+    started=_started,
+    finished=_finished,
+    epoch_line=_epoch_line,
+)
+

@@ -38,7 +38,7 @@ A model is a keyfill model folder of kind ``"transformer"``
 (:mod:`keyfill.learn.modelfile`): ``weights.safetensors`` and a
 ``config.json`` holding the architecture, the skeleton it serves (joint names,
 parents, offsets, channels, up axis), whether its corpus folded the top joint,
-the normalisation statistics and a training summary. :func:`load_model`
+the normalisation statistics and a training summary. :func:`load`
 refuses anything else without executing code from it.
 """
 
@@ -54,7 +54,8 @@ import numpy as np
 from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError
 from keyfill.kinematics import fk
-from keyfill.learn.benchmark import axis_vector, facing_rotation, horizontal_axes, interpolation
+from keyfill.learn.benchmark import interpolation
+from keyfill.learn.facing import axis_vector, facing_rotation, horizontal_axes
 from keyfill.motion import Skeleton
 
 KEY, UNKNOWN, IGNORED = 0, 1, 2
@@ -450,7 +451,7 @@ def torch_device(name: str):
     return dev
 
 
-def load_model(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
+def load(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
     """Read a model folder written by :meth:`CompletionModel.save` (no code is executed)."""
     from keyfill.learn import modelfile
 
@@ -544,15 +545,15 @@ def complete_motion(model: CompletionModel, motion, keys) -> tuple[object, dict]
     return result, {"spans": len(parts), "max_frames": model.config.max_frames}
 
 
-def complete_method(motion, keys, options):
+def complete(motion, keys, options):
     """``keyfill complete --method transformer``: see :func:`complete_motion`."""
     from keyfill.errors import UsageError
     from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.methods import Completion
+    from keyfill.learn.completion import Completion
 
     if options.model is None:
         raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    model = load_model(options.model, options.device)
+    model = load(options.model, options.device)
     filled, info = complete_motion(model, motion, keys)
     info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:

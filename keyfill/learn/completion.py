@@ -1,0 +1,38 @@
+"""What every in-betweening method takes and gives: :class:`CompleteOptions` and :class:`Completion`.
+
+A method is a function ``complete(motion, keys, options) -> Completion``
+(see :mod:`keyfill.learn.registry`). It reads only the key frames of
+``motion`` (and, for learned methods, a model folder) and returns a motion
+with every frame filled and ``keys`` attached.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from keyfill.motion import Motion
+
+
+@dataclass(frozen=True)
+class CompleteOptions:
+    """Options of a completion.
+
+    Attributes:
+        model: path of a model folder (learned methods), or None for the model shipped with keyfill.
+        exact_keys: make frames at keys equal the input keys exactly.
+        seed: seed for any randomness (e.g. dropout sampling, GAN noise).
+        device: torch device for learned methods (``"cpu"``, ``"cuda"``).
+    """
+
+    model: str | None = None
+    exact_keys: bool = True
+    seed: int = 0
+    device: str = "cpu"
+
+
+@dataclass
+class Completion:
+    """The result of a completion: the filled motion and a JSON-ready report."""
+
+    motion: Motion
+    info: dict = field(default_factory=dict)

@@ -1,0 +1,151 @@
+"""The registry of in-betweening methods: the one list that ``complete``, ``evaluate`` and ``train`` read.
+
+Each :class:`Method` names the functions that implement it as
+``"module:attribute"`` strings, imported on first use, so reading the registry
+(``keyfill --help``, ``keyfill info``) loads no torch. A learned method's model
+folders carry its name as their ``kind`` (:mod:`keyfill.learn.modelfile`), so a
+folder is dispatched to its method by :func:`method_for_model`.
+
+A learned method's module provides:
+
+* ``complete(motion, keys, options) -> Completion`` (:mod:`keyfill.learn.completion`);
+* ``load(path, device) -> model``: a loaded model. The protocol that scores the
+  method calls the model's own hook: ``benchmark_method()`` for ``lafan1``
+  (:mod:`keyfill.learn.benchmark`), ``predict(sequences)`` for ``keys``
+  (:mod:`keyfill.learn.lamp_eval`);
+* ``DEFAULT_MODEL``: the folder of the model shipped with keyfill, or None.
+
+Its training module provides ``TRAINING``, a
+:class:`keyfill.learn.training.TrainingSpec` (options, help text and the task
+for the one training loop). See docs/learned_methods.md, "Adding a method".
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from keyfill.errors import ModelError, UsageError
+from keyfill.learn.completion import CompleteOptions, Completion
+from keyfill.motion import Keys, Motion
+
+
+@dataclass(frozen=True)
+class Method:
+    """One in-betweening method.
+
+    Attributes:
+        name: the ``--method`` name; for a learned method also the ``kind`` of its model folders.
+        summary: one line for ``--help``.
+        complete: ``"module:function"`` implementing ``complete(motion, keys, options) -> Completion``.
+        module: the learned method's module (``load``, ``DEFAULT_MODEL``); None for splines.
+        protocol: the benchmark protocol that scores its models (``"lafan1"``, ``"keys"``).
+        training: the module whose ``TRAINING`` trains it (``keyfill train NAME``); None if not trainable.
+    """
+
+    name: str
+    summary: str
+    complete: str
+    module: str | None = None
+    protocol: str | None = None
+    training: str | None = None
+
+    @property
+    def learned(self) -> bool:
+        return self.module is not None
+
+    def function(self):
+        """The ``complete`` function."""
+        module, attr = self.complete.split(":")
+        return getattr(importlib.import_module(module), attr)
+
+    def implementation(self):
+        """The learned method's module."""
+        if self.module is None:
+            raise UsageError(f"{self.name} is not a learned method; it has no models")
+        return importlib.import_module(self.module)
+
+    def training_spec(self):
+        """The :class:`~keyfill.learn.training.TrainingSpec` of ``keyfill train NAME``."""
+        if self.training is None:
+            raise UsageError(f"{self.name} cannot be trained")
+        return importlib.import_module(self.training).TRAINING
+
+    def default_model(self) -> Path | None:
+        """The model folder shipped with keyfill for this method, or None."""
+        path = getattr(self.implementation(), "DEFAULT_MODEL", None)
+        return Path(path) if path is not None and Path(path).is_dir() else None
+
+
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("linear", "lerp of translations, slerp of rotations", "keyfill.learn.baselines:complete_linear"),
+    Method("cubic", "C1 cubic splines (log-map cubic for rotations)", "keyfill.learn.baselines:complete_cubic"),
+    Method("arnn", "keyframe-conditioned recurrent network for the hopping lamp (Zhang & van de Panne 2018)",
+           "keyfill.learn.arnn:complete", module="keyfill.learn.arnn", protocol="keys",
+           training="keyfill.learn.train_arnn"),
+    Method("transformer", "BERT-style motion-completion transformer (Duan et al. 2021)",
+           "keyfill.learn.transformer:complete", module="keyfill.learn.transformer", protocol="lafan1",
+           training="keyfill.learn.train_transformer"),
+)}
+
+
+def get(name: str) -> Method:
+    """The method called ``name``; a :class:`UsageError` listing the methods otherwise."""
+    if name not in METHODS:
+        raise UsageError(f"unknown method {name!r}; methods are: {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def learned() -> list[Method]:
+    """The learned methods, in registry order."""
+    return [m for m in METHODS.values() if m.learned]
+
+
+def trainable() -> list[Method]:
+    """The methods ``keyfill train`` offers."""
+    return [m for m in METHODS.values() if m.training is not None]
+
+
+def method_for_model(path: str | Path) -> Method:
+    """The learned method whose model folder ``path`` is (by the ``kind`` in its config)."""
+    from keyfill.learn.modelfile import read_config
+
+    kind = read_config(path)["kind"]
+    for m in learned():
+        if m.name == kind:
+            return m
+    raise ModelError(f"{path}: a model of kind {kind!r}, which no method of this keyfill knows "
+                     f"(known kinds: {', '.join(m.name for m in learned())})")
+
+
+def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, object]:
+    """``(label, method, loaded model)`` for a learned method's name (its shipped model) or a model folder."""
+    if name_or_path in METHODS:
+        method = METHODS[name_or_path]
+        path = method.default_model()
+        if path is None:
+            raise UsageError(f"no {name_or_path} model ships with keyfill; give a model folder "
+                             f"(train one with 'keyfill train {name_or_path}')")
+        return name_or_path, method, method.implementation().load(path, device)
+    if not Path(name_or_path).exists():
+        raise UsageError(f"{name_or_path!r} is neither a method ({', '.join(METHODS)}) nor a model folder")
+    method = method_for_model(name_or_path)
+    return str(name_or_path), method, method.implementation().load(name_or_path, device)
+
+
+def complete(motion: Motion, keys: Keys, method: str = "cubic", options: CompleteOptions | None = None) -> Completion:
+    """Fill the frames between ``keys`` of ``motion`` with ``method``."""
+    options = options or CompleteOptions()
+    m = get(method)
+    keys = keys.check(motion.num_frames, min_keys=2)
+    if not m.learned and options.model is not None:
+        raise UsageError(f"--model applies to learned methods, not to {method!r}")
+    if options.model is not None:
+        kind = method_for_model(options.model).name
+        if kind != method:
+            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {method!r}; complete with --method {kind}")
+        options = replace(options, model=str(options.model))
+    result = m.function()(motion, keys, options)
+    result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
+    return result

@@ -41,7 +41,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
-from keyfill.learn import metrics
+from keyfill.learn import metrics, realism
 from keyfill.learn.baselines import segment_coordinates
 from keyfill.learn.corpus import Corpus, load_corpus
 from keyfill.learn.facing import align_windows, global_pose
@@ -91,12 +91,14 @@ class TestSet:
         quats: ``(W, T, J, 4)`` local quaternions.
         root: ``(W, T, 3)`` root positions.
         files: the clip file of each window.
+        fps: frames per second.
     """
 
     skeleton: Skeleton
     quats: np.ndarray
     root: np.ndarray
     files: tuple[str, ...] = ()
+    fps: float = 30.0
 
 
 # --- methods ---------------------------------------------------------------------------
@@ -205,7 +207,10 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
     """Score ``methods`` on any key layout: the test windows cut to ``keys[-1] + 1`` frames.
 
     Every frame between the first and the last key that is not a key is hidden
-    (NaN) from the methods and scored. Returns ``{method: {"L2Q", "L2P", "NPSS"}}``.
+    (NaN) from the methods and scored. Returns ``{method: {"L2Q", "L2P", "NPSS",
+    "skate", "jitter"}}``: the protocol's three metrics on the hidden frames, and
+    foot skating (cm/s) and jitter (m/s^3) of :mod:`keyfill.learn.realism` over
+    the hidden frames and the two frames on each side (:func:`realism_span`).
     """
     keys = np.asarray(keys, dtype=np.int64)
     if len(test.quats) == 0:
@@ -220,6 +225,8 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
     given_q[:, hidden] = np.nan
     given_r[:, hidden] = np.nan
     g_q, g_p = global_pose(gt_q[:, hidden], gt_r[:, hidden], skel.offsets, skel.parents)
+    span = realism_span(hidden, T)
+    _, ground = global_pose(gt_q, gt_r, skel.offsets, skel.parents)
     out = {}
     for name, method in methods.items():
         p_q, p_r = method(skel, given_q, given_r, keys)
@@ -230,8 +237,29 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
             "L2Q": metrics.l2q(g_q, pr_q),
             "L2P": metrics.l2p(g_p, pr_p, stats.x_mean, stats.x_std),
             "NPSS": metrics.npss(g_q, pr_q),
+            **realism_scores(test, p_q[:, span], p_r[:, span], ground),
         }
     return out
+
+
+def realism_span(hidden: np.ndarray, num_frames: int) -> np.ndarray:
+    """The frames realism is measured on: the hidden ones and two on each side (third differences reach the keys)."""
+    return np.arange(max(int(hidden[0]) - 2, 0), min(int(hidden[-1]) + 3, num_frames))
+
+
+def realism_scores(test: TestSet, quats: np.ndarray, root: np.ndarray, reference: np.ndarray) -> dict[str, float]:
+    """Foot skating (cm/s) and jitter (m/s^3) of windows ``quats (N, T, J, 4)``, ``root (N, T, 3)``.
+
+    ``reference`` holds global positions ``(N, T', J, 3)`` of the ground truth, whose lowest foot heights are
+    the floor.
+    """
+    skel = test.skeleton
+    _, pos = global_pose(quats, root, skel.offsets, skel.parents)
+    return {
+        "skate": realism.foot_skating(pos, realism.foot_joints(skel), skel.up_axis, test.fps, skel.meters_per_unit,
+                                      reference),
+        "jitter": realism.jitter(pos, test.fps, skel.meters_per_unit),
+    }
 
 
 # --- the protocol from BVH files ----------------------------------------------------
@@ -301,7 +329,7 @@ def prepare(
         "facing_axis": facing_axis,
     }
     files = tuple(test.files[c] for c in clip_of)
-    return Protocol(TestSet(corpus.skeleton, q, r, files), stats, info)
+    return Protocol(TestSet(corpus.skeleton, q, r, files, corpus.fps), stats, info)
 
 
 def lafan1(
@@ -383,13 +411,44 @@ def run(
                    fold=fold if fold is not None else getattr(method, "folded", None),
                    facing_axis=facing_axis, progress=progress)
     results = evaluate(methods, proto.test, proto.stats, lengths)
-    info = proto.info
+    info = {**proto.info, "truth": truth_realism(proto.test, lengths)}
     lines = [f"lafan1: {info['test_windows']} test windows from {info['test_clips']} clips, "
              f"statistics from {info['train_windows']} windows of {info['train_clips']} clips"]
     if info.get("test_clips_too_short", 0) + info.get("train_clips_too_short", 0):
         lines.append(f"skipped {info['test_clips_too_short']} test and {info['train_clips_too_short']} training "
                      f"clips shorter than a window")
+    table = format_table(results) + "\n\n" + format_realism(results, info["truth"])
     return Evaluation("lafan1", method_or_model, info,
-                      {m: {str(n): v for n, v in r.items()} for m, r in results.items()},
-                      lines, format_table(results))
+                      {m: {str(n): v for n, v in r.items()} for m, r in results.items()}, lines, table)
+
+
+def truth_realism(test: TestSet, lengths: Sequence[int] = LENGTHS) -> dict[int, dict[str, float]]:
+    """Foot skating and jitter of the ground truth over the frames :func:`score_keys` measures at each length."""
+    out = {}
+    for n in lengths:
+        T = N_PAST + n + 1
+        span = realism_span(np.arange(N_PAST, N_PAST + n), T)
+        _, ground = global_pose(test.quats[:, :T], test.root[:, :T], test.skeleton.offsets, test.skeleton.parents)
+        out[n] = realism_scores(test, test.quats[:, span], test.root[:, span], ground)
+    return out
+
+
+def format_realism(results: dict[str, dict[int, dict[str, float]]], truth: dict[int, dict[str, float]]) -> str:
+    """Foot skating (cm/s) and jitter (m/s^3) over the transitions: one row per method and the ground truth."""
+    lengths = sorted(truth)
+    rows = {**results, "ground truth": truth}
+    width = max(len(n) for n in [*rows, "transition length"])
+    labels = {"skate": "foot skating (cm/s)", "jitter": "jitter (m/s^3)"}
+    # cells wide enough that each block holds its label
+    cell = max(7, -(-(max(len(v) for v in labels.values()) + 1) // len(lengths)) - 1)
+    block = (cell + 1) * len(lengths) - 1
+
+    def cells(fmt):
+        return "  ".join(" ".join(fmt(m, n) for n in lengths) for m in labels)
+
+    lines = [(f"{'':{width}} " + "  ".join(f"{labels[m]:<{block}}" for m in labels)).rstrip(),
+             f"{'transition length':{width}} " + cells(lambda m, n: f"{n:>{cell}}")]
+    for name, r in rows.items():
+        lines.append(f"{name:{width}} " + cells(lambda m, n: f"{r[n][m]:{cell}.2f}"))
+    return "\n".join(lines)
 

@@ -1,6 +1,8 @@
 """Tangent-space editing of Bezier animation curves (Ciccone, Oztireli & Sumner 2019).
 
-* :mod:`keyfill.edit.curves`: the curve type (per-control Bezier keys and tangents), exact evaluation, baking;
+The curves themselves are a core data type, :mod:`keyfill.curves` (per-control
+Bezier keys and tangents, exact evaluation, baking to a Motion).
+
 * :mod:`keyfill.edit.fit`: curves through the keys of a dense motion;
 * :mod:`keyfill.edit.curvefile`: curves as ``pxr.Ts`` splines in USD files;
 * :mod:`keyfill.edit.rig`: states of points and their Jacobians with respect to the controls;

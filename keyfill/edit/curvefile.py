@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill.edit.curves import Control, Curves
+from keyfill.curves import Control, Curves
 from keyfill.errors import FormatError
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 

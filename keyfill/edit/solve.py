@@ -58,8 +58,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from keyfill import rotations as R
+from keyfill.curves import CurveArrays, Curves, SegmentEval, evaluate_segments
 from keyfill.edit import qp as QP
-from keyfill.edit.curves import CurveArrays, Curves, evaluate_segments, tangent_derivatives
 from keyfill.edit.edits import Contact, EditFile, Manipulation, TimingEdit
 from keyfill.edit.rig import Point, Rig
 from keyfill.errors import DataError, InfeasibleError
@@ -184,6 +184,20 @@ class _Work:
             values[:, cols] = ev.value
         frames = self.rig.frames(values, joints)
         return [self.rig.state(frames, p) for p in points]
+
+
+def tangent_derivatives(ev: SegmentEval) -> np.ndarray:
+    """``(T, n, 4)``: derivatives of ``c(t)`` with respect to the segment's own tangents.
+
+    Columns: width and height of the out tangent at the segment's first key,
+    width and height of the in tangent at its last key. Heights enter the
+    Bezier linearly (``b1``, ``-b2``); a width moves its control point in
+    time, which shifts the curve by minus its slope times the same weight.
+    """
+    sb1 = ev.slope * ev.b1
+    sb2 = ev.slope * ev.b2
+    return np.stack([-sb1, ev.b1, sb2, -ev.b2], axis=-1)
+
 
 
 def _rotvec(target: np.ndarray, current: np.ndarray) -> np.ndarray:

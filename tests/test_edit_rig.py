@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_edit_curves import random_curves
+from test_curves import random_curves
 
 from keyfill import rotations as R
 from keyfill.curves import controls_to_pose

@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_edit_character import character
-from test_edit_curvefile import pxr_values
+from test_usd_curves import pxr_values
 
-from keyfill.edit import curvefile, edits, qp, solve
+from keyfill.edit import edits, qp, solve
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point
 from keyfill.errors import FormatError, InfeasibleError
+from keyfill.io import usd_curves
 
 #: pins and contacts around a reach of the left hand; the elbow limit is active
 GUARDED = """
@@ -144,14 +145,14 @@ def test_results_are_deterministic(curves, guarded, tmp_path):
     again, _ = solve.edit_tangents(curves, ef)
     for name in ("in_tan", "out_tan", "broken"):
         np.testing.assert_array_equal(getattr(again, name), getattr(out, name))
-    curvefile.save(out, tmp_path / "a.usda")
-    curvefile.save(again, tmp_path / "b.usda")
+    usd_curves.save(out, tmp_path / "a.usda")
+    usd_curves.save(again, tmp_path / "b.usda")
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
 
 
 def test_output_curves_evaluate_the_same_in_pxr(guarded, tmp_path):
     _, out, _ = guarded
-    curvefile.save(out, tmp_path / "out.usdc")
+    usd_curves.save(out, tmp_path / "out.usdc")
     t = np.linspace(0, 40, 401)
     assert np.abs(pxr_values(tmp_path / "out.usdc", out, t) - out.evaluate(t)).max() < 1e-6
 

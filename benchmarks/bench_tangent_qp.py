@@ -68,6 +68,7 @@ from keyfill.edit import solve
 from keyfill.edit.edits import Contact, EditFile, Manipulation
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point, Rig
+from keyfill.edit.session import WorkingCurves
 from keyfill.motion import Keys
 
 DOFS = (24, 72, 120, 168)
@@ -140,9 +141,7 @@ class Scene:
 
     def rig_state(self, curves, frame: float) -> np.ndarray:
         """World position ``(3,)`` of the moved point at ``frame``."""
-        from keyfill.edit.solve import _Work
-
-        return _Work(curves).states([self.hand], [frame])[0][0][0]
+        return WorkingCurves(curves).states([self.hand], [frame])[0][0][0]
 
     def unlocked(self, groups: list[list[list[int]]], k: int) -> list[int]:
         """``k`` controls taken in turn from ``groups`` (lists of joints' controls): a whole joint at

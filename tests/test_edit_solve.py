@@ -8,8 +8,10 @@ from test_edit_character import character
 from test_usd_curves import pxr_values
 
 from keyfill.edit import edits, qp, solve
+from keyfill.edit.checks import LIMIT_SAMPLES_PER_FRAME
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point
+from keyfill.edit.session import WorkingCurves
 from keyfill.errors import FormatError, InfeasibleError
 from keyfill.io import usd_curves
 
@@ -84,9 +86,7 @@ move = [0, 5, 0]
 
 
 def world(curves, points, times):
-    from keyfill.edit.solve import _Work
-
-    return _Work(curves).states(points, times)
+    return WorkingCurves(curves).states(points, times)
 
 
 def test_edits_reach_their_targets(curves, guarded):
@@ -111,7 +111,7 @@ def test_keys_never_change_and_no_key_is_added(curves, guarded):
 
 def test_limits_hold_at_every_sampled_time(curves, guarded):
     ef, out, reports = guarded
-    t = np.arange(0, curves.times[-1] + 1e-9, 1 / solve.LIMIT_SAMPLES_PER_FRAME)  # 10 samples per frame
+    t = np.arange(0, curves.times[-1] + 1e-9, 1 / LIMIT_SAMPLES_PER_FRAME)  # 10 samples per frame
     cols = sorted(ef.limits)
     vals = out.evaluate(t, cols)
     low = np.array([ef.limits[c][0] for c in cols])

@@ -232,6 +232,24 @@ def test_break_tangents_changes_only_the_segment(curves, tmp_path):
     assert len(changed) and out.broken[1, changed].all() and out.broken[2, changed].all()
 
 
+@pytest.mark.parametrize("frames, break_tangents", [("[0, 10]", "true"), ("[30, 40]", "false")])
+def test_a_contact_on_a_segment_that_does_not_change_is_dropped(curves, tmp_path, frames, break_tangents):
+    """Issue 15: a contact outside the segments an edit changes holds nothing, so its leg stays out of C.
+
+    It shares the hips' rotations with the hand (case 3), which used to add the leg's controls to
+    the optimisation although no sample looked at the leg: indexing them crashed (IndexError).
+    """
+    edit = f"[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 6, 3]\nbreak_tangents = {break_tangents}\n"
+    contact = f"[[contact]]\njoint = 'Toes_L'\nframes = {frames}\n"
+    alone, (ra,) = solve.edit_tangents(curves, load(tmp_path, curves, "pins = ['Hips']\n" + edit))
+    out, (r,) = solve.edit_tangents(curves, load(tmp_path, curves, "pins = ['Hips']\n" + contact + edit))
+    assert r.reached and r.constraints == [] and r.optimised_controls == ra.optimised_controls
+    np.testing.assert_array_equal(out.out_tan, alone.out_tan)
+    np.testing.assert_array_equal(out.in_tan, alone.in_tan)
+    legs = [i for i, c in enumerate(curves.controls) if "Leg" in curves.skeleton.names[c.joint]]
+    np.testing.assert_array_equal(out.out_tan[:, legs], curves.out_tan[:, legs])
+
+
 def test_orientation_targets(curves, tmp_path):
     from keyfill import rotations as R
 

@@ -14,7 +14,9 @@
    are sampled.
 3. *Sampling*. Each kept pin or contact is sampled at the frames strictly
    inside the segments that the variables change (at most ``4 |C_j|``
-   evenly spaced times per segment), plus the edit's hold frames.
+   evenly spaced times per segment), plus the edit's hold frames. A
+   constraint with no frame there holds nothing: it is dropped and the
+   reduction runs again without it, so that its controls do not join ``C``.
 """
 
 from __future__ import annotations
@@ -200,22 +202,30 @@ def sample_times(work: WorkingCurves, segs, start: float, end: float, n_max: int
 def move_variables(session: Session, edit: Manipulation, pins, contacts) -> tuple[TangentVariables, list[Constraint]]:
     """Steps 1-3 for a move edit: its variables and its sampled constraints (holds last).
 
-    Marks the keys whose tangents the edit breaks in the working curves.
+    A kept pin or contact with no frame inside the segments that change
+    (a contact on another segment, with ``break_tangents`` or a broken key)
+    holds nothing, yet case 3 added its controls to ``C``: such constraints
+    are dropped and the reduction runs again without them, until every kept
+    constraint has samples. Marks the keys whose tangents the edit breaks in
+    the working curves.
     """
     work, point = session.work, edit.point
-    C, kept = reduce(session, edit, point, pins, contacts)
-    var = TangentVariables(work, int(work.segment(edit.time)), C, edit.break_tangents)
+    s = int(work.segment(edit.time))
+    while True:
+        C, kept = reduce(session, edit, point, pins, contacts)
+        var = TangentVariables(work, s, C, edit.break_tangents)
+        position = {c: i for i, c in enumerate(C)}
+        for con in kept:
+            inter = [position[c] for c in con.controls if c in position]
+            segs = sorted(set().union(*(var.segments(i) for i in inter))) if inter else []
+            con.times = sample_times(work, segs, con.start, con.end, 4 * len(inter))
+        unsampled = [con for con in kept if not len(con.times)]
+        if not unsampled:
+            break
+        pins = [p for p in pins if not any(con.kind == "pin" and con.point is p for con in unsampled)]
+        contacts = [c for c in contacts if not any(con.contact is c for con in unsampled)]
     var.mark_broken(work)
-    position = {c: i for i, c in enumerate(C)}
-    samples = []
-    for con in kept:
-        inter = [position[c] for c in con.controls if c in position]
-        segs = sorted(set().union(*(var.segments(i) for i in inter))) if inter else []
-        t = sample_times(work, segs, con.start, con.end, 4 * len(inter))
-        if len(t):
-            con.times = t
-            samples.append(con)
     for h in edit.holds:
         name = f"hold {point.label(session.sk)} at frame {h:g}"
-        samples.append(Constraint(name, "hold", point, h, h, frozenset(C), times=np.array([h])))
-    return var, samples
+        kept.append(Constraint(name, "hold", point, h, h, frozenset(C), times=np.array([h])))
+    return var, kept

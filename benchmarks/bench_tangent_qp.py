@@ -68,6 +68,7 @@ from keyfill.edit import solve
 from keyfill.edit.edits import Contact, EditFile, Manipulation
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point, Rig
+from keyfill.edit.session import WorkingCurves
 from keyfill.motion import Keys
 
 DOFS = (24, 72, 120, 168)
@@ -140,9 +141,7 @@ class Scene:
 
     def rig_state(self, curves, frame: float) -> np.ndarray:
         """World position ``(3,)`` of the moved point at ``frame``."""
-        from keyfill.edit.solve import _Work
-
-        return _Work(curves).states([self.hand], [frame])[0][0][0]
+        return WorkingCurves(curves).states([self.hand], [frame])[0][0][0]
 
     def unlocked(self, groups: list[list[list[int]]], k: int) -> list[int]:
         """``k`` controls taken in turn from ``groups`` (lists of joints' controls): a whole joint at
@@ -226,7 +225,7 @@ def probe(scene: Scene, frame: float, rng, pins, contacts, locked, unified) -> n
 
 
 def run_cell(scene: Scene, name: str, dof: int, edits: int, rng, unified: bool) -> dict:
-    times, cpu, failures, dofs, iters, moves = [], [], [], set(), [], []
+    times, cpu, failures, dofs, iters, moves, per_edit = [], [], [], set(), [], [], []
     segs = segments_to_edit(scene.curves, scene.length)
     for _ in range(edits):
         s = int(rng.choice(segs))
@@ -241,6 +240,9 @@ def run_cell(scene: Scene, name: str, dof: int, edits: int, rng, unified: bool) 
         times.append(report.solve_ms)
         cpu.append(report.solve_cpu_ms)
         iters.append(report.iterations)
+        per_edit.append(
+            {"frame": frame, "reached": report.reached, "iterations": report.iterations, "distance": report.distance}
+        )
         dofs.add(2 * report.optimised_tangents)
         why = []
         if not report.reached:
@@ -263,6 +265,7 @@ def run_cell(scene: Scene, name: str, dof: int, edits: int, rng, unified: bool) 
         "dof": sorted(dofs),
         "median_iterations": float(np.median(iters)),
         "median_move": float(np.median(moves)),  # fraction of the character's size
+        "per_edit": per_edit,  # the solver's outcome of each edit, to compare runs edit by edit
     }
 
 
@@ -274,7 +277,7 @@ def main(argv=None) -> int:
         "--unified", action="store_true", help="keep unified keys unified (neighbour segments change too)"
     )
     parser.add_argument("--configs", default=",".join(CONFIGS), help="comma-separated subset of: " + ", ".join(CONFIGS))
-    parser.add_argument("--json", type=Path, help="also write the results here")
+    parser.add_argument("--json", type=Path, help="also write the results (with every edit's outcome) here")
     parser.add_argument("--markdown", type=Path, help="also write the tables (wall and CPU medians) as Markdown")
     args = parser.parse_args(argv)
     if not WALK.exists():

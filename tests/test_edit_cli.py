@@ -11,7 +11,7 @@ from test_edit_character import character
 from keyfill import io
 from keyfill import rotations as R
 from keyfill.cli.main import main
-from keyfill.edit import curvefile
+from keyfill.io import usd_curves
 
 REACH = """
 pins = ["Hips"]
@@ -143,7 +143,7 @@ def test_pose_changes_a_key(tmp_path, capsys, curves_file):
     code, stdout, err = run(capsys, "pose", curves_file, "--edit", edit, "--frame", 30, "-o", out, "--json")
     assert code == 0, err
     assert json.loads(stdout)["edits"][0]["kind"] == "pose"
-    before, after = curvefile.read(curves_file), curvefile.read(out)
+    before, after = usd_curves.read(curves_file), usd_curves.read(out)
     changed = np.flatnonzero(np.any(after.values != before.values, axis=1)).tolist()
     assert changed == [3]
     code, _, err = run(capsys, "pose", curves_file, "--edit", edit, "--frame", 25, "-o", out)

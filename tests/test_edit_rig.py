@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_edit_curves import random_curves
+from test_curves import random_curves
 
 from keyfill import rotations as R
-from keyfill.edit.curves import controls_to_pose
+from keyfill.curves import controls_to_pose
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point, Rig
 from keyfill.kinematics import fk

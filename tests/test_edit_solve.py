@@ -5,12 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_edit_character import character
-from test_edit_curvefile import pxr_values
+from test_usd_curves import pxr_values
 
-from keyfill.edit import curvefile, edits, qp, solve
+from keyfill.edit import edits, qp, solve
+from keyfill.edit.checks import LIMIT_SAMPLES_PER_FRAME
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point
+from keyfill.edit.session import WorkingCurves
 from keyfill.errors import FormatError, InfeasibleError
+from keyfill.io import usd_curves
 
 #: pins and contacts around a reach of the left hand; the elbow limit is active
 GUARDED = """
@@ -83,9 +86,7 @@ move = [0, 5, 0]
 
 
 def world(curves, points, times):
-    from keyfill.edit.solve import _Work
-
-    return _Work(curves).states(points, times)
+    return WorkingCurves(curves).states(points, times)
 
 
 def test_edits_reach_their_targets(curves, guarded):
@@ -110,7 +111,7 @@ def test_keys_never_change_and_no_key_is_added(curves, guarded):
 
 def test_limits_hold_at_every_sampled_time(curves, guarded):
     ef, out, reports = guarded
-    t = np.arange(0, curves.times[-1] + 1e-9, 1 / solve.LIMIT_SAMPLES_PER_FRAME)  # 10 samples per frame
+    t = np.arange(0, curves.times[-1] + 1e-9, 1 / LIMIT_SAMPLES_PER_FRAME)  # 10 samples per frame
     cols = sorted(ef.limits)
     vals = out.evaluate(t, cols)
     low = np.array([ef.limits[c][0] for c in cols])
@@ -144,14 +145,14 @@ def test_results_are_deterministic(curves, guarded, tmp_path):
     again, _ = solve.edit_tangents(curves, ef)
     for name in ("in_tan", "out_tan", "broken"):
         np.testing.assert_array_equal(getattr(again, name), getattr(out, name))
-    curvefile.save(out, tmp_path / "a.usda")
-    curvefile.save(again, tmp_path / "b.usda")
+    usd_curves.save(out, tmp_path / "a.usda")
+    usd_curves.save(again, tmp_path / "b.usda")
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
 
 
 def test_output_curves_evaluate_the_same_in_pxr(guarded, tmp_path):
     _, out, _ = guarded
-    curvefile.save(out, tmp_path / "out.usdc")
+    usd_curves.save(out, tmp_path / "out.usdc")
     t = np.linspace(0, 40, 401)
     assert np.abs(pxr_values(tmp_path / "out.usdc", out, t) - out.evaluate(t)).max() < 1e-6
 
@@ -229,6 +230,24 @@ def test_break_tangents_changes_only_the_segment(curves, tmp_path):
     np.testing.assert_allclose(out.evaluate(t_out), curves.evaluate(t_out), atol=1e-12)
     changed = np.flatnonzero(np.abs(out.out_tan[1] - curves.out_tan[1]).max(axis=1) > 0)
     assert len(changed) and out.broken[1, changed].all() and out.broken[2, changed].all()
+
+
+@pytest.mark.parametrize("frames, break_tangents", [("[0, 10]", "true"), ("[30, 40]", "false")])
+def test_a_contact_on_a_segment_that_does_not_change_is_dropped(curves, tmp_path, frames, break_tangents):
+    """Issue 15: a contact outside the segments an edit changes holds nothing, so its leg stays out of C.
+
+    It shares the hips' rotations with the hand (case 3), which used to add the leg's controls to
+    the optimisation although no sample looked at the leg: indexing them crashed (IndexError).
+    """
+    edit = f"[[edit]]\njoint = 'Hand_L'\nframe = 15\nmove = [0, 6, 3]\nbreak_tangents = {break_tangents}\n"
+    contact = f"[[contact]]\njoint = 'Toes_L'\nframes = {frames}\n"
+    alone, (ra,) = solve.edit_tangents(curves, load(tmp_path, curves, "pins = ['Hips']\n" + edit))
+    out, (r,) = solve.edit_tangents(curves, load(tmp_path, curves, "pins = ['Hips']\n" + contact + edit))
+    assert r.reached and r.constraints == [] and r.optimised_controls == ra.optimised_controls
+    np.testing.assert_array_equal(out.out_tan, alone.out_tan)
+    np.testing.assert_array_equal(out.in_tan, alone.in_tan)
+    legs = [i for i, c in enumerate(curves.controls) if "Leg" in curves.skeleton.names[c.joint]]
+    np.testing.assert_array_equal(out.out_tan[:, legs], curves.out_tan[:, legs])
 
 
 def test_orientation_targets(curves, tmp_path):

@@ -22,6 +22,7 @@ from keyfill.characters import lamp
 from keyfill.viz import frame_range, gif
 from keyfill.viz.palette import Palette
 from keyfill.viz import curves as C
+from keyfill.viz import scene
 from keyfill.viz import stick as S
 
 WALKER_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
@@ -205,14 +206,14 @@ def test_limb_sides():
     left = ["LeftUpLeg", "mixamorig:LeftHand", "UpperArm_L", "l_knee", "LHipJoint", "Foot.L"]
     right = ["RightArm", "Hand_R", "RThumb", "r_elbow"]
     centre = ["Hips", "Spine1", "Head", "LowerBack", "joint_Root", "Leg", "LUMBAR", "Root"]
-    assert [S.limb_side(n) for n in left] == [-1] * len(left)
-    assert [S.limb_side(n) for n in right] == [1] * len(right)
-    assert [S.limb_side(n) for n in centre] == [0] * len(centre)
+    assert [scene.limb_side(n) for n in left] == [-1] * len(left)
+    assert [scene.limb_side(n) for n in right] == [1] * len(right)
+    assert [scene.limb_side(n) for n in centre] == [0] * len(centre)
 
 
 def test_bones_skip_translated_joints_and_include_end_sites():
     motion = walker()
-    f = S.figure_points(motion)
+    f = scene.figure_points(motion)
     J = motion.num_joints
     assert f.points.shape == (24, J + 3, 3)
     bones = {tuple(b) for b in f.bones.tolist()}
@@ -223,12 +224,12 @@ def test_bones_skip_translated_joints_and_include_end_sites():
                       np.vstack([[0, 0, 0], sk.offsets]), ((),) + sk.channels)
     m = Motion(rooted, 30, np.concatenate([R.quat_identity((24, 1)), motion.rotations], axis=1),
                np.concatenate([np.zeros((24, 1, 3)), motion.positions], axis=1))
-    assert (0, 1) not in {tuple(b) for b in S.figure_points(m).bones.tolist()}
+    assert (0, 1) not in {tuple(b) for b in scene.figure_points(m).bones.tolist()}
 
 
 def test_lamp_figure_has_base_plate_and_shade():
     motion = lamp_hop()
-    f = S.figure_points(motion)
+    f = scene.figure_points(motion)
     assert len(f.bones) == 3 + 4  # base-leg-neck-head chain, plate, two shade sides and its rim
     plate = f.points[:, f.bones[3]]
     np.testing.assert_allclose(np.linalg.norm(plate[:, 0] - plate[:, 1], axis=-1), lamp.DIMENSIONS.base_length)
@@ -236,21 +237,21 @@ def test_lamp_figure_has_base_plate_and_shade():
 
 def test_cameras():
     motion = walker()
-    f = S.figure_points(motion)
-    h = S.travel_axis(f.points, f.used, "Y")
+    f = scene.figure_points(motion)
+    h = scene.travel_axis(f.points, f.used, "Y")
     np.testing.assert_array_equal(h, [0, 0, 1])  # walks along +Z
-    side = S.make_camera("side", h, "Y")
+    side = scene.make_camera("side", h, "Y")
     np.testing.assert_allclose(side.right, [0, 0, 1])
     np.testing.assert_allclose(side.up, [0, 1, 0])
-    top = S.make_camera("top", h, "Y")
+    top = scene.make_camera("top", h, "Y")
     np.testing.assert_allclose(np.cross(top.right, top.up), [0, 1, 0], atol=1e-12)  # seen from above
-    front = S.make_camera("front", h, "Y")
+    front = scene.make_camera("front", h, "Y")
     np.testing.assert_allclose(np.cross(front.right, front.up), [0, 0, 1], atol=1e-12)  # faces the walker
     backwards = motion.replace(positions=motion.positions * [1, 1, -1])
-    fb = S.figure_points(backwards)
-    np.testing.assert_array_equal(S.travel_axis(fb.points, fb.used, "Y"), [0, 0, -1])
-    for view in S.VIEWS:
-        cam = S.make_camera(view, np.array([0.0, -1.0, 0.0]), "Z")
+    fb = scene.figure_points(backwards)
+    np.testing.assert_array_equal(scene.travel_axis(fb.points, fb.used, "Y"), [0, 0, -1])
+    for view in scene.VIEWS:
+        cam = scene.make_camera(view, np.array([0.0, -1.0, 0.0]), "Z")
         assert abs(np.linalg.norm(cam.right) - 1) < 1e-12 and abs(cam.right @ cam.up) < 1e-12
 
 
@@ -410,7 +411,7 @@ def test_cli_unsupported_suffix(files, capsys, command, suffix):
 def test_bandai_walk_preview(tmp_path):
     path = shared_path("bvh_fixtures", "dataset-1_walk_normal_002.bvh")
     motion = io.load(path)
-    f = S.figure_points(motion)
+    f = scene.figure_points(motion)
     hips = motion.skeleton.index("Hips")
     assert not any(b[1] == hips for b in f.bones.tolist())  # root motion is not a bone
     assert len(f.bones) == 20 + len(motion.skeleton.end_sites)

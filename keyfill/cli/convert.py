@@ -41,8 +41,8 @@ def convert(src, dst, fmt, in_fmt, curves, keys_text, key_every, as_json):
 
     motion = io.load(src, in_fmt)
     if curves:
-        from keyfill.edit import curvefile
         from keyfill.edit.fit import fit
+        from keyfill.io import usd_curves as curvefile
 
         if dst == "-" or io.format_of(dst, fmt) == "bvh":
             raise UsageError("--curves writes a USD curves file: give DST a .usda, .usdc or .usd name")

@@ -57,9 +57,10 @@ def output_options(f):
 
 def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, frame=None) -> None:
     """Read the curves, apply the edit file (``mode`` "tangents" or "pose"), write and report."""
-    from keyfill.edit import curvefile, edits, solve
+    from keyfill.edit import edits, solve
     from keyfill.edit.qp import check_solver
     from keyfill.errors import InfeasibleError
+    from keyfill.io import usd_curves as curvefile
 
     check_solver(solver)
     curves = curvefile.read(curves_path)

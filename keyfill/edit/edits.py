@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill.edit.curves import Curves
+from keyfill.curves import Curves
 from keyfill.edit.rig import Point
 from keyfill.errors import FormatError, KeyfillError
 

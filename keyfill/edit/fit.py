@@ -1,7 +1,7 @@
 """Fit Bezier curves to a dense motion: values exact at the keys, tangents least-squares.
 
 ``fit(motion, keys)`` turns any :class:`~keyfill.motion.Motion` (a BVH
-capture, a learned completion) into editable :class:`~keyfill.edit.curves.Curves`:
+capture, a learned completion) into editable :class:`~keyfill.curves.Curves`:
 
 * controls: every rotation channel of the skeleton (Euler angles in each
   joint's order, made continuous over time) and the translation channels of
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from keyfill.edit.curves import Control, Curves
+from keyfill.curves import Control, Curves
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Keys, Motion
 
 #: weight of the Catmull-Rom prior relative to one frame's squared error

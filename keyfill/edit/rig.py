@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from keyfill.edit.curves import Control
+from keyfill.curves import Control
 from keyfill.motion import Skeleton
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}

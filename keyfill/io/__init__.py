@@ -2,8 +2,11 @@
 
 The format comes from the suffix (``.bvh``, ``.usda``, ``.usdc``, ``.usd``) or
 from ``format=`` (required for ``-``, standard input or output). Each format
-module offers ``read(path, label=None) -> Motion`` (``label`` names the file in
-error messages) and ``write(motion, path, **options)``. Saving is atomic: the file appears
+has a reader ``read(path, label=None) -> Motion`` (``label`` names the file in
+error messages) and a writer ``write(motion, path, **options)``: BVH in
+:mod:`keyfill.io.bvh`; USD in :mod:`keyfill.io.usd` (UsdSkel), read through
+:func:`keyfill.io.usd_curves.read_motion` so that a keyfill curves file gives
+its Bezier curves baked at every frame. Saving is atomic: the file appears
 complete or not at all (see :func:`keyfill.files.atomic_output`).
 """
 
@@ -19,8 +22,9 @@ from keyfill.errors import FormatError, UsageError
 from keyfill.files import atomic_output
 from keyfill.motion import Motion
 
-#: format name -> module implementing it
-FORMATS = {"bvh": "keyfill.io.bvh", "usda": "keyfill.io.usd", "usdc": "keyfill.io.usd", "usd": "keyfill.io.usd"}
+_USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
+#: format name -> its (reader, writer) as "module:function", imported on first use
+FORMATS = {"bvh": ("keyfill.io.bvh:read", "keyfill.io.bvh:write"), "usda": _USD, "usdc": _USD, "usd": _USD}
 STDIO = "-"
 
 
@@ -39,23 +43,24 @@ def format_of(path: str | os.PathLike, format: str | None = None) -> str:
     return suffix
 
 
-def _module(fmt: str):
-    return importlib.import_module(FORMATS[fmt])
+def _function(target: str):
+    module, name = target.split(":")
+    return getattr(importlib.import_module(module), name)
 
 
 def load(path: str | os.PathLike, format: str | None = None) -> Motion:
     """Read a motion file (``"-"``: standard input, with ``format``)."""
     fmt = format_of(path, format)
-    mod = _module(fmt)
+    read = _function(FORMATS[fmt][0])
     if str(path) == STDIO:
         with tempfile.TemporaryDirectory() as tmp:
             p = Path(tmp) / ("stdin." + fmt)
             p.write_bytes(sys.stdin.buffer.read())
-            return mod.read(p, label="<stdin>")
+            return read(p, label="<stdin>")
     p = Path(path)
     if not p.is_file():
         raise FormatError("no such file" if not p.exists() else "not a file", p)
-    return mod.read(p)
+    return read(p)
 
 
 def save(motion: Motion, path: str | os.PathLike, format: str | None = None, **options) -> None:
@@ -64,14 +69,14 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, **o
     ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key files).
     """
     fmt = format_of(path, format)
-    mod = _module(fmt)
+    write = _function(FORMATS[fmt][1])
     if str(path) == STDIO:
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / ("stdout." + fmt)
-            mod.write(motion, out, **options)
+            write(motion, out, **options)
             sys.stdout.flush()
             sys.stdout.buffer.write(out.read_bytes())
             sys.stdout.buffer.flush()
         return
     with atomic_output(path) as tmp:
-        mod.write(motion, tmp, **options)
+        write(motion, tmp, **options)

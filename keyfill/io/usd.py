@@ -217,14 +217,20 @@ def _sample_times(attrs) -> list[float]:
     return sorted(times)
 
 
-def read(path: str | Path, label=None, curves: bool = True) -> Motion:
+def read(path: str | Path, label=None) -> Motion:
     """Read a UsdSkel animation into a :class:`Motion`; ``label`` names the file in errors.
 
-    A keyfill curves file (:mod:`keyfill.edit.curvefile`) bakes its Bezier
-    curves at every frame unless ``curves=False`` (then its stored
-    SkelAnimation is read like any other).
+    A keyfill curves file reads here as its stored SkelAnimation (32-bit
+    floats, for viewers); :func:`keyfill.io.load` reads USD files through
+    :func:`keyfill.io.usd_curves.read_motion`, which bakes the curves instead.
     """
-    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
+    label = label if label is not None else path
+    return read_stage(open_stage(path, label), label)
+
+
+def open_stage(path: str | Path, label=None):
+    """The ``Usd.Stage`` of ``path``; :class:`FormatError` (naming ``label``) when it is not USD."""
+    Usd = _pxr()[2]
     label = label if label is not None else path
     try:
         stage = Usd.Stage.Open(str(path))
@@ -233,6 +239,12 @@ def read(path: str | Path, label=None, curves: bool = True) -> Motion:
         raise FormatError(f"not a readable USD file ({first[-1].strip() if first else 'parse error'})", label) from None
     if stage is None:
         raise FormatError("not a readable USD file", label)
+    return stage
+
+
+def read_stage(stage, label) -> Motion:
+    """The UsdSkel animation of an open stage as a :class:`Motion` (see the module docstring)."""
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     skel = _find_skeleton(stage, UsdSkel, label)
     joints = [str(t) for t in (skel.GetJointsAttr().Get() or [])]
     if not joints:
@@ -298,13 +310,7 @@ def read(path: str | Path, label=None, curves: bool = True) -> Motion:
         if np.any(np.abs(frames - np.round(frames)) > 1e-6):
             raise DataError(f"{label}: animation samples at fractional time codes cannot be keys")
         keys = Keys(np.round(frames).astype(np.int64))
-    motion = Motion(skeleton, fps, rot, pos, keys=keys)
-    if curves:
-        from keyfill.edit import curvefile
-
-        if curvefile.curves_prim(stage) is not None:
-            return curvefile.from_stage(stage, motion, label).bake()
-    return motion
+    return Motion(skeleton, fps, rot, pos, keys=keys)
 
 
 def _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label) -> Skeleton:

@@ -3,9 +3,11 @@
 * :mod:`keyfill.viz.curves`: one panel per animation variable (BVH channel as
   Euler angles in the file's own order, a world position, or the hopping
   lamp's six variables), several files overlaid, keys as open circles.
-* :mod:`keyfill.viz.stick`: stick figures from forward kinematics seen by a
-  fixed orthographic camera; keys ghosted, joint trails ("motion curves"),
-  a ground line or grid. Renders a GIF, a filmstrip PNG or a trail still.
+* :mod:`keyfill.viz.stick`: stick figures seen by a fixed orthographic
+  camera; keys ghosted, joint trails ("motion curves"), a ground line or
+  grid. Renders a GIF, a filmstrip PNG or a trail still.
+* :mod:`keyfill.viz.scene`: what a stick figure shows and from where: world
+  points and bones from forward kinematics, the views' cameras, the ground.
 * :mod:`keyfill.viz.gif`: GIF writing with exact frame timing.
 * :mod:`keyfill.viz.palette`: one shared palette per picture with exact colour
   mapping (GIF frames, and small PNGs).

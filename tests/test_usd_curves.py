@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_edit_character import character
-from test_edit_curves import random_curves
+from test_curves import random_curves
 
 from keyfill import io
 from keyfill import rotations as R
-from keyfill.edit import curvefile
 from keyfill.edit.fit import fit
 from keyfill.errors import FormatError
+from keyfill.io import usd_curves
 
 
 def pxr_values(path, curves, times) -> np.ndarray:
@@ -19,7 +19,7 @@ def pxr_values(path, curves, times) -> np.ndarray:
     from pxr import Usd
 
     stage = Usd.Stage.Open(str(path))
-    prim = curvefile.curves_prim(stage)
+    prim = usd_curves.curves_prim(stage)
     out = np.full((len(times), curves.num_controls), np.nan)
     for attr in prim.GetAttributes():
         if not attr.HasSpline():
@@ -37,8 +37,8 @@ def test_round_trip_keeps_every_key_and_tangent(tmp_path, suffix):
     broken[::2] = False
     c = c.replace(broken=broken)
     path = tmp_path / f"curves.{suffix}"
-    curvefile.save(c, path)
-    back = curvefile.read(path)
+    usd_curves.save(c, path)
+    back = usd_curves.read(path)
     assert back.controls == c.controls and back.num_frames == c.num_frames and back.fps == c.fps
     np.testing.assert_array_equal(back.times, c.times)
     np.testing.assert_array_equal(back.values, c.values)  # bit for bit
@@ -51,7 +51,7 @@ def test_round_trip_keeps_every_key_and_tangent(tmp_path, suffix):
 def test_pxr_evaluates_what_keyfill_evaluates(tmp_path, broken):
     c = random_curves(6, broken=broken)
     path = tmp_path / "curves.usda"
-    curvefile.save(c, path)
+    usd_curves.save(c, path)
     t = np.linspace(-3, 43, 461)
     theirs = pxr_values(path, c, t)
     ours = c.evaluate(t)
@@ -62,24 +62,24 @@ def test_loading_a_curves_file_bakes_the_curves(tmp_path):
     m = character()
     c = fit(m, m.keys)
     path = tmp_path / "c.usda"
-    curvefile.save(c, path)
+    usd_curves.save(c, path)
     baked = io.load(path)
     assert baked.keys.to_list() == list(m.keys.frames)
     ref = c.bake()
     assert R.quat_angle(baked.rotations, ref.rotations).max() < 1e-12
     np.testing.assert_allclose(baked.positions, ref.positions, atol=1e-12)
     # the stored SkelAnimation (float32) is the same motion, for viewers that only know UsdSkel
-    stored = io.usd.read(path, curves=False)
+    stored = io.usd.read(path)
     assert R.quat_angle(stored.rotations, ref.rotations).max() < 1e-6
     # and a .bvh output bakes too
-    curvefile.save(c, tmp_path / "c.bvh")
+    usd_curves.save(c, tmp_path / "c.bvh")
     assert R.quat_angle(io.load(tmp_path / "c.bvh").rotations, ref.rotations).max() < 1e-9
 
 
 def test_writing_is_deterministic(tmp_path):
     c = random_curves(7)
-    curvefile.save(c, tmp_path / "a.usda")
-    curvefile.save(c, tmp_path / "b.usda")
+    usd_curves.save(c, tmp_path / "a.usda")
+    usd_curves.save(c, tmp_path / "b.usda")
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
 
 
@@ -88,11 +88,11 @@ def _edit_spline(path, name, change):
 
     layer = Sdf.Layer.FindOrOpen(str(path))
     stage = Usd.Stage.Open(layer)
-    attr = curvefile.curves_prim(stage).GetAttribute(name)
+    attr = usd_curves.curves_prim(stage).GetAttribute(name)
     spline = attr.GetSpline()
     change(spline)
     attr.SetSpline(spline)
-    with curvefile._quiet_stderr():
+    with usd_curves._quiet_stderr():
         layer.Save()
 
 
@@ -101,7 +101,7 @@ def test_foreign_splines_hermite_and_linear_are_read(tmp_path):
 
     c = random_curves(8)
     path = tmp_path / "c.usda"
-    curvefile.save(c, path)
+    usd_curves.save(c, path)
 
     def hermite_and_linear(spline):
         spline.SetCurveType(Ts.CurveTypeHermite)
@@ -111,7 +111,7 @@ def test_foreign_splines_hermite_and_linear_are_read(tmp_path):
         spline.SetKnot(k)
 
     _edit_spline(path, "Neck_Xrotation", hermite_and_linear)
-    back = curvefile.read(path)
+    back = usd_curves.read(path)
     t = np.linspace(0, 40, 401)
     i = back.control_index("Neck.Xrotation")
     assert np.abs(pxr_values(path, back, t)[:, i] - back.evaluate(t)[:, i]).max() < 1e-6
@@ -122,16 +122,16 @@ def test_bad_splines_are_refused_with_the_attribute_name(tmp_path):
 
     c = random_curves(9)
     path = tmp_path / "c.usda"
-    curvefile.save(c, path)
+    usd_curves.save(c, path)
 
     def drop_knot(spline):
         spline.RemoveKnot(20.0)
 
     _edit_spline(path, "Head_Yrotation", drop_knot)
     with pytest.raises(FormatError, match="Head_Yrotation has knots at 0, 10, 30, 40"):
-        curvefile.read(path)
+        usd_curves.read(path)
 
-    curvefile.save(c, path)
+    usd_curves.save(c, path)
 
     def held(spline):
         k = spline.GetKnots()[10.0]
@@ -147,4 +147,4 @@ def test_a_plain_usd_file_is_not_a_curves_file(tmp_path):
     m = character()
     io.save(m, tmp_path / "plain.usda")
     with pytest.raises(FormatError, match="not a keyfill curves file"):
-        curvefile.read(tmp_path / "plain.usda")
+        usd_curves.read(tmp_path / "plain.usda")

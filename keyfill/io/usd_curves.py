@@ -1,4 +1,4 @@
-"""Curve files: Bezier animation curves as ``pxr.Ts`` splines in a USD file.
+"""Curve files: Bezier animation curves (:class:`~keyfill.curves.Curves`) as ``pxr.Ts`` splines in a USD file.
 
 Layout (``.usda``, ``.usdc`` or ``.usd``)::
 
@@ -29,6 +29,9 @@ linear segments (turned into the equivalent Bezier); held segments, dual
 values, loops and other extrapolations are refused with a clear message.
 ``attr.Get(time)`` on the saved file equals :meth:`Curves.evaluate` to
 rounding: both solve the same cubic.
+
+:func:`keyfill.io.load` reads every USD file through :func:`read_motion`, so a
+curves file opened as a motion gives its curves baked at every frame.
 """
 
 from __future__ import annotations
@@ -40,8 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill.edit.curves import Control, Curves
-from keyfill.errors import FormatError
+from keyfill.curves import Control, Curves
+from keyfill.errors import DataError, FormatError
+from keyfill.io import usd
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 
 LAYOUT = "keyfill.curves"
@@ -51,9 +55,7 @@ _CUSTOM = "keyfill"
 
 
 def _attr_name(skeleton, control: Control, used: set[str]) -> str:
-    from keyfill.io.usd import _identifier
-
-    base = f"{_identifier(skeleton.names[control.joint])}_{control.channel}"
+    base = f"{usd._identifier(skeleton.names[control.joint])}_{control.channel}"
     name, n = base, 1
     while name in used:
         name, n = f"{base}_{n}", n + 1
@@ -86,8 +88,6 @@ def write(curves: Curves, path: str | Path) -> None:
     Not atomic by itself: callers write through :func:`keyfill.files.atomic_output`.
     """
     from pxr import Sdf, Ts, Usd, UsdGeom
-
-    from keyfill.io import usd
 
     usd.write(curves.bake(), path)
     layer = Sdf.Layer.FindOrOpen(str(path))
@@ -255,29 +255,31 @@ def from_stage(stage, motion: Motion, label) -> Curves:
             out_tan=out_tan,
             broken=broken,
         )
-    except Exception as e:  # DataError from validation: name the file
-        from keyfill.errors import DataError
-
-        if isinstance(e, DataError):
-            raise FormatError(str(e), label) from None
-        raise
+    except DataError as e:  # from the validation of Curves: name the file
+        raise FormatError(str(e), label) from None
 
 
 def read(path: str | Path, label=None) -> Curves:
     """Read a keyfill curves file written by :func:`write` (or following its layout)."""
-    from pxr import Usd
-
-    from keyfill.io import usd
-
     label = path if label is None else label
     hint = "make one with keyfill convert IN.bvh OUT.usda --curves --keys ..."
     if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
         raise FormatError(f"not a keyfill curves file (a .usda, .usdc or .usd file); {hint}", label)
     if not Path(path).is_file():
         raise FormatError("no such file", label)
-    motion = usd.read(path, label=label, curves=False)
-    stage = Usd.Stage.Open(str(path))
-    return from_stage(stage, motion, label)
+    stage = usd.open_stage(path, label)
+    return from_stage(stage, usd.read_stage(stage, label), label)
+
+
+def read_motion(path: str | Path, label=None) -> Motion:
+    """Any USD file as a :class:`Motion`: a curves file gives its curves baked at every frame
+    (exact, where its SkelAnimation holds 32-bit floats), any other file its UsdSkel animation."""
+    label = path if label is None else label
+    stage = usd.open_stage(path, label)
+    motion = usd.read_stage(stage, label)
+    if curves_prim(stage) is None:
+        return motion
+    return from_stage(stage, motion, label).bake()
 
 
 def _short(t: np.ndarray) -> str:

@@ -7,8 +7,9 @@ import pytest
 from test_edit_character import character
 
 from keyfill import rotations as R
-from keyfill.edit.curves import evaluate_segments, solve_bezier_time, tangent_derivatives
+from keyfill.curves import evaluate_segments, solve_bezier_time
 from keyfill.edit.fit import fit
+from keyfill.edit.move import tangent_derivatives
 from keyfill.errors import DataError
 
 

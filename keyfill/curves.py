@@ -1,4 +1,4 @@
-"""Bezier animation curves: one curve per control, all keyed at the same times.
+"""Bezier animation curves, a core data type: one curve per control, all keyed at the same times.
 
 A *control* is one animated channel of the skeleton: a translation channel
 (``"Xposition"``, file units) or a rotation channel (``"Zrotation"``, radians,
@@ -16,7 +16,7 @@ so a tangent is the 2-vector ``theta = (X, Y)`` of Ciccone et al. 2019: ``X``
 (width, frames) sets the timing, ``Y`` (height, value units) the shape; the
 curve's slope at the key is ``Y / X``. These are the same numbers as the
 ``pxr.Ts`` knot's tangent width and ``width * slope`` (see
-:mod:`keyfill.edit.curvefile`). A key's tangents are *unified* when the in and
+:mod:`keyfill.io.usd_curves`). A key's tangents are *unified* when the in and
 out tangents have the same slope (a C1 curve) and *broken* otherwise.
 
 Evaluation is exact: for each time the cubic ``B^X(lambda) = t`` is solved for
@@ -325,19 +325,6 @@ def evaluate_segments(curves: CurveArrays, time: np.ndarray, seg: np.ndarray, co
     value = (one * one * one + b1) * y0 + b1 * dy1 + b2 * (y3 - dy3) + lam * lam * lam * y3
     outside = (rel < 0) | (rel > dt)
     return SegmentEval(value, lam, b1, b2, (a, b, dt, y0, dy1, y3, dy3, outside if outside.any() else None))
-
-
-def tangent_derivatives(ev: SegmentEval) -> np.ndarray:
-    """``(T, n, 4)``: derivatives of ``c(t)`` with respect to the segment's own tangents.
-
-    Columns: width and height of the out tangent at the segment's first key,
-    width and height of the in tangent at its last key. Heights enter the
-    Bezier linearly (``b1``, ``-b2``); a width moves its control point in
-    time, which shifts the curve by minus its slope times the same weight.
-    """
-    sb1 = ev.slope * ev.b1
-    sb2 = ev.slope * ev.b2
-    return np.stack([-sb1, ev.b1, sb2, -ev.b2], axis=-1)
 
 
 def solve_bezier_time(u: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

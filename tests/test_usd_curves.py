@@ -9,6 +9,7 @@ from test_curves import random_curves
 
 from keyfill import io
 from keyfill import rotations as R
+from keyfill.files import quiet_stderr
 from keyfill.edit.fit import fit
 from keyfill.errors import FormatError
 from keyfill.io import usd_curves
@@ -92,7 +93,7 @@ def _edit_spline(path, name, change):
     spline = attr.GetSpline()
     change(spline)
     attr.SetSpline(spline)
-    with usd_curves._quiet_stderr():
+    with quiet_stderr():
         layer.Save()
 
 

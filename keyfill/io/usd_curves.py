@@ -36,15 +36,13 @@ curves file opened as a motion gives its curves baked at every frame.
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from keyfill.curves import Control, Curves
 from keyfill.errors import DataError, FormatError
+from keyfill.files import quiet_stderr
 from keyfill.io import usd
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 
@@ -61,25 +59,6 @@ def _attr_name(skeleton, control: Control, used: set[str]) -> str:
         name, n = f"{base}_{n}", n + 1
     used.add(name)
     return name
-
-
-@contextlib.contextmanager
-def _quiet_stderr():
-    """Silence the C++ warnings pxr prints while writing splines.
-
-    usd-core 26.11 warns "TsSpline inner looping is deprecated" for every
-    spline written to text, and about the crate upgrade for splines in
-    ``.usdc``; both are expected here and would clutter the CLI's stderr.
-    """
-    sys.stderr.flush()
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-            yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
 
 
 def write(curves: Curves, path: str | Path) -> None:
@@ -116,7 +95,9 @@ def write(curves: Curves, path: str | Path) -> None:
             knot.SetCustomDataByKey("broken", bool(curves.broken[k, i]))
             spline.SetKnot(knot)
         attr.SetSpline(spline)
-    with _quiet_stderr():
+    # usd-core 26.11 warns "TsSpline inner looping is deprecated" for every spline written to text,
+    # and about the crate upgrade for splines in .usdc: expected here, and noise on the CLI's stderr.
+    with quiet_stderr():
         layer.Save()
 
 

@@ -31,39 +31,21 @@ has tilted past ``max_tilt``.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from keyfill.files import quiet_stderr
 from keyfill.sim.controller import Controller
 from keyfill.characters.lamp import Dimensions
 from keyfill.sim.settings import Settings
 
 
-@contextlib.contextmanager
-def _quiet_stderr():
-    """Silence C-level writes to stderr (pybullet prints its build time on import)."""
-    try:
-        fd = os.dup(2)
-    except OSError:  # no stderr at all
-        yield
-        return
-    try:
-        with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 2)
-            yield
-    finally:
-        os.dup2(fd, 2)
-        os.close(fd)
-
-
 def import_pybullet():
     """The pybullet module, imported without its start-up banner."""
-    with _quiet_stderr():
+    with quiet_stderr():
         import pybullet
 
     return pybullet

@@ -1,0 +1,149 @@
+"""Settings of the generative tweening model and its training (:class:`GanConfig`).
+
+Layer widths come from a named preset (:data:`PRESETS`):
+
+* ``"paper"``: the channel widths of Table 5 of Zhou et al. 2020;
+* ``"cpu"`` (the default): the same layers (kernels, strides, residual ratios,
+  so the same receptive fields) at about an eighth of the widths, small enough
+  to train on a 2-core CPU in a few hours.
+
+Every setting is a plain JSON value, so a model folder's ``config.json`` holds
+the whole configuration and a ``--resume`` can compare it.
+
+Lengths are frames, speeds metres per second, positions inside the networks
+metres (file units times the skeleton's ``meters_per_unit``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from keyfill.errors import UsageError
+
+#: channel widths per network: encoder (6 layers), decoder (13 hidden layers), discriminator (6), path predictor (8)
+PRESETS: dict[str, dict[str, list[int]]] = {
+    "paper": {
+        "encoder": [384, 384, 512, 512, 768, 1024],
+        "decoder": [1024, 1024, 1024, 768, 768, 768, 768, 512, 512, 512, 512, 512, 512],
+        "discriminator": [512, 512, 512, 512, 1024, 1024],
+        "path": [128, 128, 256, 256, 256, 256, 128, 128],
+    },
+    "cpu": {
+        "encoder": [48, 48, 64, 64, 96, 128],
+        "decoder": [128, 128, 128, 96, 96, 96, 96, 64, 64, 64, 64, 64, 64],
+        "discriminator": [48, 48, 64, 64, 96, 128],
+        "path": [32, 32, 64, 64, 64, 64, 32, 32],
+    },
+}
+_LAYERS = {"encoder": 6, "decoder": 13, "discriminator": 6, "path": 8}
+
+
+@dataclass(frozen=True)
+class GanConfig:
+    """Architecture, data and training settings (both stages).
+
+    Attributes:
+        preset: name of the width preset the widths came from (``"custom"`` when changed).
+        widths: channel widths per network (see :data:`PRESETS`).
+        noise_dim: channels of Gaussian noise joined to every latent step (keyfill's
+            source of variety until Motion DNA lands; the seed of ``complete`` draws it).
+        style_dim: channels of the per-sequence style vector joined to every latent
+            step (the Motion DNA hook; 0: none, the decoder then takes no style).
+        mask_scale: the dense mask (distance to the nearest key, frames) is divided by this.
+        sequence_frames: frames ``N`` of a generator training sequence (a multiple of 64).
+        min_gap, max_gap: key gaps drawn in training, frames (the paper: up to 600 of
+            its 636-frame effective receptive field); ``max_gap`` is also the largest
+            gap ``complete`` accepts.
+        short_gap_seconds: gaps up to this long take both keys from one clip (Appendix C).
+        jump_speed: for a gap that jumps to another clip, the root moves at most this
+            fast (m/s) between the two keys; distance grows with the gap.
+        max_frames: the longest key range ``complete`` fills.
+        batch_size: generator sequences per step (the paper: 4).
+        real_frames: frames of each sequence the discriminator judges (a multiple of 64);
+            real ones are crops of corpus clips, fake ones crops of generated sequences.
+        crops_per_sequence: fake crops taken from each generated sequence (and as many real ones).
+        path_batch: clips per path-predictor step.
+        steps_per_epoch: steps in an epoch of either stage.
+        lr_generator, lr_discriminator, lr_path: RMSprop learning rates.
+        adv_weight, br_weight, joint_weight: loss weights (Appendix A: 1, 5, 300).
+        root_weight_start, root_weight_end, root_weight_every: the root path loss weight
+            grows by 1 every ``root_weight_every`` generator steps from start to end
+            (Appendix A: 10 to 80 every 1000).
+        val_fraction: share of the clips held out for validation (by a seeded draw).
+        val_sequences: held-out sequences scored after each generator epoch.
+        seed: the seed of the clip split and of every batch (epoch ``e`` draws from
+            ``numpy.random.default_rng([seed, stage, e])``).
+    """
+
+    preset: str = "cpu"
+    widths: dict = field(default_factory=lambda: {k: list(v) for k, v in PRESETS["cpu"].items()})
+    noise_dim: int = 32
+    style_dim: int = 0
+    mask_scale: float = 64.0
+    sequence_frames: int = 1024
+    min_gap: int = 1
+    max_gap: int = 600
+    short_gap_seconds: float = 3.0
+    jump_speed: float = 1.5
+    max_frames: int = 8192
+    batch_size: int = 4
+    real_frames: int = 128
+    crops_per_sequence: int = 4
+    path_batch: int = 16
+    steps_per_epoch: int = 200
+    lr_generator: float = 1e-4
+    lr_discriminator: float = 1e-4
+    lr_path: float = 1e-4
+    adv_weight: float = 1.0
+    br_weight: float = 5.0
+    joint_weight: float = 300.0
+    root_weight_start: float = 10.0
+    root_weight_end: float = 80.0
+    root_weight_every: int = 1000
+    val_fraction: float = 0.05
+    val_sequences: int = 8
+    seed: int = 0
+
+    def __post_init__(self):
+        for name, n in _LAYERS.items():
+            w = self.widths.get(name)
+            if not isinstance(w, (list, tuple)) or len(w) != n or not all(isinstance(c, int) and c > 0 for c in w):
+                raise UsageError(f"GAN widths[{name!r}] must be {n} positive integers, got {w!r}")
+        if set(self.widths) != set(_LAYERS):
+            raise UsageError(f"GAN widths name {sorted(self.widths)}; expected {sorted(_LAYERS)}")
+        if self.sequence_frames % 64 or self.real_frames % 64 or self.real_frames < 64:
+            raise UsageError("sequence_frames and real_frames must be positive multiples of 64")
+        if not 1 <= self.min_gap <= self.max_gap:
+            raise UsageError(f"key gaps need 1 <= min_gap <= max_gap, got {self.min_gap}, {self.max_gap}")
+        if self.noise_dim < 0 or self.style_dim < 0:
+            raise UsageError("noise_dim and style_dim cannot be negative")
+        if self.batch_size < 1 or self.path_batch < 1 or self.crops_per_sequence < 1 or self.steps_per_epoch < 1:
+            raise UsageError("batch sizes, crops and steps per epoch must be positive")
+        if self.real_frames > self.sequence_frames:
+            raise UsageError("real_frames cannot exceed sequence_frames")
+
+    @classmethod
+    def from_preset(cls, name: str, **changes) -> "GanConfig":
+        """The config with the widths of preset ``name`` (and other fields changed)."""
+        if name not in PRESETS:
+            raise UsageError(f"unknown GAN preset {name!r}; presets are {', '.join(PRESETS)}")
+        widths = {k: list(v) for k, v in PRESETS[name].items()}
+        return cls(preset=name, widths=widths, **changes)
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "GanConfig":
+        """The config from :meth:`to_json` output; unknown keys are a :class:`UsageError`."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - names
+        if unknown:
+            raise UsageError(f"unknown GAN setting {min(unknown)!r}")
+        return cls(**data)
+
+    def root_weight(self, step: int) -> float:
+        """The root path loss weight at generator step ``step`` (Appendix A's schedule)."""
+        grown = self.root_weight_start + step // max(self.root_weight_every, 1)
+        return float(min(grown, self.root_weight_end))

@@ -1,0 +1,55 @@
+"""The dense keyframe input format of the local motion generator (section 3.5, Fig. 4).
+
+Every frame gets a copy of the pose of its nearest key, and the mask becomes a
+distance transform: 0 at a key, elsewhere the number of frames to the nearest
+key (divided by ``mask_scale`` to keep the input near unit size). A frame
+exactly between two keys takes the earlier one. Frames before the first and
+after the last key take that key.
+
+A pose is ``(J, 3)``: row 0 the root's position (world axes, the sequence
+re-centred so that the keys' mean ground position is the origin), rows 1.. the
+joints' positions relative to the root (world axes), all in metres. The
+generator's input is ``(6 J, T)``: the ``3 J`` pose values, then the mask
+repeated for every coordinate (the paper's ``3 M`` mask channels, which leave
+room for partial keys).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def nearest_key(num_frames: int, key_frames) -> tuple[np.ndarray, np.ndarray]:
+    """``(index (T,) int, distance (T,) int)``: each frame's nearest key (its index in ``key_frames``) and the distance."""
+    k = np.asarray(key_frames, dtype=np.int64)
+    f = np.arange(num_frames)
+    right = np.clip(np.searchsorted(k, f, side="left"), 0, len(k) - 1)
+    left = np.clip(right - 1, 0, len(k) - 1)
+    dl, dr = np.abs(f - k[left]), np.abs(k[right] - f)
+    idx = np.where(dl <= dr, left, right)
+    return idx, np.minimum(dl, dr)
+
+
+def dense_input(num_frames: int, key_frames, key_poses, mask_scale: float = 64.0) -> np.ndarray:
+    """The generator input ``(6 J, T)`` float32 for keys at ``key_frames (K,)`` with ``key_poses (K, J, 3)``."""
+    idx, dist = nearest_key(num_frames, key_frames)
+    poses = np.asarray(key_poses, dtype=np.float32)[idx]  # (T, J, 3)
+    T, J = poses.shape[:2]
+    pos = poses.reshape(T, 3 * J).T
+    mask = np.broadcast_to((dist / mask_scale).astype(np.float32), (3 * J, T))
+    return np.concatenate([pos, mask], axis=0)
+
+
+def centre_keys(key_poses: np.ndarray, up_axis: str = "Y") -> tuple[np.ndarray, np.ndarray]:
+    """``(poses, shift (3,))``: key poses ``(K, J, 3)`` with the keys' mean ground position of the root moved to 0.
+
+    Only the two ground axes move (the height stays); ``shift`` is what was subtracted.
+    """
+    from keyfill.learn.benchmark import horizontal_axes
+
+    h = list(horizontal_axes(up_axis))
+    shift = np.zeros(3)
+    shift[h] = np.asarray(key_poses)[:, 0, h].mean(axis=0)
+    out = np.array(key_poses, dtype=np.float64)
+    out[:, 0] -= shift
+    return out, shift

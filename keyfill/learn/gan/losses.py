@@ -1,0 +1,89 @@
+"""The losses of Zhou et al. 2020 (torch): Eqs. 5, 7, 8 and 10.
+
+Shapes: velocities ``(B, 3, T)`` (entry ``t`` is ``root[t + 1] - root[t]``, the
+last one unused), root paths ``(B, T, 3)``, joint positions ``(B, T, J, 3)``,
+key masks ``(B, T)`` bool. Positions are in whatever unit the caller gives
+(keyfill's networks work in metres), and the losses are in that unit squared.
+"""
+
+from __future__ import annotations
+
+import torch
+
+#: Eq. 5: displacements over 1, 2, 4, ..., 128 frames
+SCALES = tuple(2**q for q in range(8))
+#: Eqs. 7-8: labels of real and fake sub-sequences, and the generator's target
+REAL, FAKE, GENERATOR_TARGET = 1.0, -1.0, 0.2361
+
+
+def displacement_loss(velocities, root, lengths=None, scales=SCALES):
+    """Eq. 5, the multi-scale root displacement loss of the global path predictor.
+
+    For each interval ``n`` in ``scales``, the mean over ``t`` of
+    ``|| sum_{i=t}^{t+n-1} v_i - (root[t+n] - root[t]) ||^2``, then the mean over
+    the intervals. (Eq. 4 sums ``i = t0 .. t``, one term too many for a
+    displacement from ``t0`` to ``t``; the sum here has exactly ``n`` terms, as
+    the text means.) Intervals not shorter than a sequence have no terms; the
+    mean is over the intervals that have some.
+
+    Args:
+        velocities: ``(B, 3, T)`` predicted root velocities.
+        root: ``(B, T, 3)`` true root positions.
+        lengths: ``(B,)`` valid frames per row (rows are padded at the end), or None for all ``T``.
+
+    For one row this is exactly Eq. 5 with ``1 / (N - n)`` per interval; over a
+    batch the ``(row, t)`` terms of an interval are pooled.
+    """
+    B, _, T = velocities.shape
+    v = velocities.transpose(1, 2)[:, : T - 1]
+    cum = torch.cat([torch.zeros_like(v[:, :1]), torch.cumsum(v, dim=1)], dim=1)  # (B, T, 3): predicted root - root[0]
+    if lengths is None:
+        lengths = torch.full((B,), T, dtype=torch.long, device=velocities.device)
+    lengths = torch.as_tensor(lengths, device=velocities.device)
+    terms = []
+    for n in scales:
+        if n >= T:
+            continue
+        err = (cum[:, n:] - cum[:, :-n]) - (root[:, n:] - root[:, :-n])  # (B, T - n, 3), t = 0 .. T-n-1
+        valid = (torch.arange(T - n, device=v.device)[None] + n) < lengths[:, None]  # t + n inside the row
+        count = valid.sum()
+        if count == 0:
+            continue
+        terms.append(((err**2).sum(-1) * valid).sum() / count)
+    if not terms:
+        return velocities.sum() * 0
+    return torch.stack(terms).mean()
+
+
+def discriminator_loss(real_scores, fake_scores):
+    """Eq. 7 (least-squares GAN): ``mean((y_real - 1)^2) + mean((y_fake + 1)^2)``."""
+    return ((real_scores - REAL) ** 2).mean() + ((fake_scores - FAKE) ** 2).mean()
+
+
+def generator_loss(fake_scores):
+    """Eq. 8: ``mean((y_fake - 0.2361)^2)``."""
+    return ((fake_scores - GENERATOR_TARGET) ** 2).mean()
+
+
+def key_joint_loss(positions, key_positions, key_mask):
+    """Keyframe loss on the local joints: mean over key frames and non-root joints of the squared distance.
+
+    ``positions``, ``key_positions``: ``(B, T, J, 3)`` root-relative; joint 0 is skipped.
+    """
+    d = ((positions[:, :, 1:] - key_positions[:, :, 1:]) ** 2).sum(-1).mean(-1)  # (B, T)
+    m = key_mask.to(d.dtype)
+    return (d * m).sum() / m.sum().clamp_min(1)
+
+
+def key_root_loss(root, key_root, key_mask):
+    """Eq. 10: the root path at the keys after re-centring both paths on their mean over the keys.
+
+    ``root``, ``key_root``: ``(B, T, 3)``. Per row,
+    ``1/N' sum_{t in keys} ||(root_t - mean) - (key_t - key mean)||^2``; the mean over rows.
+    """
+    m = key_mask.to(root.dtype)[..., None]  # (B, T, 1)
+    n = m.sum(1, keepdim=True).clamp_min(1)
+    c = (root * m).sum(1, keepdim=True) / n
+    ck = (key_root * m).sum(1, keepdim=True) / n
+    d = (((root - c) - (key_root - ck)) ** 2 * m).sum((1, 2)) / n[:, 0, 0]
+    return d.mean()

@@ -1,0 +1,79 @@
+"""Corpus clips as what the GAN's networks see: root paths and root-relative joint positions (numpy).
+
+* ``relative (T, J, 3)``: joint positions relative to the root in world axes
+  (forward kinematics of the local rotations with the root at the origin and
+  the constant bone offsets); row 0 is zero. The paper's ``T^joints``.
+* ``root (T, 3)``: the root's world position.
+
+Both in metres (file units times ``meters_per_unit``). Turning a clip about
+the up axis (:func:`turn`) turns both, which is how training draws headings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from keyfill.kinematics import fk
+from keyfill.learn.benchmark import horizontal_axes
+
+
+def relative_positions(quats: np.ndarray, offsets: np.ndarray, parents) -> np.ndarray:
+    """``(..., J, 3)`` root-relative world-axis joint positions of local ``quats (..., J, 4)``."""
+    off = np.array(offsets, dtype=np.float64)
+    off[0] = 0.0
+    return fk(quats, np.broadcast_to(off, quats.shape[:-1] + (3,)), parents)[1]
+
+
+def turn(points: np.ndarray, angle, up_axis: str = "Y") -> np.ndarray:
+    """``points (..., 3)`` rotated by ``angle`` radians about the up axis (broadcast over leading dims).
+
+    For ``up_axis`` Y a positive angle takes +Z towards +X (a right-handed turn about +Y).
+    """
+    a, b = horizontal_axes(up_axis)
+    if up_axis == "Y":
+        a, b = b, a  # about +Y: (z, x) rotates like (x, y) about +Z
+    c, s = np.cos(angle), np.sin(angle)
+    out = np.array(points, dtype=np.float64, copy=True)
+    pa, pb = points[..., a], points[..., b]
+    out[..., a] = c * pa - s * pb
+    out[..., b] = s * pa + c * pb
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ClipPool:
+    """The clips of a corpus ready for sampling (everything in metres).
+
+    Attributes:
+        relative: per clip ``(T_c, J, 3)`` float32 root-relative positions.
+        root: per clip ``(T_c, 3)`` float64 root positions.
+        fps: frames per second.
+        up_axis: ``"Y"`` or ``"Z"``.
+    """
+
+    relative: tuple[np.ndarray, ...]
+    root: tuple[np.ndarray, ...]
+    fps: float
+    up_axis: str
+
+    def __len__(self) -> int:
+        return len(self.root)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.array([len(r) for r in self.root], dtype=np.int64)
+
+
+def clip_pool(corpus, clips=None) -> ClipPool:
+    """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`."""
+    s = corpus.skeleton
+    m = s.meters_per_unit
+    clips = range(len(corpus)) if clips is None else clips
+    rel, root = [], []
+    for i in clips:
+        q, r = corpus.clip(int(i))
+        rel.append((relative_positions(q, s.offsets * m, s.parents)).astype(np.float32))
+        root.append(np.asarray(r, dtype=np.float64) * m)
+    return ClipPool(tuple(rel), tuple(root), float(corpus.fps), s.up_axis)

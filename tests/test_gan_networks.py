@@ -9,11 +9,11 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from keyfill.learn.gan import losses as L  # noqa: E402
-from keyfill.learn.gan.config import PRESETS, GanConfig  # noqa: E402
-from keyfill.learn.gan.dense import dense_input, nearest_key  # noqa: E402
-from keyfill.learn.gan.layers import ResidualConv, batch_regularisation  # noqa: E402
-from keyfill.learn.gan.networks import (  # noqa: E402
+from keyfill.learn.gan import losses as L
+from keyfill.learn.gan.config import PRESETS, GanConfig
+from keyfill.learn.gan.dense import dense_input, nearest_key
+from keyfill.learn.gan.layers import ResidualConv, batch_regularisation
+from keyfill.learn.gan.networks import (
     Discriminator,
     Generator,
     PathPredictor,
@@ -21,8 +21,8 @@ from keyfill.learn.gan.networks import (  # noqa: E402
     generator_receptive_field,
     root_path,
 )
-from keyfill.learn.gan.rcfk import RCFK  # noqa: E402
-from keyfill.learn.gan.ranges import JointRanges  # noqa: E402
+from keyfill.learn.gan.ranges import JointRanges
+from keyfill.learn.gan.rcfk import RCFK
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

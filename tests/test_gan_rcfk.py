@@ -7,8 +7,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from keyfill import rotations as R  # noqa: E402
-from keyfill.learn.gan.ranges import (  # noqa: E402
+from keyfill import rotations as R
+from keyfill.learn.gan.ranges import (
     MIDDLE_LIMIT,
     JointRanges,
     angle_range,
@@ -17,8 +17,8 @@ from keyfill.learn.gan.ranges import (  # noqa: E402
     estimate_ranges,
     inside,
 )
-from keyfill.learn.gan.rcfk import RCFK, range_map, rotation_6d_to_matrix  # noqa: E402
-from keyfill.motion import Skeleton  # noqa: E402
+from keyfill.learn.gan.rcfk import RCFK, range_map, rotation_6d_to_matrix
+from keyfill.motion import Skeleton
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -128,7 +128,7 @@ def test_clip_pool_is_in_metres(tmp_path):
 
     corpus = synthetic_corpus(tmp_path / "c", clips_per_style=1)
     pool = clip_pool(corpus)
-    q, r = corpus.clip(0)
+    _, r = corpus.clip(0)
     assert np.allclose(pool.root[0], r * 0.01)
     # the walker's spine joint is 20 cm from the (folded) hips: 0.2 m
     assert np.allclose(np.linalg.norm(pool.relative[0][:, 2], axis=-1), 0.2, atol=1e-6)

@@ -124,7 +124,7 @@ class GanConfig:
             raise UsageError("real_frames cannot exceed sequence_frames")
 
     @classmethod
-    def from_preset(cls, name: str, **changes) -> "GanConfig":
+    def from_preset(cls, name: str, **changes) -> GanConfig:
         """The config with the widths of preset ``name`` (and other fields changed)."""
         if name not in PRESETS:
             raise UsageError(f"unknown GAN preset {name!r}; presets are {', '.join(PRESETS)}")
@@ -135,7 +135,7 @@ class GanConfig:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, data: dict) -> "GanConfig":
+    def from_json(cls, data: dict) -> GanConfig:
         """The config from :meth:`to_json` output; unknown keys are a :class:`UsageError`."""
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - names

@@ -126,4 +126,4 @@ def receptive_field(layers: list[tuple[int, int, bool]]) -> int:
         else:
             rf += (k - 1) * jump
             jump *= s
-    return int(round(rf))
+    return round(rf)

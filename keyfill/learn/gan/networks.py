@@ -21,7 +21,9 @@ path predictor a multiple of 16 (:func:`pad_frames` pads by repeating the last f
 * :class:`Discriminator`: ``(B, 3 (J - 1), T)`` root-relative joint positions ->
   ``(B, T / 64)`` scores, one per overlapping sub-sequence (receptive field 190 frames).
 * :class:`PathPredictor`: ``(B, 3 (J - 1), T)`` root-relative joint positions ->
-  ``(B, 3, T)`` root velocities: entry ``t`` is ``root[t + 1] - root[t]``.
+  ``(B, 3, T)`` root velocities: entry ``t`` is ``root[t + 1] - root[t]``. Its
+  output layer starts at zero (a fresh predictor says "standing still" rather
+  than drifting at random).
 """
 
 from __future__ import annotations
@@ -102,7 +104,7 @@ class Generator(nn.Module):
 
         Missing noise or style count as zeros.
         """
-        B, C, T = dense.shape
+        B, _, T = dense.shape
         if T % GENERATOR_MULTIPLE:
             raise ValueError(f"the generator takes a multiple of {GENERATOR_MULTIPLE} frames, got {T}")
         z = self.encoder(dense)
@@ -140,6 +142,8 @@ class PathPredictor(nn.Module):
         self.body = _stack(channels, widths, PATH, PATH_RATIOS)
         k, s, p = PATH_OUT
         self.output = nn.Conv1d(widths[-1], 3, k, s, p)
+        nn.init.zeros_(self.output.weight)  # start from standing still: zero velocity, not random drift
+        nn.init.zeros_(self.output.bias)
 
     def forward(self, x):
         """``x (B, 3 (J - 1), T)`` -> velocities ``(B, 3, T)``; any ``T``: padded to a multiple of 16 and cut back."""

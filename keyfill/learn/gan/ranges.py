@@ -74,7 +74,7 @@ class JointRanges:
                 "lo": np.asarray(self.lo).tolist(), "hi": np.asarray(self.hi).tolist()}
 
     @classmethod
-    def from_json(cls, data: dict) -> "JointRanges":
+    def from_json(cls, data: dict) -> JointRanges:
         return cls(np.asarray(data["driven"], dtype=np.int64), tuple(R.check_order(o) for o in data["orders"]),
                    np.asarray(data["lo"], dtype=np.float64).reshape(-1, 3),
                    np.asarray(data["hi"], dtype=np.float64).reshape(-1, 3))

@@ -98,7 +98,7 @@ class RCFK(nn.Module):
 
     def angles(self, v):
         """Euler angles ``(B, T, D, 3)`` radians of the driven joints from ``v (B, channels, T)``."""
-        B, C, T = v.shape
+        B, _, T = v.shape
         raw = v[:, 6:].transpose(1, 2).reshape(B, T, -1, 3)
         return range_map(raw, self.lo, self.hi)
 

@@ -73,7 +73,7 @@ def sample_keys(pool: ClipPool, rng: np.random.Generator, frames: int, min_gap: 
     lengths = pool.lengths
     if len(pool) == 0:
         raise DataError("no clips to sample keys from")
-    short = max(int(round(short_gap_seconds * pool.fps)), 0)
+    short = max(round(short_gap_seconds * pool.fps), 0)
     ground = _ground_mask(pool.up_axis)
 
     c = int(rng.integers(len(pool)))

@@ -14,10 +14,12 @@ TINY_WIDTHS = {"encoder": [8] * 6, "decoder": [16] * 13, "discriminator": [8] * 
 
 def tiny_config(**changes) -> GanConfig:
     """A config small enough to train for a few steps in a second or two."""
-    base = dict(preset="custom", widths={k: list(v) for k, v in TINY_WIDTHS.items()}, sequence_frames=256,
-                max_gap=120, real_frames=128, batch_size=2, crops_per_sequence=2, path_batch=4, steps_per_epoch=4,
-                noise_dim=4, lr_path=1e-3, lr_generator=1e-3, lr_discriminator=1e-3, val_fraction=0.2,
-                val_sequences=2)
+    base = {
+        "preset": "custom", "widths": {k: list(v) for k, v in TINY_WIDTHS.items()}, "sequence_frames": 256,
+        "max_gap": 120, "real_frames": 128, "batch_size": 2, "crops_per_sequence": 2, "path_batch": 4,
+        "steps_per_epoch": 4, "noise_dim": 4, "lr_path": 3e-4, "lr_generator": 1e-3, "lr_discriminator": 1e-3,
+        "val_fraction": 0.2, "val_sequences": 2,
+    }
     base.update(changes)
     return GanConfig(**base)
 

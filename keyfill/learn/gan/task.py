@@ -1,0 +1,404 @@
+"""Training the generative tweening model: one task, two stages, for keyfill's training loop.
+
+Section 3.7: the global path predictor is trained first on real clips; then it
+is frozen and the local motion generator is trained against the discriminator.
+
+* ``stage="path"``: networks ``{"path"}``; each step draws ``path_batch`` whole
+  clips (:func:`keyfill.learn.gan.sampling.clip_batch`) and minimises Eq. 5.
+  :meth:`GanTask.save` writes a ``"gan"`` model folder of stage ``"path"``.
+* ``stage="generator"``: networks ``{"generator", "discriminator"}``; the path
+  predictor comes frozen from ``path_model`` (a model folder of either stage).
+  Each step draws ``batch_size`` key layouts of ``sequence_frames`` frames
+  (:func:`~keyfill.learn.gan.sampling.sample_keys`), the noise, and real crops,
+  then updates the discriminator once and the generator once (section 3.7):
+
+  - discriminator: Eq. 7 on real crops and crops of the generated sequences
+    (keys pasted in, generator detached), plus ``br_weight`` times Eq. 9 over
+    its residual layers;
+  - generator: ``adv_weight`` * Eq. 8 + ``br_weight`` * Eq. 9 over its residual
+    layers + ``joint_weight`` * the key joint loss + the root weight (growing
+    with the step, Appendix A) * Eq. 10 on the path the frozen predictor gives.
+
+  :meth:`GanTask.save` writes a ``"gan"`` model folder of stage ``"full"``.
+
+Both stages use RMSprop with PyTorch's defaults (section 3.7) at the config's
+learning rates, kept constant. All randomness of a batch is drawn in
+:meth:`GanTask.batches` from ``numpy.random.default_rng([seed, stage, epoch])``
+(keys, clips, headings, noise, crop starts), so a resumed run draws what an
+uninterrupted one would; the task's own state is the generator step count that
+drives the root weight schedule.
+
+The contract is that of ``keyfill.learn.training.TrainingTask`` (kind, config,
+fingerprint, build, optimizers, learning_rates, batches, shard, step, validate,
+state_dict / load_state_dict, save).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from keyfill.errors import DataError, UsageError
+from keyfill.learn.gan import KIND
+from keyfill.learn.gan.config import GanConfig
+from keyfill.learn.gan.dense import dense_input
+from keyfill.learn.gan.poses import clip_pool
+from keyfill.learn.gan.ranges import estimate_ranges
+from keyfill.learn.gan.sampling import clip_batch, crop_starts, real_crops, sample_keys
+
+STAGES = ("path", "generator")
+
+
+@dataclass
+class Batch:
+    """One global batch: ``arrays`` name -> numpy array whose first axis is the row (sequence or clip)."""
+
+    stage: str
+    arrays: dict = field(default_factory=dict)
+
+    @property
+    def rows(self) -> int:
+        return len(next(iter(self.arrays.values())))
+
+
+def _unwrap(net):
+    """The module inside a data-parallel wrapper (or ``net`` itself)."""
+    return getattr(net, "module", net)
+
+
+class GanTask:
+    """The training task of either stage (see the module docstring).
+
+    Args:
+        corpus: a :class:`~keyfill.learn.corpus.Corpus` (clips of one skeleton).
+        config: the settings.
+        stage: ``"path"`` or ``"generator"``.
+        path_model: for the generator stage, the model folder holding the trained path predictor.
+    """
+
+    kind = KIND
+
+    def __init__(self, corpus, config: GanConfig | None = None, stage: str = "path",
+                 path_model: str | os.PathLike | None = None):
+        if stage not in STAGES:
+            raise UsageError(f"unknown gan training stage {stage!r}; stages are {', '.join(STAGES)}")
+        self.cfg = config or GanConfig()
+        self.stage = stage
+        self.corpus = corpus
+        self.skeleton = corpus.skeleton
+        if self.skeleton.num_joints < 2:
+            raise DataError("the gan model needs a skeleton of at least two joints")
+        C = len(corpus)
+        n_val = round(self.cfg.val_fraction * C) if C > 1 else 0
+        order = np.random.default_rng([self.cfg.seed, 7]).permutation(C)
+        self.val_clips = np.sort(order[:n_val])
+        self.train_clips = np.sort(order[n_val:])
+        self.train_pool = clip_pool(corpus, self.train_clips)
+        self.val_pool = clip_pool(corpus, self.val_clips) if n_val else None
+        train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
+        self.ranges = estimate_ranges(self.skeleton, train_q)
+        self.steps = 0
+        self.nets: dict = {}
+        self.path_net = None
+        self.path_hash = ""
+        if stage == "generator":
+            if path_model is None:
+                raise UsageError("the generator stage needs the trained path predictor: give path_model (a gan model "
+                                 "folder from the path stage)")
+            self.path_net, self.path_hash = self._load_path(path_model)
+        if stage == "generator" and self.cfg.real_frames > int(self.train_pool.lengths.max()):
+            raise DataError(f"real_frames {self.cfg.real_frames} is longer than every training clip "
+                            f"(the longest has {int(self.train_pool.lengths.max())} frames)")
+
+    # --- the contract ---
+
+    def config(self) -> dict:
+        """Settings a ``--resume`` must match."""
+        return {"stage": self.stage, "gan": self.cfg.to_json(), "path_model": self.path_hash}
+
+    def fingerprint(self) -> str:
+        """SHA-1 of the corpus arrays (and file names) the task trains on."""
+        h = hashlib.sha1()
+        c = self.corpus
+        for a in (c.quats, c.root, c.starts):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update(json.dumps([Path(f).name for f in c.files]).encode())
+        return h.hexdigest()
+
+    def build(self, generator=None) -> dict:
+        """The networks of this stage: ``{"path"}`` or ``{"generator", "discriminator"}``.
+
+        Weights come from torch's global generator, which the loop seeds and forks
+        around this call (``generator`` is accepted for the contract and not needed).
+        """
+        from keyfill.learn.gan.model import build_networks
+
+        nets = build_networks(self.skeleton, self.ranges, self.cfg)
+        if self.stage == "path":
+            self.nets = {"path": nets["path"]}
+        else:
+            self.nets = {"generator": nets["generator"], "discriminator": nets["discriminator"]}
+        return self.nets
+
+    def optimizers(self, nets) -> dict:
+        """RMSprop (PyTorch defaults) per network."""
+        import torch
+
+        lr = {"path": self.cfg.lr_path, "generator": self.cfg.lr_generator,
+              "discriminator": self.cfg.lr_discriminator}
+        return {name: torch.optim.RMSprop(net.parameters(), lr=lr[name]) for name, net in nets.items()}
+
+    def learning_rates(self, epoch: int, step: int, steps: int):
+        """Constant rates (the optimisers' own): None."""
+        return
+
+    def batches(self, epoch: int) -> Iterator[Batch]:
+        """``steps_per_epoch`` global batches, all drawn from ``default_rng([seed, stage, epoch])``."""
+        rng = np.random.default_rng([self.cfg.seed, STAGES.index(self.stage), int(epoch)])
+        for _ in range(self.cfg.steps_per_epoch):
+            yield self.path_batch(rng) if self.stage == "path" else self.generator_batch(rng, self.train_pool)
+
+    def shard(self, batch: Batch, rank: int, world: int) -> Batch:
+        """Rows ``rank, rank + world, ...`` of every array."""
+        return Batch(batch.stage, {k: v[rank::world] for k, v in batch.arrays.items()})
+
+    def step(self, batch: Batch, update) -> tuple[dict, int]:
+        """One step; calls ``update(name, loss)`` per optimiser (discriminator before generator)."""
+        if batch.stage == "path":
+            return self._path_step(batch, update)
+        return self._generator_step(batch, update)
+
+    def validate(self, epoch: int) -> dict:
+        """Held-out scores: ``path_loss`` (Eq. 5, m^2) or ``key_joint_error`` / ``key_root_error`` (file units)."""
+        if self.val_pool is None or not self.nets:
+            return {}
+        if self.stage == "path":
+            return self._validate_path()
+        return self._validate_generator()
+
+    def state_dict(self) -> dict:
+        return {"steps": int(self.steps)}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.steps = int(state["steps"])
+
+    def save(self, output, nets, history) -> Path:
+        """Write the model folder ``output`` (kind ``"gan"``; stage ``"path"`` or ``"full"``)."""
+        from keyfill.learn.gan.model import GanModel, build_networks
+
+        nets = {k: _unwrap(v) for k, v in nets.items()}
+        if self.stage == "path":
+            gen, path, stage = None, nets["path"], "path"
+        else:
+            gen, path, stage = nets["generator"], self.path_net, "full"
+        if path is None:
+            path = build_networks(self.skeleton, self.ranges, self.cfg)["path"]
+        history = list(history or [])
+        info = {"stage": self.stage, "steps": int(self.steps), "epochs": len(history),
+                "clips": len(self.train_clips), "validation_clips": len(self.val_clips),
+                "final": history[-1] if history else {}}
+        model = GanModel(self.cfg, self.skeleton, self.ranges, gen, path, bool(self.corpus.folded),
+                         float(self.corpus.fps), stage, info)
+        return Path(model.save(output))
+
+    # --- batches ---
+
+    def path_batch(self, rng: np.random.Generator) -> Batch:
+        rel, root, lengths = clip_batch(self.train_pool, rng, self.cfg.path_batch, self.cfg.sequence_frames)
+        return Batch("path", {"relative": rel, "root": root, "lengths": lengths})
+
+    def generator_batch(self, rng: np.random.Generator, pool) -> Batch:
+        cfg = self.cfg
+        N, B = cfg.sequence_frames, cfg.batch_size
+        dense, mask = [], []
+        for _ in range(B):
+            lay = sample_keys(pool, rng, N, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
+            dense.append(dense_input(N, lay.frames, lay.poses, cfg.mask_scale))
+            m = np.zeros(N, dtype=bool)
+            m[lay.frames] = True
+            mask.append(m)
+        arrays = {"dense": np.stack(dense), "key_mask": np.stack(mask),
+                  "noise": rng.standard_normal((B, cfg.noise_dim, N // 64)).astype(np.float32)}
+        if self.stage == "generator":
+            crops = cfg.crops_per_sequence
+            real = real_crops(self.train_pool, rng, B * crops, cfg.real_frames)
+            arrays["real"] = real.reshape(B, crops, *real.shape[1:])
+            arrays["starts"] = crop_starts(rng, B, crops, N, cfg.real_frames)
+        return Batch("generator", arrays)
+
+    # --- steps ---
+
+    def _path_step(self, batch: Batch, update):
+        import torch
+
+        from keyfill.learn.gan.losses import displacement_loss
+        from keyfill.learn.gan.networks import joint_channels
+
+        net = self.nets["path"]
+        dev = next(net.parameters()).device
+        a = batch.arrays
+        rel = torch.as_tensor(a["relative"], device=dev)
+        root = torch.as_tensor(a["root"], device=dev)
+        loss = displacement_loss(net(joint_channels(rel)), root, torch.as_tensor(a["lengths"], device=dev))
+        update("path", loss)
+        self.steps += 1
+        return {"path": float(loss.detach())}, batch.rows
+
+    def _frozen_path(self, dev):
+        p = self.path_net
+        if next(p.parameters()).device != dev:
+            p.to(dev)
+        return p
+
+    def generator_outputs(self, G, dense, noise):
+        """``(v, quats, relative (B, T, J, 3), root (B, T, 3))`` of the generator and the frozen path predictor."""
+        from keyfill.learn.gan.networks import joint_channels, root_path
+
+        v = G(dense, noise)
+        quats, rel = _unwrap(G).rcfk(v)
+        root = root_path(self._frozen_path(dense.device)(joint_channels(rel)))
+        return v, quats, rel, root
+
+    def _generator_step(self, batch: Batch, update):
+        import torch
+
+        from keyfill.learn.gan import losses as L
+        from keyfill.learn.gan.layers import batch_regularisation, clear_statistics
+        from keyfill.learn.gan.networks import joint_channels
+
+        cfg = self.cfg
+        G, D = self.nets["generator"], self.nets["discriminator"]
+        dev = next(G.parameters()).device
+        a = batch.arrays
+        dense = torch.as_tensor(a["dense"], device=dev)
+        key_mask = torch.as_tensor(a["key_mask"], device=dev)
+        noise = torch.as_tensor(a["noise"], device=dev) if cfg.noise_dim else None
+        B, _, N = dense.shape
+        J = self.skeleton.num_joints
+        keypose = dense[:, : 3 * J].transpose(1, 2).reshape(B, N, J, 3)  # each frame's nearest key; the key at keys
+        key_rel = torch.cat([torch.zeros_like(keypose[:, :, :1]), keypose[:, :, 1:]], dim=2)
+
+        clear_statistics(G)
+        _, _, rel, root = self.generator_outputs(G, dense, noise)
+        pasted = torch.where(key_mask[:, :, None, None], key_rel, rel)  # keys pasted in before D sees the motion
+        fake = self._crops(joint_channels(pasted), torch.as_tensor(a["starts"], device=dev), cfg.real_frames)
+        real = torch.as_tensor(a["real"], device=dev)
+        real = joint_channels(real.reshape(-1, *real.shape[2:]))
+
+        # discriminator: one forward over real and fake, so Eq. 9 sees both
+        clear_statistics(D)
+        scores = D(torch.cat([real, fake.detach()]))
+        d_adv = L.discriminator_loss(scores[: len(real)], scores[len(real) :])
+        d_br = batch_regularisation(D)
+        update("discriminator", d_adv + cfg.br_weight * d_br)
+
+        # generator, against the updated discriminator (its weights frozen for this pass)
+        for p in D.parameters():
+            p.requires_grad_(False)
+        try:
+            g_adv = L.generator_loss(D(fake))
+            g_br = batch_regularisation(G)
+            joint = L.key_joint_loss(rel, key_rel, key_mask)
+            root_l = L.key_root_loss(root, keypose[:, :, 0], key_mask)
+            w_root = cfg.root_weight(self.steps)
+            total = cfg.adv_weight * g_adv + cfg.br_weight * g_br + cfg.joint_weight * joint + w_root * root_l
+            update("generator", total)
+        finally:
+            for p in D.parameters():
+                p.requires_grad_(True)
+        self.steps += 1
+        out = {"d_adv": d_adv, "d_br": d_br, "g_adv": g_adv, "g_br": g_br, "key_joint": joint, "key_root": root_l,
+               "generator": total}
+        return {k: float(v.detach()) for k, v in out.items()} | {"root_weight": w_root}, batch.rows
+
+    @staticmethod
+    def _crops(x, starts, length: int):
+        """``x (B, C, T)``, ``starts (B, K)`` -> ``(B * K, C, length)``."""
+        import torch
+
+        B, C, _ = x.shape
+        idx = starts[:, :, None] + torch.arange(length, device=x.device)  # (B, K, length)
+        K = idx.shape[1]
+        g = x[:, None].expand(B, K, C, x.shape[-1]).gather(3, idx[:, :, None, :].expand(B, K, C, length))
+        return g.reshape(B * K, C, length)
+
+    # --- validation ---
+
+    def _validate_path(self) -> dict:
+        import torch
+
+        from keyfill.learn.gan.losses import displacement_loss
+        from keyfill.learn.gan.networks import joint_channels
+
+        net = self.nets["path"]
+        was = net.training
+        net.eval()
+        rng = np.random.default_rng([self.cfg.seed, 99])
+        rel, root, lengths = clip_batch(self.val_pool, rng, min(len(self.val_pool), 64), self.cfg.sequence_frames)
+        dev = next(net.parameters()).device
+        with torch.no_grad():
+            loss = displacement_loss(net(joint_channels(torch.as_tensor(rel, device=dev))),
+                                     torch.as_tensor(root, device=dev), torch.as_tensor(lengths, device=dev))
+        net.train(was)
+        return {"path_loss": float(loss)}
+
+    def _validate_generator(self) -> dict:
+        import torch
+
+        G = self.nets["generator"]
+        was = G.training
+        G.eval()
+        rng = np.random.default_rng([self.cfg.seed, 98])
+        cfg = self.cfg
+        joint_err, root_err = [], []
+        dev = next(G.parameters()).device
+        with torch.no_grad():
+            for _ in range(cfg.val_sequences):
+                b = self.generator_batch_for(rng)
+                dense = torch.as_tensor(b["dense"], device=dev)
+                noise = torch.as_tensor(b["noise"], device=dev) if cfg.noise_dim else None
+                _, _, rel, root = self.generator_outputs(G, dense, noise)
+                J = self.skeleton.num_joints
+                N = dense.shape[-1]
+                keypose = dense[:, : 3 * J].transpose(1, 2).reshape(1, N, J, 3)[0].cpu().numpy()
+                k = np.flatnonzero(b["key_mask"][0])
+                rel_k, root_k = rel[0, k].cpu().numpy(), root[0, k].cpu().numpy()
+                joint_err.append(np.linalg.norm(rel_k[:, 1:] - keypose[k, 1:], axis=-1).mean())
+                kr = keypose[k, 0]
+                aligned = root_k - root_k.mean(0) + kr.mean(0)
+                root_err.append(np.linalg.norm(aligned - kr, axis=-1).mean())
+        G.train(was)
+        m = self.skeleton.meters_per_unit
+        return {"key_joint_error": float(np.mean(joint_err) / m), "key_root_error": float(np.mean(root_err) / m)}
+
+    def generator_batch_for(self, rng) -> dict:
+        """One held-out sequence's ``dense``, ``key_mask`` and ``noise`` (batch of one)."""
+        cfg = self.cfg
+        N = cfg.sequence_frames
+        lay = sample_keys(self.val_pool, rng, N, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
+        m = np.zeros((1, N), dtype=bool)
+        m[0, lay.frames] = True
+        return {"dense": dense_input(N, lay.frames, lay.poses, cfg.mask_scale)[None], "key_mask": m,
+                "noise": rng.standard_normal((1, cfg.noise_dim, N // 64)).astype(np.float32)}
+
+    # --- the path predictor of the generator stage ---
+
+    def _load_path(self, path_model):
+        from keyfill.learn.gan.model import load_model
+        from keyfill.learn.modelfile import WEIGHTS, check_skeleton, model_folder, read_config
+
+        config = read_config(path_model, kind=KIND)
+        check_skeleton(config, self.skeleton, model_folder(path_model))
+        model = load_model(path_model, stage=None)
+        net = model.path
+        for p in net.parameters():
+            p.requires_grad_(False)
+        net.eval()
+        digest = hashlib.sha1((model_folder(path_model) / WEIGHTS).read_bytes()).hexdigest()
+        return net, digest

@@ -1,0 +1,272 @@
+"""A trained generative tweening model: its folder (kind ``"gan"``) and ``complete``.
+
+A model folder (:mod:`keyfill.learn.modelfile`) holds ``weights.safetensors``
+with the generator's tensors under ``generator.`` and the path predictor's
+under ``path.``, and a ``config.json`` with the skeleton it serves, whether its
+corpus folded a static top joint into the hips, the frame rate, the
+:class:`~keyfill.learn.gan.config.GanConfig`, the joint ranges of the RC-FK
+layer (plain arrays, :class:`~keyfill.learn.gan.ranges.JointRanges`), the
+``stage`` (``"path"``: only the path predictor, from the first training stage;
+``"full"``: both networks) and a training summary. The discriminator is a
+training tool and is not saved in the model (training checkpoints keep it).
+
+:func:`complete_motion` fills a motion between its keys:
+
+1. the key poses become root positions and root-relative joint positions
+   (metres), re-centred on the keys' mean ground position, in the dense
+   input format over the key range (padded to a multiple of 64 frames);
+2. the generator, with noise drawn from ``torch.Generator().manual_seed(seed)``,
+   gives every frame's local rotations through RC-FK; the path predictor gives
+   root velocities, summed to a path and moved (a least-squares translation,
+   as in Eq. 10) onto the key roots;
+3. joints the network does not drive (leaves) are interpolated between keys;
+   frames outside the key range hold the generated first or last frame, so
+   the exact-key correction puts them on the nearest key.
+
+Keys are not yet exact; ``complete_method`` applies the shared correction
+(:func:`keyfill.learn.exact_keys.snap_to_keys`) when asked.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from keyfill import rotations as R
+from keyfill.errors import KeyfillError, ModelError, UsageError
+from keyfill.learn.gan import KIND
+from keyfill.learn.gan.config import GanConfig
+from keyfill.learn.gan.dense import centre_keys, dense_input
+from keyfill.learn.gan.ranges import JointRanges
+from keyfill.motion import Skeleton
+
+STAGES = ("path", "full")
+
+
+def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> dict:
+    """Fresh ``{"generator", "discriminator", "path"}`` torch modules (weights from torch's global generator).
+
+    The skeleton's offsets are converted to metres for the RC-FK layer.
+    """
+    from keyfill.learn.gan.networks import Discriminator, Generator, PathPredictor
+    from keyfill.learn.gan.rcfk import RCFK
+
+    J = skeleton.num_joints
+    rcfk = RCFK(skeleton.parents, skeleton.offsets * skeleton.meters_per_unit, ranges)
+    w = cfg.widths
+    return {
+        "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim),
+        "discriminator": Discriminator(3 * (J - 1), w["discriminator"]),
+        "path": PathPredictor(3 * (J - 1), w["path"]),
+    }
+
+
+@dataclass
+class GanModel:
+    """A generative tweening model with everything needed to use it.
+
+    Attributes:
+        config: the settings it was built and trained with.
+        skeleton: the skeleton it serves (constant offsets; file units).
+        ranges: the RC-FK joint ranges.
+        generator, path: the torch modules (``generator`` is None for a ``"path"`` stage model).
+        folded: whether its corpus folded a static top joint into the hips.
+        fps: the corpus frame rate.
+        stage: ``"path"`` or ``"full"``.
+        info: training summary.
+    """
+
+    config: GanConfig
+    skeleton: Skeleton
+    ranges: JointRanges
+    generator: object
+    path: object
+    folded: bool = False
+    fps: float = 30.0
+    stage: str = "full"
+    info: dict = field(default_factory=dict)
+
+    def model_config(self) -> dict:
+        """The ``config.json`` content of this model."""
+        from keyfill.learn.modelfile import skeleton_to_json
+
+        s = self.skeleton
+        return {
+            "skeleton": {**skeleton_to_json(s), "channels": [list(c) for c in s.channels],
+                         "up_axis": s.up_axis, "meters_per_unit": s.meters_per_unit},
+            "folded_root": bool(self.folded),
+            "fps": float(self.fps),
+            "stage": self.stage,
+            "gan": self.config.to_json(),
+            "ranges": self.ranges.to_json(),
+            "training": self.info,
+        }
+
+    def tensors(self) -> dict:
+        out = {f"path.{k}": v for k, v in self.path.state_dict().items()}
+        if self.generator is not None:
+            out.update({f"generator.{k}": v for k, v in self.generator.state_dict().items()})
+        return out
+
+    def save(self, path: str | os.PathLike):
+        """Write the model folder ``path`` atomically (replaces a model already there)."""
+        from keyfill.learn.modelfile import save_model
+
+        return save_model(path, KIND, self.tensors(), self.model_config())
+
+
+def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None = "full") -> GanModel:
+    """Read a ``"gan"`` model folder (no code is executed); ``stage`` (if given) must match."""
+    from keyfill.learn import modelfile
+    from keyfill.learn.transformer import torch_device
+
+    dev = torch_device(device)
+    tensors, config = modelfile.load_model(path, kind=KIND)
+    folder = modelfile.model_folder(path)
+    try:
+        cfg = GanConfig.from_json(config["gan"])
+        s = config["skeleton"]
+        skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
+                        channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
+                        meters_per_unit=s["meters_per_unit"])
+        ranges = JointRanges.from_json(config["ranges"])
+        model_stage = config["stage"]
+        if model_stage not in STAGES:
+            raise ValueError(f"unknown stage {model_stage!r}")
+        nets = modelfile.build_for_loading(lambda: build_networks(skel, ranges, cfg))
+    except (KeyError, TypeError, ValueError, KeyfillError) as e:
+        raise ModelError(f"{folder}: damaged gan model config ({e})") from None
+    if stage is not None and model_stage != stage:
+        raise ModelError(f"{folder}: a gan model of stage {model_stage!r} (only the global path predictor); "
+                         f"train its generator (the second stage) before completing motions with it")
+    gen = nets["generator"] if model_stage == "full" else None
+    for name, net in (("path", nets["path"]), ("generator", gen)):
+        if net is None:
+            continue
+        part = {k[len(name) + 1 :]: v for k, v in tensors.items() if k.startswith(name + ".")}
+        modelfile.load_state(net, part, folder)
+        net.eval().to(dev)
+    return GanModel(cfg, skel, ranges, gen, nets["path"], bool(config["folded_root"]), float(config["fps"]),
+                    model_stage, dict(config.get("training") or {}))
+
+
+# --- completing motions -------------------------------------------------------------
+
+
+def check_keys(model: GanModel, frames: np.ndarray) -> None:
+    """A :class:`UsageError` when two consecutive keys are too far apart or the key range too long."""
+    cfg = model.config
+    for a, b in itertools.pairwise(int(f) for f in frames):
+        if b - a > cfg.max_gap:
+            raise UsageError(f"keys {a} and {b} are {b - a} frames apart; this gan model fills gaps of at most "
+                             f"{cfg.max_gap} frames (its receptive field); add a key between them")
+    span = int(frames[-1] - frames[0] + 1)
+    if span > cfg.max_frames:
+        raise UsageError(f"the keys span {span} frames ({int(frames[0])}-{int(frames[-1])}); this gan model fills "
+                         f"at most {cfg.max_frames} frames at once")
+
+
+def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0):
+    """Run both networks over the key range.
+
+    Args:
+        key_frames: ``(K,)`` increasing, starting at 0.
+        key_poses: ``(K, J, 3)`` metres: root positions (re-centred) and root-relative joints.
+        seed: the seed of the noise.
+
+    Returns:
+        ``(quats (T, J, 4), root (T, 3))`` for ``T = key_frames[-1] + 1`` frames, the
+        root path moved onto the key roots; float64 numpy.
+    """
+    import torch
+
+    from keyfill.learn.gan.networks import GENERATOR_MULTIPLE, joint_channels, root_path
+
+    cfg = model.config
+    T = int(key_frames[-1]) + 1
+    Tp = T + (-T) % GENERATOR_MULTIPLE
+    dev = next(model.generator.parameters()).device
+    x = torch.as_tensor(dense_input(Tp, key_frames, key_poses, cfg.mask_scale), device=dev)[None]
+    g = torch.Generator().manual_seed(int(seed))
+    noise = torch.randn(1, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
+    with torch.inference_mode():
+        v = model.generator(x, noise)
+        quats, rel = model.generator.rcfk(v)
+        root = root_path(model.path(joint_channels(rel)))[0, :T].double().cpu().numpy()
+    q = quats[0, :T].double().cpu().numpy()
+    kr = np.asarray(key_poses)[:, 0]
+    root = root + (kr.mean(0) - root[key_frames].mean(0))
+    return R.quat_normalize(q), root
+
+
+def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[object, dict]:
+    """Fill every frame of ``motion`` between its ``keys`` (reads only the key frames; see the module docstring).
+
+    Returns ``(motion, info)``; keys are not yet exact.
+    """
+    from keyfill.learn.baselines import linear
+    from keyfill.learn.corpus import bone_difference, fold_root
+    from keyfill.learn.gan.poses import relative_positions
+    from keyfill.motion import Keys
+
+    if model.generator is None:
+        raise ModelError("this gan model holds only the global path predictor; train its generator first")
+    k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
+    check_keys(model, k)
+    lin = linear(motion, Keys(k))
+    q, p = lin.rotations, lin.positions
+    skel = motion.skeleton
+    if model.folded:
+        if len(skel.children(0)) != 1:
+            raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
+                             f"{len(skel.children(0))} children")
+        q, p = fold_root(q, p, skel.parents)
+    here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
+    diff = bone_difference(model.skeleton, here)
+    if diff is not None:
+        raise ModelError(f"the gan model serves another skeleton: {diff}")
+    m = model.skeleton.meters_per_unit
+    poses = relative_positions(q[k], model.skeleton.offsets * m, model.skeleton.parents)
+    poses[:, 0] = p[k, 0] * m
+    poses, shift = centre_keys(poses, model.skeleton.up_axis)
+    k0 = int(k[0])
+    gq, groot = generate(model, k - k0, poses, seed)
+    span = slice(k0, int(k[-1]) + 1)
+    out_q = q.copy()
+    driven = np.concatenate([[0], model.ranges.driven])
+    out_q[span, driven] = gq[:, driven]
+    pos = p.copy()
+    pos[span, 0] = (groot + shift) / m
+    # outside the key range, hold the generated first and last frames (the exact-key correction then
+    # moves them onto the keys together with the frames inside)
+    end = int(k[-1])
+    out_q[:k0], out_q[end + 1 :] = out_q[k0], out_q[end]
+    pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
+    if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
+        c = skel.children(0)[0]
+        top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
+        inv = R.quat_conjugate(top_q)
+        out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
+        pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
+        out_q[:, 0], pos[:, 0] = top_q, top_p
+    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
+    return result, {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0)}
+
+
+def complete(motion, keys, options):
+    """``keyfill complete --method gan``: :func:`complete_motion`, then exact keys when ``options.exact_keys``."""
+    from keyfill.learn.exact_keys import snap_to_keys
+    from keyfill.learn.methods import Completion
+
+    if options.model is None:
+        raise UsageError("the gan method needs --model FOLDER (train one with 'keyfill train gan')")
+    model = load_model(options.model, options.device)
+    filled, info = complete_motion(model, motion, keys, options.seed)
+    info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
+    if options.exact_keys:
+        filled, report = snap_to_keys(filled, motion, keys)
+        info.update(report)
+    return Completion(filled, info)

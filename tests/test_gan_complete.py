@@ -1,0 +1,119 @@
+"""Inference: exact keys, seeds that choose the noise, and the errors of ``complete``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from gan_helpers import run, synthetic_corpus, tiny_config
+from synthetic_corpus import walker_motion, walker_skeleton
+
+from keyfill import io
+from keyfill.errors import ModelError, UsageError
+from keyfill.learn.baselines import linear
+from keyfill.learn.gan.model import complete, complete_motion, load_model
+from keyfill.learn.gan.task import GanTask
+from keyfill.learn.methods import CompleteOptions
+from keyfill.learn.modelfile import save_model, skeleton_to_json
+from keyfill.motion import Keys
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    """``(path-stage model, full model)`` folders, each trained for a handful of steps."""
+    root = tmp_path_factory.mktemp("gan_models")
+    corpus = synthetic_corpus(root / "clips", clips_per_style=2)
+    cfg = tiny_config(max_frames=256, steps_per_epoch=3)
+    path_task = GanTask(corpus, cfg, "path")
+    torch.manual_seed(0)
+    nets = path_task.build()
+    run(path_task, nets, epochs=1)
+    path_dir = path_task.save(root / "path", nets, [])
+    task = GanTask(corpus, cfg, "generator", path_model=path_dir)
+    nets = task.build()
+    run(task, nets, epochs=1)
+    return path_dir, task.save(root / "full", nets, [])
+
+
+@pytest.fixture(scope="module")
+def motion():
+    """A 240-frame walk of the training skeleton (joint_Root on top, as in the corpus files)."""
+    return walker_motion(walker_skeleton(), 240, np.random.default_rng(42))
+
+
+KEYS = Keys(np.array([0, 50, 130, 200]))
+
+
+def test_inference_hits_keys_exactly(models, motion):
+    out = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=3))
+    m = out.motion
+    assert m.num_frames == motion.num_frames and m.keys.to_list() == KEYS.to_list()
+    k = KEYS.frames
+    assert np.array_equal(m.rotations[k], motion.rotations[k])
+    assert np.array_equal(m.positions[k], motion.positions[k])
+    assert np.all(np.isfinite(m.rotations)) and np.allclose(np.linalg.norm(m.rotations, axis=-1), 1)
+    assert out.info["exact_keys"] and out.info["seed"] == 3
+    # outside the key range every frame holds the nearest key
+    assert np.allclose(m.rotations[201:], motion.rotations[200])
+    # only the hips move: the static joint_Root and every bone below the hips keep their offsets
+    assert np.allclose(m.positions[:, 0], motion.positions[:, 0])
+    assert np.allclose(m.positions[:, 2:], motion.positions[:, 2:])
+
+
+def test_two_seeds_give_different_inbetweens_through_the_same_keys(models, motion):
+    a = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=1)).motion
+    b = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=2)).motion
+    again = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=1)).motion
+    k = KEYS.frames
+    assert np.array_equal(a.rotations[k], b.rotations[k]) and np.array_equal(a.positions[k], b.positions[k])
+    between = np.setdiff1d(np.arange(k[0], k[-1]), k)
+    assert np.abs(a.rotations[between] - b.rotations[between]).max() > 1e-3
+    assert np.array_equal(a.rotations, again.rotations) and np.array_equal(a.positions, again.positions)
+
+
+def test_joints_the_network_does_not_drive_are_interpolated(models, motion):
+    model = load_model(models[1])
+    out, info = complete_motion(model, motion, KEYS, seed=0)
+    lin = linear(motion, KEYS)
+    leaves = [motion.skeleton.index(n) for n in ("Head", "Foot_L", "Foot_R")]
+    assert np.allclose(out.rotations[:, leaves], lin.rotations[:, leaves])
+    assert info["frames_generated"] == 201
+
+
+def test_keys_too_far_apart(models, motion):
+    with pytest.raises(UsageError, match=r"keys 10 and 131 are 121 frames apart.*at most 120"):
+        complete(motion, Keys(np.array([0, 10, 131])), CompleteOptions(model=str(models[1])))
+
+
+def test_sequence_longer_than_supported(models):
+    long = walker_motion(walker_skeleton(), 400, np.random.default_rng(1))
+    with pytest.raises(UsageError, match=r"span 301 frames.*at most 256"):
+        complete(long, Keys(np.array([0, 100, 200, 300])), CompleteOptions(model=str(models[1])))
+
+
+def test_another_skeleton(models):
+    other = walker_motion(walker_skeleton(leg_length=55.0), 100, np.random.default_rng(1))
+    with pytest.raises(ModelError, match="another skeleton"):
+        complete(other, Keys(np.array([0, 60, 99])), CompleteOptions(model=str(models[1])))
+
+
+def test_model_folder_of_another_kind_or_stage(models, motion, tmp_path):
+    save_model(tmp_path / "tf", "transformer", {"w": torch.zeros(1)}, {"skeleton": skeleton_to_json(motion.skeleton)})
+    with pytest.raises(ModelError, match="'transformer' model, not a 'gan' model"):
+        complete(motion, KEYS, CompleteOptions(model=str(tmp_path / "tf")))
+    with pytest.raises(ModelError, match="stage 'path'"):
+        complete(motion, KEYS, CompleteOptions(model=str(models[0])))
+    with pytest.raises(UsageError, match="--model"):
+        complete(motion, KEYS, CompleteOptions())
+
+
+def test_written_file_round_trips(models, motion, tmp_path):
+    out = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=5)).motion
+    io.save(out, tmp_path / "filled.bvh")
+    back = io.load(tmp_path / "filled.bvh")
+    assert back.num_frames == motion.num_frames
+    assert np.allclose(back.world_positions()[KEYS.frames], motion.world_positions()[KEYS.frames], atol=1e-4)

@@ -117,3 +117,17 @@ def test_written_file_round_trips(models, motion, tmp_path):
     back = io.load(tmp_path / "filled.bvh")
     assert back.num_frames == motion.num_frames
     assert np.allclose(back.world_positions()[KEYS.frames], motion.world_positions()[KEYS.frames], atol=1e-4)
+
+
+def test_reads_only_the_key_frames(models, motion):
+    rng = np.random.default_rng(0)
+    noisy = motion.rotations.copy()
+    others = np.setdiff1d(np.arange(motion.num_frames), KEYS.frames)
+    noisy[others] = rng.normal(size=noisy[others].shape)
+    noisy[others] /= np.linalg.norm(noisy[others], axis=-1, keepdims=True)
+    pos = motion.positions.copy()
+    pos[others] += rng.normal(size=pos[others].shape)
+    scrambled = motion.replace(rotations=noisy, positions=pos)
+    a = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=4)).motion
+    b = complete(scrambled, KEYS, CompleteOptions(model=str(models[1]), seed=4)).motion
+    assert np.array_equal(a.rotations, b.rotations) and np.array_equal(a.positions, b.positions)

@@ -202,12 +202,36 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     return R.quat_normalize(q), root
 
 
+def _undriven(model: GanModel, num_joints: int) -> np.ndarray:
+    """Joints of the file whose rotation the network does not give: the leaves, and the top joint when folded."""
+    out = set(range(1, num_joints)) - {int(j) for j in model.ranges.driven}
+    if model.folded:
+        out.add(0)
+    return np.array(sorted(out), dtype=np.int64)
+
+
+def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(rotations, positions)`` of ``motion`` with translations lerped between the keys ``k`` and the
+    rotations of ``joints`` slerped (as :func:`keyfill.learn.baselines.linear`, only where needed:
+    the other rotations are overwritten by the network, and slerp of every joint costs as much as the networks)."""
+    from keyfill.learn.baselines import segment_coordinates
+
+    s, u = segment_coordinates(motion.num_frames, k)
+    p0, p1 = motion.positions[k[s]], motion.positions[k[s + 1]]
+    pos = p0 + u[:, None, None] * (p1 - p0)
+    rot = motion.rotations.copy()
+    if len(joints):
+        q0, q1 = motion.rotations[k[s]][:, joints], motion.rotations[k[s + 1]][:, joints]
+        rot[:, joints] = R.quat_slerp(q0, q1, np.broadcast_to(u[:, None], q0.shape[:2]))
+    rot[k], pos[k] = motion.rotations[k], motion.positions[k]
+    return rot, pos
+
+
 def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[object, dict]:
     """Fill every frame of ``motion`` between its ``keys`` (reads only the key frames; see the module docstring).
 
     Returns ``(motion, info)``; keys are not yet exact.
     """
-    from keyfill.learn.baselines import linear
     from keyfill.learn.corpus import bone_difference, fold_root
     from keyfill.learn.gan.poses import relative_positions
     from keyfill.motion import Keys
@@ -216,8 +240,8 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
         raise ModelError("this gan model holds only the global path predictor; train its generator first")
     k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
     check_keys(model, k)
-    lin = linear(motion, Keys(k))
-    q, p = lin.rotations, lin.positions
+    lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
+    q, p = lin_q, lin_p
     skel = motion.skeleton
     if model.folded:
         if len(skel.children(0)) != 1:
@@ -247,7 +271,7 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
     pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
     if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
         c = skel.children(0)[0]
-        top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
+        top_q, top_p = lin_q[:, 0], lin_p[:, 0]
         inv = R.quat_conjugate(top_q)
         out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
         pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)

@@ -32,25 +32,23 @@ def synthetic_corpus(folder: Path, clips_per_style: int = 3, seed: int = 0):
     return load_corpus([folder], cache=False)
 
 
-def run(task, nets, epochs, start=0):
-    """A minimal stand-in for keyfill's training loop: zero_grad, backward, step per ``update`` call.
+def fit(task, output, seed: int = 0, checkpoint=None, resume: bool = False):
+    """Train ``task`` with keyfill's one training loop; returns its :class:`~keyfill.learn.training.Outcome`."""
+    from keyfill.learn.training import train
 
-    Returns the list of per-step loss dictionaries.
-    """
-    opts = task.optimizers(nets)
+    return train(task, output, seed=seed, checkpoint=checkpoint, resume=resume)
 
-    def update(name, loss):
-        opts[name].zero_grad(set_to_none=True)
-        loss.backward()
-        opts[name].step()
 
-    log = []
-    for e in range(start, start + epochs):
-        for batch in task.batches(e):
-            losses, rows = task.step(task.shard(batch, 0, 1), update)
-            assert rows == batch.rows
-            log.append(losses)
-    return log
+def built(task, seed: int = 0):
+    """The networks the loop will build for ``seed`` (it seeds torch's global generator so), in training mode."""
+    import torch
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        nets = task.build(torch.Generator().manual_seed(seed))
+    for net in nets.values():
+        net.train()
+    return nets
 
 
 def mean_of(log, name, part=slice(None)):

@@ -1,4 +1,5 @@
-"""The training task of both stages: a few steps reduce the losses; batches, state and config behave."""
+"""The training task of both stages in keyfill's one training loop: a few steps reduce the losses; batches,
+state, resume and config behave."""
 
 from __future__ import annotations
 
@@ -9,11 +10,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from gan_helpers import run, synthetic_corpus, tiny_config
+from gan_helpers import built, fit, synthetic_corpus, tiny_config
 
 from keyfill.errors import ModelError, UsageError
-from keyfill.learn.gan.task import GanTask
-from keyfill.learn.modelfile import read_config
+from keyfill.learn import registry
+from keyfill.learn.gan.task import GanTask, read_config
+from keyfill.learn.modelfile import read_config as read_model_config
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -30,50 +32,66 @@ def corpus(tmp_path_factory):
 @pytest.fixture(scope="module")
 def path_model(corpus, tmp_path_factory):
     """A path predictor trained for a few steps, saved as a stage-"path" gan model."""
-    task = GanTask(corpus, tiny_config(), "path")
-    torch.manual_seed(0)
-    nets = task.build(torch.Generator().manual_seed(0))
-    log = run(task, nets, epochs=6)
-    return task.save(tmp_path_factory.mktemp("gan_path") / "path-model", nets, [log[-1]])
+    task = GanTask(corpus, tiny_config(), "path", epochs=6)
+    return fit(task, tmp_path_factory.mktemp("gan_path") / "path-model").model
 
 
-def test_path_stage_reduces_eq5(corpus):
-    task = GanTask(corpus, tiny_config(), "path")
-    torch.manual_seed(0)
-    nets = task.build(torch.Generator().manual_seed(0))
+def test_path_stage_reduces_eq5(corpus, tmp_path):
+    task = GanTask(corpus, tiny_config(), "path", epochs=6)
+    built(task)
     fixed = task.path_batch(np.random.default_rng(123))
     before = task.step(fixed, no_update)[0]["path"]
-    run(task, nets, epochs=6)
+    out = fit(task, tmp_path / "m")
+    task.nets["path"].train()
     after = task.step(fixed, no_update)[0]["path"]
     assert after < 0.7 * before
-    assert task.validate(2)["path_loss"] > 0
+    assert len(out.history) == 6 and out.history[-1]["path_loss"] > 0
+    assert read_model_config(out.model, kind="gan")["stage"] == "path"
 
 
-def test_generator_stage_reduces_its_losses(corpus, path_model):
-    task = GanTask(corpus, tiny_config(), "generator", path_model=path_model)
-    torch.manual_seed(1)
-    nets = task.build(torch.Generator().manual_seed(1))
+def test_generator_stage_reduces_its_losses(corpus, path_model, tmp_path):
+    task = GanTask(corpus, tiny_config(), "generator", path_model=path_model, epochs=3)
+    nets = built(task, seed=1)
     assert set(nets) == {"generator", "discriminator"}
     fixed = task.generator_batch(np.random.default_rng(321), task.train_pool)
     before = task.step(fixed, no_update)[0]
+    task.step_count = 0  # scoring counted as a step
     frozen = {k: v.clone() for k, v in task.path_net.state_dict().items()}
-    log = run(task, nets, epochs=3)
+    out = fit(task, tmp_path / "full", seed=1)
+    for net in task.nets.values():
+        net.train()
     after = task.step(fixed, no_update)[0]
     assert after["key_joint"] < 0.7 * before["key_joint"]
     assert after["key_root"] < 0.7 * before["key_root"]
     assert after["generator"] < 0.7 * before["generator"]
     assert after["d_adv"] < before["d_adv"]
-    assert all(np.isfinite(v) for entry in log for v in entry.values())
+    assert all(np.isfinite(v) for row in out.history for v in row.values() if isinstance(v, float))
     # the path predictor stayed frozen
     assert all(torch.equal(frozen[k], v) for k, v in task.path_net.state_dict().items())
-    scores = task.validate(2)
-    assert set(scores) == {"key_joint_error", "key_root_error"} and all(v >= 0 for v in scores.values())
-    saved = task.save(path_model.parent / "full", nets, log)
-    cfg = read_config(saved, kind="gan")
-    assert cfg["stage"] == "full" and cfg["ranges"]["driven"] and cfg["training"]["steps"] == task.steps
+    row = out.history[-1]
+    assert row["key_joint_error"] >= 0 and row["key_root_error"] >= 0 and "lr_generator" in row
+    cfg = read_model_config(out.model, kind="gan")
+    assert cfg["stage"] == "full" and cfg["ranges"]["driven"] and cfg["training"]["steps"] == 12
 
 
-def test_batches_are_seeded_sharded_and_resumable(corpus, path_model):
+def test_resume_gives_the_same_model(corpus, path_model, tmp_path):
+    straight = fit(GanTask(corpus, tiny_config(steps_per_epoch=2), "generator", path_model=path_model, epochs=2),
+                   tmp_path / "straight", seed=3)
+    ck = tmp_path / "half.checkpoint.pt"
+    fit(GanTask(corpus, tiny_config(steps_per_epoch=2), "generator", path_model=path_model, epochs=1),
+        tmp_path / "half", seed=3, checkpoint=ck)
+    resumed = GanTask(corpus, tiny_config(steps_per_epoch=2), "generator", path_model=path_model, epochs=2)
+    fit(resumed, tmp_path / "resumed", seed=3, checkpoint=ck, resume=True)
+    assert resumed.step_count == 4
+    a = (straight.model / "weights.safetensors").read_bytes()
+    assert a == (tmp_path / "resumed" / "weights.safetensors").read_bytes()
+    with pytest.raises(UsageError, match="other settings"):
+        other = GanTask(corpus, tiny_config(steps_per_epoch=2, max_gap=100), "generator", path_model=path_model,
+                        epochs=2)
+        fit(other, tmp_path / "other", seed=3, checkpoint=ck, resume=True)
+
+
+def test_batches_are_seeded_sharded_and_stateful(corpus, path_model):
     task = GanTask(corpus, tiny_config(), "generator", path_model=path_model)
     a, b = next(iter(task.batches(4))), next(iter(task.batches(4)))
     assert a.arrays.keys() == b.arrays.keys()
@@ -81,25 +99,39 @@ def test_batches_are_seeded_sharded_and_resumable(corpus, path_model):
     c = next(iter(task.batches(5)))
     assert not np.array_equal(a.arrays["dense"], c.arrays["dense"])
     halves = [task.shard(a, r, 2) for r in range(2)]
-    assert sum(h.rows for h in halves) == a.rows
+    assert sum(len(h) for h in halves) == len(a) == 2
     assert np.array_equal(halves[1].arrays["real"], a.arrays["real"][1::2])
-    task.steps = 2345
+    task.step_count = 2345
     other = GanTask(corpus, tiny_config(), "generator", path_model=path_model)
     other.load_state_dict(json.loads(json.dumps(task.state_dict())))
-    assert other.steps == 2345
+    assert other.step_count == 2345
     assert task.cfg.root_weight(0) == 10 and task.cfg.root_weight(2345) == 12 and task.cfg.root_weight(10**6) == 80
+    assert task.steps(0) == 4 and task.epochs == 40 and GanTask(corpus, tiny_config(), "path").epochs == 10
 
 
 def test_config_and_fingerprint(corpus, path_model, tmp_path):
     task = GanTask(corpus, tiny_config(), "generator", path_model=path_model)
     cfg = json.loads(json.dumps(task.config()))
     assert cfg["stage"] == "generator" and len(cfg["path_model"]) == 40 and cfg["gan"]["max_gap"] == 120
+    assert "generator_epochs" not in cfg["gan"]  # epochs may change on --resume
     fp = task.fingerprint()
     assert fp == GanTask(corpus, tiny_config(), "path").fingerprint()
     other = synthetic_corpus(tmp_path / "other", clips_per_style=2, seed=9)
     assert GanTask(other, tiny_config(), "path").fingerprint() != fp
     assert task.kind == "gan" and task.learning_rates(0, 0, 1) is None
-    assert {type(o).__name__ for o in task.optimizers(task.build()).values()} == {"RMSprop"}
+    assert {type(o).__name__ for o in task.optimizers(task.build(None)).values()} == {"RMSprop"}
+
+
+def test_config_files_and_presets(tmp_path):
+    assert read_config(None).preset == "cpu"
+    assert read_config(None, "paper").widths["decoder"][0] == 1024
+    f = tmp_path / "gan.json"
+    f.write_text(json.dumps({"preset": "paper", "sequence_frames": 2048, "noise_dim": 0}))
+    cfg = read_config(f, seed=7)
+    assert cfg.preset == "paper" and cfg.sequence_frames == 2048 and cfg.noise_dim == 0 and cfg.seed == 7
+    f.write_text(json.dumps({"no_such_setting": 1}))
+    with pytest.raises(UsageError, match="no_such_setting"):
+        read_config(f)
 
 
 def test_stage_errors(corpus, tmp_path):
@@ -109,3 +141,10 @@ def test_stage_errors(corpus, tmp_path):
         GanTask(corpus, tiny_config(), "generator")
     with pytest.raises(ModelError):
         GanTask(corpus, tiny_config(), "generator", path_model=tmp_path / "nothing")
+
+
+def test_registry_entry():
+    m = registry.get("gan")
+    assert m.learned and m.protocol == "lafan1" and m.training_spec().make_task is not None
+    assert m.default_model() is None
+    assert [o.name for o in m.training_spec().options][:2] == ["stage", "path_model"]

@@ -51,6 +51,7 @@ from keyfill.learn.gan.dense import dense_input
 from keyfill.learn.gan.poses import clip_pool
 from keyfill.learn.gan.ranges import estimate_ranges
 from keyfill.learn.gan.sampling import clip_batch, crop_starts, real_crops, sample_keys
+from keyfill.learn.training import Option, TrainingSpec, TrainingTask
 
 STAGES = ("path", "generator")
 
@@ -66,13 +67,16 @@ class Batch:
     def rows(self) -> int:
         return len(next(iter(self.arrays.values())))
 
+    def __len__(self) -> int:
+        return self.rows
+
 
 def _unwrap(net):
     """The module inside a data-parallel wrapper (or ``net`` itself)."""
     return getattr(net, "module", net)
 
 
-class GanTask:
+class GanTask(TrainingTask):
     """The training task of either stage (see the module docstring).
 
     Args:
@@ -80,16 +84,23 @@ class GanTask:
         config: the settings.
         stage: ``"path"`` or ``"generator"``.
         path_model: for the generator stage, the model folder holding the trained path predictor.
+        epochs: passes of ``steps_per_epoch`` steps (None: the config's ``path_epochs`` or ``generator_epochs``).
+        checkpoint_every: epochs between the loop's checkpoints.
     """
 
     kind = KIND
 
     def __init__(self, corpus, config: GanConfig | None = None, stage: str = "path",
-                 path_model: str | os.PathLike | None = None):
+                 path_model: str | os.PathLike | None = None, epochs: int | None = None, checkpoint_every: int = 1):
         if stage not in STAGES:
             raise UsageError(f"unknown gan training stage {stage!r}; stages are {', '.join(STAGES)}")
         self.cfg = config or GanConfig()
         self.stage = stage
+        self.epochs = int(epochs if epochs is not None else
+                          (self.cfg.path_epochs if stage == "path" else self.cfg.generator_epochs))
+        self.checkpoint_every = max(int(checkpoint_every), 1)
+        self.clip = self.cfg.grad_clip
+        self.device = "cpu"
         self.corpus = corpus
         self.skeleton = corpus.skeleton
         if self.skeleton.num_joints < 2:
@@ -103,7 +114,7 @@ class GanTask:
         self.val_pool = clip_pool(corpus, self.val_clips) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
-        self.steps = 0
+        self.step_count = 0
         self.nets: dict = {}
         self.path_net = None
         self.path_hash = ""
@@ -119,8 +130,9 @@ class GanTask:
     # --- the contract ---
 
     def config(self) -> dict:
-        """Settings a ``--resume`` must match."""
-        return {"stage": self.stage, "gan": self.cfg.to_json(), "path_model": self.path_hash}
+        """Settings a ``--resume`` must match (all but the epoch counts)."""
+        gan = {k: v for k, v in self.cfg.to_json().items() if k not in ("path_epochs", "generator_epochs")}
+        return {"stage": self.stage, "gan": gan, "path_model": self.path_hash}
 
     def fingerprint(self) -> str:
         """SHA-1 of the corpus arrays (and file names) the task trains on."""
@@ -158,6 +170,14 @@ class GanTask:
         """Constant rates (the optimisers' own): None."""
         return
 
+    def begin(self, rank: int, world: int, device: str) -> None:
+        self.device = device
+        if self.path_net is not None:
+            self.path_net.to(device)
+
+    def steps(self, epoch: int) -> int:
+        return self.cfg.steps_per_epoch
+
     def batches(self, epoch: int) -> Iterator[Batch]:
         """``steps_per_epoch`` global batches, all drawn from ``default_rng([seed, stage, epoch])``."""
         rng = np.random.default_rng([self.cfg.seed, STAGES.index(self.stage), int(epoch)])
@@ -183,10 +203,10 @@ class GanTask:
         return self._validate_generator()
 
     def state_dict(self) -> dict:
-        return {"steps": int(self.steps)}
+        return {"step_count": int(self.step_count)}
 
     def load_state_dict(self, state: dict) -> None:
-        self.steps = int(state["steps"])
+        self.step_count = int(state["step_count"])
 
     def save(self, output, nets, history) -> Path:
         """Write the model folder ``output`` (kind ``"gan"``; stage ``"path"`` or ``"full"``)."""
@@ -200,9 +220,10 @@ class GanTask:
         if path is None:
             path = build_networks(self.skeleton, self.ranges, self.cfg)["path"]
         history = list(history or [])
-        info = {"stage": self.stage, "steps": int(self.steps), "epochs": len(history),
-                "clips": len(self.train_clips), "validation_clips": len(self.val_clips),
-                "final": history[-1] if history else {}}
+        final = {k: v for k, v in (history[-1] if history else {}).items()
+                 if k not in ("seconds", "cpu_seconds")}  # model files stay reproducible
+        info = {"stage": self.stage, "steps": int(self.step_count), "epochs": len(history),
+                "clips": len(self.train_clips), "validation_clips": len(self.val_clips), "final": final}
         model = GanModel(self.cfg, self.skeleton, self.ranges, gen, path, bool(self.corpus.folded),
                          float(self.corpus.fps), stage, info)
         return Path(model.save(output))
@@ -247,7 +268,7 @@ class GanTask:
         root = torch.as_tensor(a["root"], device=dev)
         loss = displacement_loss(net(joint_channels(rel)), root, torch.as_tensor(a["lengths"], device=dev))
         update("path", loss)
-        self.steps += 1
+        self.step_count += 1
         return {"path": float(loss.detach())}, batch.rows
 
     def _frozen_path(self, dev):
@@ -306,13 +327,13 @@ class GanTask:
             g_br = batch_regularisation(G)
             joint = L.key_joint_loss(rel, key_rel, key_mask)
             root_l = L.key_root_loss(root, keypose[:, :, 0], key_mask)
-            w_root = cfg.root_weight(self.steps)
+            w_root = cfg.root_weight(self.step_count)
             total = cfg.adv_weight * g_adv + cfg.br_weight * g_br + cfg.joint_weight * joint + w_root * root_l
             update("generator", total)
         finally:
             for p in D.parameters():
                 p.requires_grad_(True)
-        self.steps += 1
+        self.step_count += 1
         out = {"d_adv": d_adv, "d_br": d_br, "g_adv": g_adv, "g_br": g_br, "key_joint": joint, "key_root": root_l,
                "generator": total}
         return {k: float(v.detach()) for k, v in out.items()} | {"root_weight": w_root}, batch.rows
@@ -402,3 +423,103 @@ class GanTask:
         net.eval()
         digest = hashlib.sha1((model_folder(path_model) / WEIGHTS).read_bytes()).hexdigest()
         return net, digest
+
+
+# --- keyfill train gan ---------------------------------------------------------------------------
+
+
+def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int = 0) -> GanConfig:
+    """The :class:`GanConfig` of preset ``preset`` with the settings of the JSON file ``path`` (if any) and ``seed``.
+
+    The file is one object of :class:`GanConfig` fields; its ``"preset"`` (without
+    ``"widths"``) picks the widths of that preset instead.
+    """
+    data = {}
+    if path is not None:
+        try:
+            data = json.loads(Path(path).read_text())
+        except OSError as e:
+            raise UsageError(f"{path}: cannot read the config ({e.strerror})") from None
+        except json.JSONDecodeError as e:
+            raise UsageError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
+        if not isinstance(data, dict):
+            raise UsageError(f"{path}: the config must be a JSON object of gan settings")
+    preset = data.pop("preset", preset) if "widths" not in data else data.get("preset", "custom")
+    try:
+        return GanConfig.from_preset(preset, **data, seed=seed) if "widths" not in data else \
+            GanConfig.from_json({**data, "seed": seed})
+    except TypeError as e:
+        raise UsageError(f"{path}: {e}") from None
+
+
+def _make_task(common, options: dict, progress) -> GanTask:
+    """The task of ``keyfill train gan``: the BVH clips in DATA, chosen by --include / --exclude."""
+    from keyfill.learn.corpus import load_corpus
+    from keyfill.learn.train_transformer import select_clips
+
+    cfg = read_config(options["config"], options["preset"], common.seed)
+    corpus = load_corpus(common.data, fold=options["fold_root"],
+                         progress=lambda f: progress(f, desc="reading clips", unit="file"))
+    corpus = select_clips(corpus, options["include"], options["exclude"])
+    return GanTask(corpus, cfg, options["stage"], options["path_model"], common.epochs, common.checkpoint_every or 1)
+
+
+def _started(task: GanTask) -> str:
+    what = "the global path predictor" if task.stage == "path" else "the local motion generator, path predictor frozen,"
+    return (f"training {what} with {task.cfg.preset} widths on {len(task.train_clips)} clips, validating on "
+            f"{len(task.val_clips)}; {task.epochs} epochs of {task.cfg.steps_per_epoch} steps")
+
+
+def _epoch_line(row: dict) -> str:
+    if "loss_path" in row:
+        val = f", held-out {row['path_loss']:.4f}" if "path_loss" in row else ""
+        return f"epoch {row['epoch']}: Eq. 5 loss {row['loss_path']:.4f} m^2{val}"
+    val = (f", held-out key errors: joints {row['key_joint_error']:.2f}, root {row['key_root_error']:.2f} "
+           "(file units)") if "key_joint_error" in row else ""
+    return (f"epoch {row['epoch']}: generator {row['loss_generator']:.4f}, discriminator {row['loss_d_adv']:.4f}"
+            f"{val}")
+
+
+def _finished(task: GanTask, outcome) -> tuple[dict, str]:
+    summary = {"output": str(outcome.output), "checkpoint": str(outcome.checkpoint), "log": str(outcome.log),
+               "stage": task.stage, "steps": task.step_count}
+    nxt = "" if task.stage == "generator" else \
+        f"; next: keyfill train gan DATA --stage generator --path-model {outcome.output} -o MODEL"
+    return summary, f"wrote {outcome.output} (checkpoint {outcome.checkpoint}, log {outcome.log}){nxt}"
+
+
+TRAINING = TrainingSpec(
+    help="""Train a generative tweening GAN (Zhou et al. 2020) on the BVH clips in DATA, in two stages.
+
+    Stage "path" trains the global path predictor on whole clips (Eq. 5) and
+    writes a gan model folder holding only it. Stage "generator" loads that
+    folder (--path-model), freezes the predictor and trains the local motion
+    generator against a discriminator on long sequences whose keys come from
+    several clips. The result completes motions: keyfill complete --method gan.
+
+    \b
+    Examples:
+      keyfill train gan bandai2/data -o models/gan-path --stage path
+      keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path
+      keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path --resume
+    """,
+    options=(
+        Option("stage", "path", "Which stage to train: the path predictor, or the generator.",
+               choices=STAGES),
+        Option("path_model", None, "The gan model folder of the path stage (the generator stage needs it).",
+               metavar="FOLDER"),
+        Option("preset", "cpu", "Layer widths: 'cpu' (small, trains on a CPU) or 'paper' (Table 5).",
+               choices=("cpu", "paper")),
+        Option("config", None, "JSON file of gan settings overriding the preset's (see docs/gan.md).", type="file"),
+        Option("include", (), "Train only on files matching one of these patterns.", multiple=True, metavar="GLOB"),
+        Option("exclude", (), "Leave out files matching these patterns (e.g. a test style).", multiple=True,
+               metavar="GLOB"),
+        Option("fold_root", None, "Fold a static top joint (like Bandai's joint_Root) into the hips. "
+               "Default: when it is static.", flag=True),
+    ),
+    make_task=_make_task,
+    started=_started,
+    finished=_finished,
+    threads=1,
+    epoch_line=_epoch_line,
+)

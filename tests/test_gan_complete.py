@@ -7,15 +7,15 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from gan_helpers import run, synthetic_corpus, tiny_config
+from gan_helpers import fit, synthetic_corpus, tiny_config
 from synthetic_corpus import walker_motion, walker_skeleton
 
 from keyfill import io
 from keyfill.errors import ModelError, UsageError
 from keyfill.learn.baselines import linear
+from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.gan.model import complete, complete_motion, load_model
 from keyfill.learn.gan.task import GanTask
-from keyfill.learn.methods import CompleteOptions
 from keyfill.learn.modelfile import save_model, skeleton_to_json
 from keyfill.motion import Keys
 
@@ -28,15 +28,9 @@ def models(tmp_path_factory):
     root = tmp_path_factory.mktemp("gan_models")
     corpus = synthetic_corpus(root / "clips", clips_per_style=2)
     cfg = tiny_config(max_frames=256, steps_per_epoch=3)
-    path_task = GanTask(corpus, cfg, "path")
-    torch.manual_seed(0)
-    nets = path_task.build()
-    run(path_task, nets, epochs=1)
-    path_dir = path_task.save(root / "path", nets, [])
-    task = GanTask(corpus, cfg, "generator", path_model=path_dir)
-    nets = task.build()
-    run(task, nets, epochs=1)
-    return path_dir, task.save(root / "full", nets, [])
+    path_dir = fit(GanTask(corpus, cfg, "path", epochs=1), root / "path").model
+    full = fit(GanTask(corpus, cfg, "generator", path_model=path_dir, epochs=1), root / "full").model
+    return path_dir, full
 
 
 @pytest.fixture(scope="module")
@@ -131,3 +125,24 @@ def test_reads_only_the_key_frames(models, motion):
     a = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=4)).motion
     b = complete(scrambled, KEYS, CompleteOptions(model=str(models[1]), seed=4)).motion
     assert np.array_equal(a.rotations, b.rotations) and np.array_equal(a.positions, b.positions)
+
+
+def test_benchmark_windows(models, motion):
+    """The LaFAN1 protocol's hook: windows sharing keys, exact at the keys."""
+    from keyfill.learn.corpus import fold_root
+
+    model = load_model(models[1])
+    q, p = fold_root(motion.rotations, motion.positions, motion.skeleton.parents)
+    skel = model.skeleton
+    quats = np.stack([q[0:65], q[40:105]])
+    root = np.stack([p[0:65, 0], p[40:105, 0]])
+    keys = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 40])
+    method = model.benchmark_method()
+    assert method.folded
+    hidden_q, hidden_r = quats.copy(), root.copy()
+    between = np.setdiff1d(np.arange(65), keys)
+    hidden_q[:, between], hidden_r[:, between] = np.nan, np.nan  # as the protocol hands them over
+    out_q, out_r = method(skel, hidden_q, hidden_r, keys)
+    assert np.all(np.isfinite(out_q)) and np.all(np.isfinite(out_r))
+    assert out_q.shape == quats.shape and out_r.shape == root.shape
+    assert np.allclose(out_q[:, keys], quats[:, keys]) and np.allclose(out_r[:, keys], root[:, keys])

@@ -87,6 +87,9 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("transformer", "BERT-style motion-completion transformer (Duan et al. 2021)",
            "keyfill.learn.transformer:complete", module="keyfill.learn.transformer", protocol="lafan1",
            training="keyfill.learn.train_transformer"),
+    Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
+           "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
+           training="keyfill.learn.gan.task"),
 )}
 
 

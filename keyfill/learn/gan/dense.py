@@ -45,7 +45,7 @@ def centre_keys(key_poses: np.ndarray, up_axis: str = "Y") -> tuple[np.ndarray, 
 
     Only the two ground axes move (the height stays); ``shift`` is what was subtracted.
     """
-    from keyfill.learn.benchmark import horizontal_axes
+    from keyfill.learn.facing import horizontal_axes
 
     h = list(horizontal_axes(up_axis))
     shift = np.zeros(3)

@@ -44,6 +44,8 @@ from keyfill.learn.gan.ranges import JointRanges
 from keyfill.motion import Skeleton
 
 STAGES = ("path", "full")
+#: no gan model ships with keyfill (train one: keyfill train gan)
+DEFAULT_MODEL = None
 
 
 def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> dict:
@@ -105,6 +107,15 @@ class GanModel:
             "training": self.info,
         }
 
+    def benchmark_method(self, seed: int = 0):
+        """This model as a method of :func:`keyfill.learn.benchmark.evaluate` (the LaFAN1 protocol)."""
+
+        def method(skeleton: Skeleton, quats, root, keys):
+            return complete_windows(self, skeleton, quats, root, keys, seed)
+
+        method.folded = self.folded  # the protocol should prepare clips as the model's corpus was
+        return method
+
     def tensors(self) -> dict:
         out = {f"path.{k}": v for k, v in self.path.state_dict().items()}
         if self.generator is not None:
@@ -153,6 +164,11 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
                     model_stage, dict(config.get("training") or {}))
 
 
+def load(path: str | os.PathLike, device: str = "cpu") -> GanModel:
+    """The registry's loader: a full (two-stage) gan model."""
+    return load_model(path, device)
+
+
 # --- completing motions -------------------------------------------------------------
 
 
@@ -162,7 +178,7 @@ def check_keys(model: GanModel, frames: np.ndarray) -> None:
     for a, b in itertools.pairwise(int(f) for f in frames):
         if b - a > cfg.max_gap:
             raise UsageError(f"keys {a} and {b} are {b - a} frames apart; this gan model fills gaps of at most "
-                             f"{cfg.max_gap} frames (its receptive field); add a key between them")
+                             f"{cfg.max_gap} frames (the longest gap it was trained for); add a key between them")
     span = int(frames[-1] - frames[0] + 1)
     if span > cfg.max_frames:
         raise UsageError(f"the keys span {span} frames ({int(frames[0])}-{int(frames[-1])}); this gan model fills "
@@ -174,32 +190,38 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
 
     Args:
         key_frames: ``(K,)`` increasing, starting at 0.
-        key_poses: ``(K, J, 3)`` metres: root positions (re-centred) and root-relative joints.
-        seed: the seed of the noise.
+        key_poses: ``(K, J, 3)``, or ``(B, K, J, 3)`` for ``B`` sequences sharing the keys; metres:
+            root positions (re-centred) and root-relative joints.
+        seed: the seed of the noise (``torch.Generator().manual_seed(seed)``, one draw for the batch).
 
     Returns:
-        ``(quats (T, J, 4), root (T, 3))`` for ``T = key_frames[-1] + 1`` frames, the
-        root path moved onto the key roots; float64 numpy.
+        ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
+        root path moved onto its key roots (the least-squares translation); float64 numpy.
     """
     import torch
 
     from keyfill.learn.gan.networks import GENERATOR_MULTIPLE, joint_channels, root_path
 
     cfg = model.config
+    key_poses = np.asarray(key_poses)
+    single = key_poses.ndim == 3
+    poses = key_poses[None] if single else key_poses
+    B = len(poses)
     T = int(key_frames[-1]) + 1
     Tp = T + (-T) % GENERATOR_MULTIPLE
     dev = next(model.generator.parameters()).device
-    x = torch.as_tensor(dense_input(Tp, key_frames, key_poses, cfg.mask_scale), device=dev)[None]
+    x = torch.as_tensor(np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale) for p in poses]), device=dev)
     g = torch.Generator().manual_seed(int(seed))
-    noise = torch.randn(1, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
+    noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
     with torch.inference_mode():
         v = model.generator(x, noise)
         quats, rel = model.generator.rcfk(v)
-        root = root_path(model.path(joint_channels(rel)))[0, :T].double().cpu().numpy()
-    q = quats[0, :T].double().cpu().numpy()
-    kr = np.asarray(key_poses)[:, 0]
-    root = root + (kr.mean(0) - root[key_frames].mean(0))
-    return R.quat_normalize(q), root
+        root = root_path(model.path(joint_channels(rel)))[:, :T].double().cpu().numpy()
+    q = quats[:, :T].double().cpu().numpy()
+    kr = poses[:, :, 0]
+    root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
+    q = R.quat_normalize(q)
+    return (q[0], root[0]) if single else (q, root)
 
 
 def _undriven(model: GanModel, num_joints: int) -> np.ndarray:
@@ -282,8 +304,8 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
 
 def complete(motion, keys, options):
     """``keyfill complete --method gan``: :func:`complete_motion`, then exact keys when ``options.exact_keys``."""
+    from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.methods import Completion
 
     if options.model is None:
         raise UsageError("the gan method needs --model FOLDER (train one with 'keyfill train gan')")
@@ -294,3 +316,52 @@ def complete(motion, keys, options):
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
     return Completion(filled, info)
+
+
+def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys, seed: int = 0):
+    """Fill windows that share their ``keys`` (the benchmark's arrays; numpy in, numpy out).
+
+    Args:
+        skeleton: the windows' skeleton (as the model's corpus was prepared: folded or not).
+        quats: ``(B, T, J, 4)`` local quaternions, root: ``(B, T, 3)`` (only key frames are read).
+        keys: ``(K,)`` increasing frames.
+
+    Returns ``(quats, root)`` of all ``T`` frames with exact keys (the shared smooth correction).
+    """
+    from keyfill.learn.benchmark import window_motion
+    from keyfill.learn.corpus import bone_difference
+    from keyfill.learn.exact_keys import snap_to_keys
+    from keyfill.learn.gan.poses import relative_positions
+    from keyfill.motion import Keys
+
+    diff = bone_difference(model.skeleton, skeleton)
+    if diff is not None:
+        raise ModelError(f"the gan model serves another skeleton: {diff}")
+    k = np.asarray(keys, dtype=np.int64)
+    check_keys(model, k)
+    m = model.skeleton.meters_per_unit
+    poses = relative_positions(np.asarray(quats)[:, k], model.skeleton.offsets * m, model.skeleton.parents)
+    poses[:, :, 0] = np.asarray(root)[:, k] * m
+    shifts = []
+    for b in range(len(poses)):
+        poses[b], shift = centre_keys(poses[b], model.skeleton.up_axis)
+        shifts.append(shift)
+    k0, end = int(k[0]), int(k[-1])
+    gq, groot = generate(model, k - k0, poses, seed)
+    out_q, out_r = [], []
+    undriven = _undriven(model, skeleton.num_joints)
+    for b in range(len(poses)):
+        # frames between keys may hold NaN (the protocol hides them); only key frames are read
+        src = window_motion(skeleton, np.nan_to_num(np.asarray(quats[b], dtype=np.float64)),
+                            np.nan_to_num(np.asarray(root[b], dtype=np.float64)))
+        rot, pos = _interpolated(src, k, undriven)
+        driven = np.concatenate([[0], model.ranges.driven])
+        rot[k0 : end + 1, driven] = gq[b][:, driven]
+        pos[k0 : end + 1, 0] = (groot[b] + shifts[b]) / m
+        rot[:k0], rot[end + 1 :] = rot[k0], rot[end]
+        pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
+        pred = src.replace(rotations=R.quat_normalize(rot), positions=pos)
+        fixed, _ = snap_to_keys(pred, src, Keys(k))
+        out_q.append(fixed.rotations)
+        out_r.append(fixed.positions[:, 0])
+    return np.array(out_q), np.array(out_r)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from keyfill.kinematics import fk
-from keyfill.learn.benchmark import horizontal_axes
+from keyfill.learn.facing import horizontal_axes
 
 
 def relative_positions(quats: np.ndarray, offsets: np.ndarray, parents) -> np.ndarray:

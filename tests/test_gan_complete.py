@@ -146,3 +146,25 @@ def test_benchmark_windows(models, motion):
     assert np.all(np.isfinite(out_q)) and np.all(np.isfinite(out_r))
     assert out_q.shape == quats.shape and out_r.shape == root.shape
     assert np.allclose(out_q[:, keys], quats[:, keys]) and np.allclose(out_r[:, keys], root[:, keys])
+
+
+def test_generate_takes_an_optional_style_vector():
+    """The Motion DNA hook: no style is a zero style; another style gives another motion."""
+    from keyfill.learn.gan.model import GanModel, build_networks, generate
+    from keyfill.learn.gan.ranges import estimate_ranges
+
+    skel = walker_skeleton(static_root=False)
+    walk = walker_motion(skel, 120, np.random.default_rng(0))
+    ranges = estimate_ranges(skel, walk.rotations)
+    cfg = tiny_config(style_dim=2)
+    torch.manual_seed(0)
+    nets = build_networks(skel, ranges, cfg)
+    model = GanModel(cfg, skel, ranges, nets["generator"].eval(), nets["path"].eval())
+    poses = np.random.default_rng(1).normal(size=(3, skel.num_joints, 3)) * 0.3
+    frames = np.array([0, 50, 100])
+    q0, r0 = generate(model, frames, poses, seed=0)
+    qz, rz = generate(model, frames, poses, seed=0, style=np.zeros(2))
+    q1, _ = generate(model, frames, poses, seed=0, style=np.ones(2))
+    assert q0.shape == (101, skel.num_joints, 4) and r0.shape == (101, 3)
+    assert np.array_equal(q0, qz) and np.array_equal(r0, rz)
+    assert np.abs(q1 - q0).max() > 1e-4

@@ -185,7 +185,7 @@ def check_keys(model: GanModel, frames: np.ndarray) -> None:
                          f"at most {cfg.max_frames} frames at once")
 
 
-def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0):
+def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None):
     """Run both networks over the key range.
 
     Args:
@@ -193,6 +193,8 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         key_poses: ``(K, J, 3)``, or ``(B, K, J, 3)`` for ``B`` sequences sharing the keys; metres:
             root positions (re-centred) and root-relative joints.
         seed: the seed of the noise (``torch.Generator().manual_seed(seed)``, one draw for the batch).
+        style: optional ``(style_dim,)`` or ``([B,] style_dim)`` per-sequence style vector (the Motion DNA
+            hook; None: zeros).
 
     Returns:
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
@@ -213,8 +215,11 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     x = torch.as_tensor(np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale) for p in poses]), device=dev)
     g = torch.Generator().manual_seed(int(seed))
     noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
+    w = None
+    if style is not None:
+        w = torch.as_tensor(np.asarray(style, dtype=np.float32), device=dev).reshape(-1, cfg.style_dim).expand(B, -1)
     with torch.inference_mode():
-        v = model.generator(x, noise)
+        v = model.generator(x, noise, w)
         quats, rel = model.generator.rcfk(v)
         root = root_path(model.path(joint_channels(rel)))[:, :T].double().cpu().numpy()
     q = quats[:, :T].double().cpu().numpy()

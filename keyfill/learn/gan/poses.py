@@ -70,10 +70,13 @@ def clip_pool(corpus, clips=None) -> ClipPool:
     """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`."""
     s = corpus.skeleton
     m = s.meters_per_unit
-    clips = range(len(corpus)) if clips is None else clips
-    rel, root = [], []
-    for i in clips:
-        q, r = corpus.clip(int(i))
-        rel.append((relative_positions(q, s.offsets * m, s.parents)).astype(np.float32))
-        root.append(np.asarray(r, dtype=np.float64) * m)
-    return ClipPool(tuple(rel), tuple(root), float(corpus.fps), s.up_axis)
+    clips = list(range(len(corpus))) if clips is None else [int(i) for i in clips]
+    if not clips:
+        return ClipPool((), (), float(corpus.fps), s.up_axis)
+    # one forward kinematics pass over all frames of the chosen clips (per clip costs a numpy call per joint each)
+    frames = np.concatenate([np.arange(corpus.starts[i], corpus.starts[i + 1]) for i in clips])
+    rel_all = relative_positions(corpus.quats[frames], s.offsets * m, s.parents).astype(np.float32)
+    bounds = np.concatenate([[0], np.cumsum([corpus.starts[i + 1] - corpus.starts[i] for i in clips])])
+    rel = tuple(rel_all[a:b] for a, b in zip(bounds[:-1], bounds[1:]))
+    root = tuple(np.asarray(corpus.root[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float64) * m for i in clips)
+    return ClipPool(rel, root, float(corpus.fps), s.up_axis)

@@ -38,11 +38,13 @@ def test_displacement_loss_matches_a_hand_computed_example():
     # n = 2: t=0: (2,1,0) - (3,0,0) -> 2; one term: 2
     # n = 4 ... 128 do not fit three frames; the mean of the two intervals: 2.5
     assert float(L.displacement_loss(vel, root)) == pytest.approx(2.5)
-    # a padded second row with the same three valid frames pools the same terms
+    # padded to five frames, the padding carries no loss; beside a row of zero error, the mean over rows
     root2 = torch.cat([root, root[:, -1:].expand(1, 2, 3)], dim=1)
     vel2 = torch.cat([vel, torch.full((1, 3, 2), 7.0)], dim=2)
-    both = L.displacement_loss(torch.cat([vel2, vel2]), torch.cat([root2, root2]), torch.tensor([3, 3]))
-    assert float(both) == pytest.approx(2.5)
+    assert float(L.displacement_loss(vel2, root2, torch.tensor([3]))) == pytest.approx(2.5)
+    still = torch.zeros(1, 3, 5)
+    both = L.displacement_loss(torch.cat([vel2, still]), torch.cat([root2, torch.zeros(1, 5, 3)]), torch.tensor([3, 5]))
+    assert float(both) == pytest.approx(1.25)
 
 
 def test_displacement_loss_is_eq5_over_eight_intervals():

@@ -148,3 +148,40 @@ def test_registry_entry():
     assert m.learned and m.protocol == "lafan1" and m.training_spec().make_task is not None
     assert m.default_model() is None
     assert [o.name for o in m.training_spec().options][:2] == ["stage", "path_model"]
+
+
+@pytest.mark.slow  # two torch processes start: about half a minute on the shared 2-core machine
+def test_two_processes_train_the_path_predictor_one_process_trains(tmp_path, monkeypatch):
+    """torchrun with 2 gloo processes, each on half of every batch, gives the 1-process path predictor.
+
+    (The generator stage is ordinary data-parallel training but not equal to one process: Eq. 9's
+    batch statistics are taken over each process's shard.)"""
+    import os
+    import subprocess
+    import sys
+
+    from gan_helpers import TINY_WIDTHS
+    from safetensors.torch import load_file
+    from synthetic_corpus import write_corpus
+
+    from keyfill.cli.main import main
+
+    monkeypatch.setenv("KEYFILL_CACHE", str(tmp_path / "cache"))
+    clips = tmp_path / "clips"
+    write_corpus(clips, clips_per_style=2, frames=(130, 200), seed=3)
+    config = tmp_path / "tiny.json"
+    config.write_text(json.dumps({"widths": TINY_WIDTHS, "steps_per_epoch": 3, "path_batch": 4,
+                                  "sequence_frames": 256, "max_gap": 120, "val_fraction": 0.2, "lr_path": 3e-4}))
+    args = ["-q", "train", "gan", str(clips), "--stage", "path", "--config", str(config), "--epochs", "2",
+            "--threads", "1"]
+    assert main([*args, "-o", str(tmp_path / "one")]) == 0
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node=2", "-m", "keyfill",
+           *args, "-o", str(tmp_path / "two")]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    one = load_file(str(tmp_path / "one" / "weights.safetensors"))
+    two = load_file(str(tmp_path / "two" / "weights.safetensors"))
+    assert one.keys() == two.keys()
+    for k in one:
+        assert torch.allclose(one[k], two[k], rtol=1e-4, atol=1e-6), (k, (one[k] - two[k]).abs().max())

@@ -31,8 +31,9 @@ def displacement_loss(velocities, root, lengths=None, scales=SCALES):
         root: ``(B, T, 3)`` true root positions.
         lengths: ``(B,)`` valid frames per row (rows are padded at the end), or None for all ``T``.
 
-    For one row this is exactly Eq. 5 with ``1 / (N - n)`` per interval; over a
-    batch the ``(row, t)`` terms of an interval are pooled.
+    Each row's value is exactly Eq. 5 with ``1 / (N - n)`` per interval (its own
+    ``N``); the batch's loss is the mean over rows, so shards of a batch
+    weighted by their rows give the whole batch's loss.
     """
     B, _, T = velocities.shape
     v = velocities.transpose(1, 2)[:, : T - 1]
@@ -40,19 +41,18 @@ def displacement_loss(velocities, root, lengths=None, scales=SCALES):
     if lengths is None:
         lengths = torch.full((B,), T, dtype=torch.long, device=velocities.device)
     lengths = torch.as_tensor(lengths, device=velocities.device)
-    terms = []
+    total = torch.zeros(B, dtype=velocities.dtype, device=velocities.device)
+    fitting = torch.zeros(B, dtype=velocities.dtype, device=velocities.device)
     for n in scales:
         if n >= T:
             continue
         err = (cum[:, n:] - cum[:, :-n]) - (root[:, n:] - root[:, :-n])  # (B, T - n, 3), t = 0 .. T-n-1
-        valid = (torch.arange(T - n, device=v.device)[None] + n) < lengths[:, None]  # t + n inside the row
-        count = valid.sum()
-        if count == 0:
-            continue
-        terms.append(((err**2).sum(-1) * valid).sum() / count)
-    if not terms:
-        return velocities.sum() * 0
-    return torch.stack(terms).mean()
+        valid = ((torch.arange(T - n, device=v.device)[None] + n) < lengths[:, None]).to(err.dtype)
+        count = valid.sum(1)  # N - n per row
+        fits = count > 0
+        total = total + torch.where(fits, ((err**2).sum(-1) * valid).sum(1) / count.clamp_min(1), 0)
+        fitting = fitting + fits.to(total.dtype)
+    return (total / fitting.clamp_min(1)).mean()
 
 
 def discriminator_loss(real_scores, fake_scores):
@@ -66,13 +66,14 @@ def generator_loss(fake_scores):
 
 
 def key_joint_loss(positions, key_positions, key_mask):
-    """Keyframe loss on the local joints: mean over key frames and non-root joints of the squared distance.
+    """Keyframe loss on the local joints: per row, the mean over its key frames and non-root joints of the
+    squared distance; then the mean over rows.
 
     ``positions``, ``key_positions``: ``(B, T, J, 3)`` root-relative; joint 0 is skipped.
     """
     d = ((positions[:, :, 1:] - key_positions[:, :, 1:]) ** 2).sum(-1).mean(-1)  # (B, T)
     m = key_mask.to(d.dtype)
-    return (d * m).sum() / m.sum().clamp_min(1)
+    return ((d * m).sum(1) / m.sum(1).clamp_min(1)).mean()
 
 
 def key_root_loss(root, key_root, key_mask):

@@ -11,6 +11,7 @@ the up axis (:func:`turn`) turns both, which is how training draws headings.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,6 +78,6 @@ def clip_pool(corpus, clips=None) -> ClipPool:
     frames = np.concatenate([np.arange(corpus.starts[i], corpus.starts[i + 1]) for i in clips])
     rel_all = relative_positions(corpus.quats[frames], s.offsets * m, s.parents).astype(np.float32)
     bounds = np.concatenate([[0], np.cumsum([corpus.starts[i + 1] - corpus.starts[i] for i in clips])])
-    rel = tuple(rel_all[a:b] for a, b in zip(bounds[:-1], bounds[1:]))
+    rel = tuple(rel_all[a:b] for a, b in itertools.pairwise(bounds))
     root = tuple(np.asarray(corpus.root[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float64) * m for i in clips)
     return ClipPool(rel, root, float(corpus.fps), s.up_axis)

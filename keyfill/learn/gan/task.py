@@ -237,13 +237,7 @@ class GanTask(TrainingTask):
     def generator_batch(self, rng: np.random.Generator, pool) -> Batch:
         cfg = self.cfg
         N, B = cfg.sequence_frames, cfg.batch_size
-        dense, mask = [], []
-        for _ in range(B):
-            lay = sample_keys(pool, rng, N, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
-            dense.append(dense_input(N, lay.frames, lay.poses, cfg.mask_scale))
-            m = np.zeros(N, dtype=bool)
-            m[lay.frames] = True
-            mask.append(m)
+        dense, mask = zip(*(self._sequence(rng, pool) for _ in range(B)))
         arrays = {"dense": np.stack(dense), "key_mask": np.stack(mask),
                   "noise": rng.standard_normal((B, cfg.noise_dim, N // 64)).astype(np.float32)}
         if self.stage == "generator":
@@ -401,12 +395,24 @@ class GanTask(TrainingTask):
     def generator_batch_for(self, rng) -> dict:
         """One held-out sequence's ``dense``, ``key_mask`` and ``noise`` (batch of one)."""
         cfg = self.cfg
+        dense, mask = self._sequence(rng, self.val_pool)
+        return {"dense": dense[None], "key_mask": mask[None],
+                "noise": rng.standard_normal((1, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)}
+
+    def _sequence(self, rng, pool) -> tuple[np.ndarray, np.ndarray]:
+        """``(dense (6 J, N), key mask (N,))`` of one training sequence.
+
+        The keys span the first ``N - tail`` frames, ``tail`` drawn from 0 to 63: the
+        last frames hold the last key, as the padding to a multiple of 64 frames does
+        at inference.
+        """
+        cfg = self.cfg
         N = cfg.sequence_frames
-        lay = sample_keys(self.val_pool, rng, N, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
-        m = np.zeros((1, N), dtype=bool)
-        m[0, lay.frames] = True
-        return {"dense": dense_input(N, lay.frames, lay.poses, cfg.mask_scale)[None], "key_mask": m,
-                "noise": rng.standard_normal((1, cfg.noise_dim, N // 64)).astype(np.float32)}
+        tail = int(rng.integers(0, 64))
+        lay = sample_keys(pool, rng, N - tail, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
+        m = np.zeros(N, dtype=bool)
+        m[lay.frames] = True
+        return dense_input(N, lay.frames, lay.poses, cfg.mask_scale), m
 
     # --- the path predictor of the generator stage ---
 

@@ -98,6 +98,13 @@ def test_batches_are_seeded_sharded_and_stateful(corpus, path_model):
     assert all(np.array_equal(a.arrays[k], b.arrays[k]) for k in a.arrays)
     c = next(iter(task.batches(5)))
     assert not np.array_equal(a.arrays["dense"], c.arrays["dense"])
+    N = task.cfg.sequence_frames
+    for dense, mask in zip(a.arrays["dense"], a.arrays["key_mask"]):
+        keys = np.flatnonzero(mask)
+        assert keys[0] == 0 and N - 64 <= keys[-1] <= N - 1
+        half = dense.shape[0] // 2  # pose channels, then the distance mask
+        assert np.allclose(dense[:half, keys[-1] :], dense[:half, [keys[-1]]])  # the tail holds the last key
+        assert np.allclose(dense[half, keys[-1] :], np.arange(N - keys[-1]) / task.cfg.mask_scale)
     halves = [task.shard(a, r, 2) for r in range(2)]
     assert sum(len(h) for h in halves) == len(a) == 2
     assert np.array_equal(halves[1].arrays["real"], a.arrays["real"][1::2])

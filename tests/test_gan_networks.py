@@ -142,8 +142,14 @@ def test_batch_regularisation_is_eq9():
 
 
 def test_receptive_fields_are_the_papers():
+    from keyfill.errors import UsageError
+    from keyfill.learn.gan.config import EFFECTIVE_RECEPTIVE_FIELD
+
     assert generator_receptive_field() == 318
     assert discriminator_receptive_field() == 190
+    assert EFFECTIVE_RECEPTIVE_FIELD == 2 * generator_receptive_field()
+    with pytest.raises(UsageError, match="receptive field"):
+        GanConfig(max_gap=700)
 
 
 def _tiny_rcfk(J=4):

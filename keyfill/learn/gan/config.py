@@ -37,6 +37,9 @@ PRESETS: dict[str, dict[str, list[int]]] = {
     },
 }
 _LAYERS = {"encoder": 6, "decoder": 13, "discriminator": 6, "path": 8}
+#: the longest gap a key layout may have: twice the 318-frame receptive field of a latent step, as the
+#: dense input copies each key halfway towards its neighbours (section 3.5; tested against the layers)
+EFFECTIVE_RECEPTIVE_FIELD = 636
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,9 @@ class GanConfig:
             raise UsageError("sequence_frames and real_frames must be positive multiples of 64")
         if not 1 <= self.min_gap <= self.max_gap:
             raise UsageError(f"key gaps need 1 <= min_gap <= max_gap, got {self.min_gap}, {self.max_gap}")
+        if self.max_gap > EFFECTIVE_RECEPTIVE_FIELD:
+            raise UsageError(f"max_gap {self.max_gap} is longer than the generator's effective receptive field "
+                             f"({EFFECTIVE_RECEPTIVE_FIELD} frames): frames in such a gap could not see both keys")
         if self.noise_dim < 0 or self.style_dim < 0:
             raise UsageError("noise_dim and style_dim cannot be negative")
         if self.batch_size < 1 or self.path_batch < 1 or self.crops_per_sequence < 1 or self.steps_per_epoch < 1:

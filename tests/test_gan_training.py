@@ -70,6 +70,7 @@ def test_generator_stage_reduces_its_losses(corpus, path_model, tmp_path):
     assert all(torch.equal(frozen[k], v) for k, v in task.path_net.state_dict().items())
     row = out.history[-1]
     assert row["key_joint_error"] >= 0 and row["key_root_error"] >= 0 and "lr_generator" in row
+    assert row["root_weight"] == 10 and "loss_root_weight" not in row and row["loss_key_joint"] > 0
     cfg = read_model_config(out.model, kind="gan")
     assert cfg["stage"] == "full" and cfg["ranges"]["driven"] and cfg["training"]["steps"] == 12
 

@@ -202,6 +202,13 @@ class GanTask(TrainingTask):
             return self._validate_path()
         return self._validate_generator()
 
+    def log_row(self, epoch: int, losses: dict, validation: dict) -> dict:
+        """The loop's row, with the root weight (a schedule, not a loss) logged as ``root_weight``."""
+        row = super().log_row(epoch, {k: v for k, v in losses.items() if k != "root_weight"}, validation)
+        if "root_weight" in losses:
+            row["root_weight"] = losses["root_weight"]
+        return row
+
     def state_dict(self) -> dict:
         return {"step_count": int(self.step_count)}
 

@@ -110,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyfillError as e:
         if debug:
             raise
-        _error(str(e))
+        if not getattr(e, "reported", False):
+            _error(str(e))
         return e.exit_code
     except KeyboardInterrupt:
         _error("interrupted")

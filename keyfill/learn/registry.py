@@ -26,7 +26,7 @@ import importlib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from keyfill.errors import ModelError, UsageError
+from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.learn.completion import CompleteOptions, Completion
 from keyfill.motion import Keys, Motion
 
@@ -134,18 +134,63 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
     return str(name_or_path), method, method.implementation().load(name_or_path, device)
 
 
+def _checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
+    """``options`` once its ``--model`` is known to fit ``m``."""
+    if not m.learned and options.model is not None:
+        raise UsageError(f"--model applies to learned methods, not to {m.name!r}")
+    if options.model is not None:
+        kind = method_for_model(options.model).name
+        if kind != m.name:
+            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {m.name!r}; complete with --method {kind}")
+        options = replace(options, model=str(options.model))
+    return options
+
+
 def complete(motion: Motion, keys: Keys, method: str = "cubic", options: CompleteOptions | None = None) -> Completion:
     """Fill the frames between ``keys`` of ``motion`` with ``method``."""
     options = options or CompleteOptions()
     m = get(method)
     keys = keys.check(motion.num_frames, min_keys=2)
-    if not m.learned and options.model is not None:
-        raise UsageError(f"--model applies to learned methods, not to {method!r}")
-    if options.model is not None:
-        kind = method_for_model(options.model).name
-        if kind != method:
-            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {method!r}; complete with --method {kind}")
-        options = replace(options, model=str(options.model))
+    options = _checked_options(m, options)
     result = m.function()(motion, keys, options)
     result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
     return result
+
+
+def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
+                  options: CompleteOptions | None = None) -> list[Completion | KeyfillError]:
+    """:func:`complete` for many ``(motion, keys)`` at once: a :class:`Completion` or the error, per job.
+
+    A method whose module has ``complete_many(jobs, options)`` (same return)
+    completes the jobs together (the ARNN runs them as one batch through its
+    network); the others are completed one by one. The model is loaded once.
+    An error of one job (bad keys, another skeleton) is that job's result;
+    an error of the method or model (a model of another kind) is raised.
+    """
+    options = options or CompleteOptions()
+    m = get(method)
+    options = _checked_options(m, options)
+    results: list = [None] * len(jobs)
+    ready = []
+    for i, (motion, keys) in enumerate(jobs):
+        try:
+            ready.append((i, motion, keys.check(motion.num_frames, min_keys=2)))
+        except KeyfillError as e:
+            results[i] = e
+    many = getattr(m.implementation(), "complete_many", None) if m.learned else None
+    if many is not None:
+        outs = many([(motion, keys) for _, motion, keys in ready], options) if ready else []
+    else:
+        outs = [_one(m.function(), motion, keys, options) for _, motion, keys in ready]
+    for (i, motion, keys), out in zip(ready, outs):
+        if isinstance(out, Completion):
+            out.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **out.info}
+        results[i] = out
+    return results
+
+
+def _one(function, motion, keys, options):
+    try:
+        return function(motion, keys, options)
+    except KeyfillError as e:
+        return e

@@ -19,16 +19,22 @@ from keyfill.learn.registry import METHODS
 @keys_options
 @click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
               help="In-betweening method.")
-@click.option("--model", type=click.Path(exists=True), help="Model folder for a learned method (default: the model shipped for it, if any).")
+@click.option("--model", type=click.Path(exists=True),
+              help="Model folder for a learned method (default: the model shipped for it, if any), or a graph file "
+                   "(.onnx) written by 'keyfill export'.")
 @click.option("--exact-keys/--no-exact-keys", default=True, show_default=True,
               help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")
 @click.option("--device", default="cpu", show_default=True, help="Torch device for learned methods.")
+@click.option("--runtime", type=click.Choice(["auto", "torch", "onnx"]), default="auto", show_default=True,
+              help="Run a learned model with torch or its exported ONNX graph (onnxruntime, no torch import; see "
+                   "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
+                   "one.")
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
 @click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed, device, fmt, in_fmt,
+def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed, device, runtime, fmt, in_fmt,
              workers, scheduler, connect_timeout, force, batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
@@ -63,7 +69,7 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
 
-    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device)
+    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime)
     if is_batch(inputs, dst):
         from keyfill.learn.batch import CompleteSpec
 
@@ -87,8 +93,11 @@ def check_method(spec) -> None:
     """Before any file is read: the method and model of a batch can work (no torch is imported)."""
     from keyfill.learn.registry import get, method_for_model
 
+    from keyfill.learn.onnx import is_graph, select
+
     m = get(spec.method)
-    if spec.options.model is not None:
+    select(m, spec.options.model, spec.options.runtime)  # a missing or foreign graph: refused before any work
+    if spec.options.model is not None and not is_graph(spec.options.model):
         if not m.learned:
             raise UsageError(f"--model applies to learned methods, not to {spec.method!r}")
         kind = method_for_model(spec.options.model).name

@@ -58,8 +58,10 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
                              "and --in-format take one SRC and DST")
         return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", None, workers, scheduler,
                          connect_timeout, force, batch_size, as_json, "converted")
+    if len(paths) == 1:
+        raise click.UsageError("Missing argument 'DST' (or, for many files, -o OUTDIR/)")
     if len(paths) != 2:
-        raise UsageError(f"give SRC and DST, or SRC... -o OUTDIR/ (got {len(paths)} paths and no -o)")
+        raise click.UsageError(f"got {len(paths)} paths: give SRC DST, or SRC... -o OUTDIR/")
     src, dst = paths
 
     motion = io.load(src, in_fmt)

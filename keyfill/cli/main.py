@@ -32,6 +32,7 @@ COMMANDS = {
     "pose": "keyfill.cli.pose:pose",
     "plot": "keyfill.cli.plot:plot",
     "preview": "keyfill.cli.preview:preview",
+    "export": "keyfill.cli.export:export",
 }
 
 

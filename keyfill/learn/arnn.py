@@ -396,3 +396,59 @@ def complete_many(jobs, options):
 
     path = DEFAULT_MODEL if options.model is None else Path(options.model)
     return complete_lamp_many(jobs, options, lambda: load_cached(path), DEFAULT_MODEL.name)
+
+
+# --- ONNX export ------------------------------------------------------------------------------------
+
+#: what a lamp step graph takes and gives (written into its metadata; docs/onnx.md explains the loop)
+STEP_CONTRACT = {
+    "graph": "one step of the autoregressive loop: frame t from frame t-1, the keys around t and a state",
+    "inputs": {
+        "y_prev": ["batch", 6, "float32", "encoded frame t-1 (frame 0: the first key)"],
+        "key_before": ["batch", 6, "float32", "encoded key X_K at or before t-1 (the last key before t)"],
+        "key_after": ["batch", 6, "float32", "encoded key X_K+1 at or after t"],
+        "t_rel": ["batch", 1, "float32", "(t - T_K) / (T_K+1 - T_K), 1 on a key's own frame"],
+        "state": ["batch", 2, "state_size", "float32", "recurrent state: zeros at t = 1, then state_out"],
+    },
+    "outputs": {
+        "y": ["batch", 6, "float32", "encoded frame t"],
+        "state_out": ["batch", 2, "state_size", "float32", "the state for frame t+1"],
+    },
+    "encoding": "variables base_x, base_y (m), base/leg/neck/head angle (rad); relative: base_x minus the first "
+                "key's, angles less the whole turns of the first key's; then (v - normalizer.mean) / normalizer.std",
+}
+
+
+class StepGraph(nn.Module):
+    """One step of a lamp network with a packed state ``(B, 2, H)``: what ``keyfill export`` writes."""
+
+    def __init__(self, net: Completer):
+        super().__init__()
+        self.net = net.eval()
+
+    def forward(self, y_prev, key_before, key_after, t_rel, state):
+        cond = self.net.key_features(key_before, key_after, t_rel)
+        if isinstance(self.net, NoMemory):
+            y, _ = self.net.step(y_prev, cond, None, None)
+            return y, state + 0.0
+        y, (h1, h2) = self.net.step(y_prev, cond, (state[:, 0], state[:, 1]), None)
+        return y, torch.stack([h1, h2], dim=1)
+
+
+def state_size(net: Completer) -> int:
+    """``H`` of the packed state ``(B, 2, H)`` of :class:`StepGraph` (1 for the memoryless network)."""
+    return 1 if isinstance(net, NoMemory) else net.gru1.hidden_size
+
+
+def export_onnx(model: LampModel, folder, path) -> None:
+    """Write ``model`` (loaded from the model folder ``folder``) as a step graph to ``path`` (atomically)."""
+    from keyfill.learn.modelfile import read_config
+    from keyfill.learn.onnx import export_module, metadata
+
+    H = state_size(model.net)
+    args = (torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES),
+            torch.ones(2, 1), torch.zeros(2, 2, H))
+    batch = torch.export.Dim("batch")
+    contract = {**STEP_CONTRACT, "state_size": H}
+    export_module(StepGraph(model.net), args, path, list(STEP_CONTRACT["inputs"]), list(STEP_CONTRACT["outputs"]),
+                  tuple({0: batch} for _ in STEP_CONTRACT["inputs"]), metadata(KIND, folder, read_config(folder), contract))

@@ -183,10 +183,9 @@ class Batch:
         return Batch(self.frames[index, :T], self.is_key[index, :T], self.valid[index, :T], lengths)
 
 
-def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
-    """Encode and pad ``sequences`` (each cut to its first..last key) into one :class:`Batch`."""
-    import torch
-
+def batch_arrays(sequences: list[LampSequence], normalizer: Normalizer):
+    """Encode and pad ``sequences`` (each cut to its first..last key): numpy ``(frames (B, T, 6) float32,
+    is_key (B, T), valid (B, T), lengths (B,) int64)``, the arrays of a :class:`Batch`."""
     if not sequences:
         raise DataError("no sequences to batch")
     T = max(int(s.keys[-1] - s.keys[0] + 1) for s in sequences)
@@ -199,13 +198,18 @@ def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
         frames[b, :n] = normalizer.encode(s.span)
         is_key[b, s.keys - s.keys[0]] = True
         valid[b, :n] = True
-    lengths = valid.sum(axis=1)
-    return Batch(torch.from_numpy(frames), torch.from_numpy(is_key), torch.from_numpy(valid),
-                 torch.from_numpy(lengths.astype(np.int64)))
+    return frames, is_key, valid, valid.sum(axis=1).astype(np.int64)
+
+
+def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
+    """Encode and pad ``sequences`` (each cut to its first..last key) into one :class:`Batch`."""
+    import torch
+
+    return Batch(*(torch.from_numpy(a) for a in batch_arrays(sequences, normalizer)))
 
 
 def conditioning(frames, is_key):
-    """The key inputs for frames ``1 .. T-1``.
+    """The key inputs for frames ``1 .. T-1`` (numpy arrays or torch tensors).
 
     Args:
         frames: ``(B, T, 6)`` frames (only those at keys are read).
@@ -217,6 +221,8 @@ def conditioning(frames, is_key):
         ``(t - T_K) / (T_{K+1} - T_K)``. Past a sequence's last key (padding) the
         last key is used for both and ``t_rel`` is 1.
     """
+    if isinstance(frames, np.ndarray):
+        return _conditioning_np(frames, is_key)
     import torch
 
     B, T = is_key.shape
@@ -232,6 +238,20 @@ def conditioning(frames, is_key):
     span = (next_idx - prev_idx).clamp(min=1).to(frames.dtype)
     t_rel = torch.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).to(frames.dtype) / span,
                         torch.ones_like(span))
+    return gather(prev_idx), gather(next_idx), t_rel[..., None], is_key[:, 1:]
+
+
+def _conditioning_np(frames: np.ndarray, is_key: np.ndarray):
+    """:func:`conditioning` in numpy, step for step (the runtime of exported lamp models imports no torch)."""
+    B, T = is_key.shape
+    t = np.broadcast_to(np.arange(T), (B, T))
+    prev_idx = np.maximum.accumulate(np.where(is_key, t, -1), axis=1)[:, :-1]
+    at_or_after = np.minimum.accumulate(np.where(is_key, t, T)[:, ::-1], axis=1)[:, ::-1][:, 1:]
+    next_idx = np.where(at_or_after >= T, prev_idx, at_or_after)
+    gather = lambda idx: np.take_along_axis(frames, idx[..., None], axis=1)  # noqa: E731
+    span = np.maximum(next_idx - prev_idx, 1).astype(frames.dtype)
+    t_rel = np.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).astype(frames.dtype) / span,
+                     np.ones_like(span))
     return gather(prev_idx), gather(next_idx), t_rel[..., None], is_key[:, 1:]
 
 

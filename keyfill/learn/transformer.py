@@ -45,6 +45,7 @@ refuses anything else without executing code from it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import os
 from dataclasses import dataclass, field
@@ -352,7 +353,8 @@ class CompletionModel:
     info: dict = field(default_factory=dict)
 
     def to(self, device: str) -> CompletionModel:
-        self.network.to(device)
+        if not isinstance(self.network, GraphNetwork):
+            self.network.to(device)
         return self
 
     @property
@@ -371,8 +373,6 @@ class CompletionModel:
             ``(quats, root)`` of all ``T`` frames; frames outside the keys hold
             the nearest key.
         """
-        import torch
-
         keys = np.asarray(keys, dtype=np.int64)
         T = quats.shape[1]
         kinds = frame_kinds(T, keys)
@@ -382,12 +382,17 @@ class CompletionModel:
         turn, shift = canonical_transform(q, r, keys, self.config.facing_axis, up)
         q, r = apply_transform(q, r, turn, shift)
         q, r = interpolation(None, q, r, keys)
-        dev = self.device
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
-        with torch.inference_mode():
-            k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
-            y = self.network(torch.as_tensor(x, dtype=torch.float32, device=dev), k)
-        pq, pr = self.features.decode(y.double().cpu().numpy())
+        if isinstance(self.network, GraphNetwork):
+            y = self.network(x, np.broadcast_to(kinds, (len(q), T)))
+        else:
+            import torch
+
+            dev = self.device
+            with torch.inference_mode():
+                k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
+                y = self.network(torch.as_tensor(x, dtype=torch.float32, device=dev), k).double().cpu().numpy()
+        pq, pr = self.features.decode(y)
         outside = kinds == IGNORED
         pq[:, outside], pr[:, outside] = q[:, outside], r[:, outside]
         pq, pr = apply_transform(pq, pr, turn, shift, inverse=True)
@@ -428,12 +433,26 @@ class CompletionModel:
         save_model(path, KIND, self.network.state_dict(), self.model_config())
 
 
+def _features(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std) -> Features:
+    std = np.where(np.asarray(pos_std) > 1e-6, pos_std, 1.0)
+    return Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
+                    np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
+
+
 def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: bool, info=None) -> CompletionModel:
     """A freshly initialised :class:`CompletionModel` (weights from torch's current generator)."""
-    std = np.where(np.asarray(pos_std) > 1e-6, pos_std, 1.0)
-    feat = Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
-                    np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
+    feat = _features(skeleton, cfg, pos_mean, pos_std)
     return CompletionModel(cfg, skeleton, feat, build_network(feat.size, cfg), folded, dict(info or {}))
+
+
+def _config_parts(config: dict):
+    """``(ModelConfig, Skeleton, statistics, folded, training)`` of a model's ``config.json`` content."""
+    cfg = ModelConfig(**config["architecture"])
+    s = config["skeleton"]
+    skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
+                    channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
+                    meters_per_unit=s["meters_per_unit"])
+    return cfg, skel, config["statistics"], bool(config["folded_root"]), config.get("training")
 
 
 def torch_device(name: str):
@@ -458,14 +477,9 @@ def load(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
     dev = torch_device(device)
     tensors, config = modelfile.load_model(path, kind=KIND)
     try:
-        cfg = ModelConfig(**config["architecture"])
-        s = config["skeleton"]
-        skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
-                        channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
-                        meters_per_unit=s["meters_per_unit"])
-        st = config["statistics"]
+        cfg, skel, st, folded, training = _config_parts(config)
         model = modelfile.build_for_loading(lambda: new_model(skel, cfg, st["pos_mean"], st["pos_std"],
-                                                              bool(config["folded_root"]), config.get("training")))
+                                                              folded, training))
     except (KeyError, TypeError, ValueError, KeyfillError) as e:
         raise ModelError(f"{modelfile.model_folder(path)}: damaged transformer model config ({e})") from None
     modelfile.load_state(model.network, tensors, path)
@@ -548,15 +562,107 @@ def complete_motion(model: CompletionModel, motion, keys) -> tuple[object, dict]
 def complete(motion, keys, options):
     """``keyfill complete --method transformer``: see :func:`complete_motion`."""
     from keyfill.errors import UsageError
-    from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.completion import Completion
 
     if options.model is None:
         raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    model = load(options.model, options.device)
+    return _complete_with(load_cached(options.model, options.device), motion, keys, options)
+
+
+def _complete_with(model: CompletionModel, motion, keys, options):
+    from keyfill.learn.completion import Completion
+    from keyfill.learn.exact_keys import snap_to_keys
+
     filled, info = complete_motion(model, motion, keys)
     info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
     return Completion(filled, info)
+
+
+def load_cached(path, device: str = "cpu") -> CompletionModel:
+    """:func:`load`, remembering the last few models while their files stay unchanged (a batch loads once)."""
+    from keyfill.learn.modelfile import CONFIG, WEIGHTS, model_folder
+
+    folder = model_folder(path)
+    stamp = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None
+                  for f in (folder / CONFIG, folder / WEIGHTS))
+    return _load_cached(str(path), device, stamp)
+
+
+@functools.lru_cache(maxsize=4)
+def _load_cached(path: str, device: str, stamp: tuple) -> CompletionModel:
+    return load(path, device)
+
+
+# --- ONNX: export (torch) and the graph runtime (no torch) ---------------------------------------------
+
+#: what a transformer graph takes and gives (written into its metadata; docs/onnx.md)
+CONTRACT = {
+    "graph": "the whole network: pre-filled, encoded frames of windows and the kind of each frame -> "
+             "completed encoded frames",
+    "inputs": {
+        "features": ["batch", "frames", "feature_size", "float32",
+                     "frames in the canonical frame, unknown frames pre-filled by LERP/SLERP, encoded by Features"],
+        "kinds": ["batch", "frames", "int64", "0 key, 1 unknown (to fill), 2 ignored (outside the keys)"],
+    },
+    "outputs": {"completed": ["batch", "frames", "feature_size", "float32", "completed encoded frames"]},
+}
+
+
+class GraphNetwork:
+    """The transformer network as an exported graph: ``(x (B, T, F) float64, kinds (B, T)) -> (B, T, F) float64``."""
+
+    def __init__(self, graph):
+        self.graph = graph
+
+    def __call__(self, x: np.ndarray, kinds: np.ndarray) -> np.ndarray:
+        y = self.graph.run({"features": np.ascontiguousarray(x, dtype=np.float32),
+                            "kinds": np.ascontiguousarray(kinds, dtype=np.int64)})[0]
+        return y.astype(np.float64)
+
+
+def model_from_graph(graph) -> CompletionModel:
+    """A :class:`CompletionModel` whose network is an exported graph (:class:`keyfill.learn.onnx.Graph`)."""
+    model = getattr(graph, "_transformer_model", None)
+    if model is None:
+        try:
+            cfg, skel, st, folded, training = _config_parts(graph.config)
+            model = CompletionModel(cfg, skel, _features(skel, cfg, st["pos_mean"], st["pos_std"]),
+                                    GraphNetwork(graph), folded, dict(training or {}))
+        except (KeyError, TypeError, ValueError, KeyfillError) as e:
+            raise ModelError(f"{graph.path}: damaged transformer model metadata ({e})") from None
+        graph._transformer_model = model
+    return model
+
+
+def complete_graph(jobs, options, graph):
+    """``keyfill complete --method transformer`` through an exported graph: a Completion or the error, per job."""
+    model = model_from_graph(graph)
+    out = []
+    for motion, keys in jobs:
+        try:
+            result = _complete_with(model, motion, keys, options)
+            result.info["runtime"] = "onnx"
+            out.append(result)
+        except KeyfillError as e:
+            out.append(e)
+    return out
+
+
+def export_onnx(model: CompletionModel, folder, path) -> None:
+    """Write ``model``'s network (loaded from the model folder ``folder``) as a graph to ``path`` (atomically).
+
+    Batch and frame counts are free (frames up to the model's window).
+    """
+    import torch
+
+    from keyfill.learn.modelfile import read_config
+    from keyfill.learn.onnx import export_module, metadata
+
+    T = min(30, model.config.max_frames)
+    args = (torch.zeros(2, T, model.features.size), torch.zeros(2, T, dtype=torch.int64))
+    batch, frames = torch.export.Dim("batch"), torch.export.Dim("frames", min=2, max=model.config.max_frames)
+    contract = {**CONTRACT, "feature_size": model.features.size, "max_frames": model.config.max_frames}
+    export_module(model.network.cpu(), args, path, list(CONTRACT["inputs"]), list(CONTRACT["outputs"]),
+                  ({0: batch, 1: frames}, {0: batch, 1: frames}), metadata(KIND, folder, read_config(folder), contract))

@@ -9,6 +9,8 @@ are :mod:`keyfill.io.batch`'s.
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
 
 from keyfill.errors import FormatError, KeyfillError
@@ -27,6 +29,21 @@ class CompleteSpec:
     fmt: str | None = None
 
 
+def one_thread() -> None:
+    """One torch thread in a batch job.
+
+    Batches run in parallel as processes, one per core; torch's own thread pool
+    on top of that oversubscribes the cores (on a loaded 2-core machine the
+    ARNN's batch steps took 3x as long with torch's default threads), and
+    one thread everywhere keeps a file's bytes independent of the machine
+    that completes it. Set before torch is imported where possible.
+    """
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    torch = sys.modules.get("torch")
+    if torch is not None and torch.get_num_threads() != 1:
+        torch.set_num_threads(1)
+
+
 def complete_chunk(chunk: list[Item], spec: CompleteSpec) -> list[dict | None]:
     """Complete the inputs of ``chunk``; write the outputs of the items marked ``write``.
 
@@ -38,6 +55,7 @@ def complete_chunk(chunk: list[Item], spec: CompleteSpec) -> list[dict | None]:
     from keyfill.learn.registry import complete_many
     from keyfill.motion import Keys
 
+    one_thread()
     outcomes: list = [None] * len(chunk)
     jobs, where = [], []
     for i, it in enumerate(chunk):

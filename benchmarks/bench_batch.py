@@ -41,7 +41,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from bench_bvh_io import load_average, machine
 from bench_complete import keyfill_command, timed_run
 from timing import timed_ms
@@ -128,13 +127,12 @@ def latency(model, graph: Path, work: Path, repeat: int) -> dict:
     """In-process latency of one 30-frame window, torch vs onnxruntime (one thread each)."""
     import torch
 
+    from keyfill import io
     from keyfill.characters.lamp import to_variables
     from keyfill.learn import arnn
     from keyfill.learn import onnx as kx
     from keyfill.learn.arnn_onnx import OnnxLampModel
     from keyfill.learn.lamp_features import LampSequence
-
-    from keyfill import io
 
     torch.set_num_threads(1)
     tf_graph = kx.Graph(work / "tf-onnx" / kx.GRAPH)
@@ -159,6 +157,23 @@ def latency(model, graph: Path, work: Path, repeat: int) -> dict:
     torch_lamp, onnx_lamp = arnn.load(arnn.DEFAULT_MODEL), OnnxLampModel(kx.Graph(graph))
     out["arnn_1x30_torch_ms"] = timed_ms(lambda: torch_lamp.predict(seq), repeat)
     out["arnn_1x30_onnx_ms"] = timed_ms(lambda: onnx_lamp.predict(seq), repeat)
+    # parity: the largest difference relative to the data's scale
+    rng = np.random.default_rng(1)
+    worst = 0.0
+    for B, T in ((1, 30), (4, 17), (2, 65)):
+        xr = rng.normal(size=(B, T, model.features.size)).astype(np.float32)
+        kr = rng.integers(0, 3, size=(B, T))
+        with torch.inference_mode():
+            ref = net(torch.from_numpy(xr), torch.from_numpy(kr)).numpy()
+        got = tf_graph.run({"features": xr, "kinds": kr})[0]
+        worst = max(worst, float(np.abs(got - ref).max() / np.abs(ref).max()))
+    out["transformer_parity_relative"] = worst
+    full = [LampSequence(np.where(np.isin(np.arange(87), motion.keys.frames)[:, None],
+                                  to_variables(motion), 0.0), motion.keys.frames)]
+    full += [LampSequence(rng.normal(scale=0.5, size=(n, 6)), [0, n // 3, n - 1]) for n in (10, 30, 140)]
+    scale = torch_lamp.normalizer.std
+    out["arnn_parity_relative_to_std"] = max(float((np.abs(a - b) / scale).max())
+                                             for a, b in zip(onnx_lamp.predict(full), torch_lamp.predict(full)))
     return out
 
 
@@ -202,6 +217,8 @@ def main(argv=None) -> int:
     for m in ("transformer", "arnn"):
         print(f"1 x 30 frames, {m} network: torch {lat[m + '_1x30_torch_ms']['median']:.2f} ms, onnx "
               f"{lat[m + '_1x30_onnx_ms']['median']:.2f} ms (medians)")
+    print(f"parity: transformer {lat['transformer_parity_relative']:.1e} of the output scale, ARNN "
+          f"{lat['arnn_parity_relative_to_std']:.1e} of the variables' std (goal 1e-4)")
     return 0
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import DATA
+
 from keyfill import io
 from keyfill.cli.main import main
 from keyfill.io import batch

@@ -73,6 +73,10 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
     if is_batch(inputs, dst):
         from keyfill.learn.batch import CompleteSpec
 
+        if dst == "-" or in_fmt is not None:
+            raise UsageError("a batch reads files by their suffixes and writes into a folder (-o OUTDIR/); "
+                             "'-' and --in-format take one file")
+
         spec = CompleteSpec(method, options, keys_text, key_every)
         return run_batch(inputs, dst, fmt, "keyfill.learn.batch:complete_chunk", spec, workers, scheduler,
                          connect_timeout, force, batch_size, as_json, "completed", check=lambda: check_method(spec))

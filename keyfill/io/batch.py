@@ -77,7 +77,7 @@ def _expand(text: str, outdir: Path) -> list[tuple[Path, Path]]:
         return [(f, f.relative_to(p)) for f in files]
     if p.exists() or not glob.has_magic(text):
         return [(p, Path(p.name))]  # a missing file is that input's failure, reported with the others
-    base = Path(*[part for part in _prefix(p.parts)]) if _prefix(p.parts) else Path(".")
+    base = Path(*_prefix(p.parts)) if _prefix(p.parts) else Path(".")
     files = sorted(Path(f) for f in glob.glob(text, recursive=True))
     files = [f for f in files if f.is_file() and not _inside(f, outdir)]
     if not files:
@@ -189,7 +189,8 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
     The executor is started only when there is work; a Dask scheduler that
     cannot be reached is one :class:`KeyfillError` before any file is written.
     """
-    from keyfill.parallel import check_options, executor as make_executor
+    from keyfill.parallel import check_options
+    from keyfill.parallel import executor as make_executor
 
     check_options(workers, connect_timeout)
     if chunk < 1:

@@ -189,3 +189,22 @@ def test_convert_many_files_into_a_folder(tmp_path, capsys):
     assert (tmp_path / "out" / "walk.usda").read_bytes() == (tmp_path / "walk.usda").read_bytes()
     code, out, err = run(capsys, "convert", src / "walk.bvh", "-o", tmp_path / "out", "--format", "usda")
     assert code == 0 and "skipped 1" in err
+
+
+def test_a_batch_runs_torch_on_one_thread_and_restores_it(lamps, tmp_path, monkeypatch):
+    import torch
+
+    from keyfill.learn import registry
+
+    seen = []
+    real = registry.complete_many
+    monkeypatch.setattr(registry, "complete_many", lambda *a: seen.append(torch.get_num_threads()) or real(*a))
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        summary = batch.run(batch.plan([lamps], tmp_path / "o"), complete_chunk, CompleteSpec("arnn", CompleteOptions()),
+                            workers=1)
+        assert [f["status"] for f in summary.files] == ["done"] * 7
+        assert seen == [1] and torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

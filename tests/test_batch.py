@@ -208,3 +208,39 @@ def test_a_batch_runs_torch_on_one_thread_and_restores_it(lamps, tmp_path, monke
         assert seen == [1] and torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_transformer_batch_sends_windows_of_one_layout_together(tmp_path, capsys, monkeypatch):
+    import torch
+
+    from synthetic_corpus import walker_motion, walker_skeleton
+
+    from keyfill.learn import transformer as T
+
+    skeleton = walker_skeleton(static_root=False)
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        model = T.new_model(skeleton, T.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0),
+                            np.zeros(21), np.full(21, 30.0), folded=False)
+        with torch.no_grad():
+            for p in model.network.parameters():
+                p.add_(0.05 * torch.randn(p.shape))
+    model.save(tmp_path / "model")
+    (tmp_path / "in").mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        io.save(walker_motion(skeleton, 50, rng), tmp_path / "in" / f"walk{i}.bvh")
+    calls = []
+    real = T.CompletionModel.complete_windows
+    monkeypatch.setattr(T.CompletionModel, "complete_windows",
+                        lambda self, q, r, k: calls.append(len(q)) or real(self, q, r, k))
+    args = ("--method", "transformer", "--model", tmp_path / "model", "--key-every", "10", "--runtime", "torch")
+    code, out, err = run(capsys, "complete", tmp_path / "in", "-o", tmp_path / "out", "--workers", "1", *args)
+    assert code == 0, err
+    assert calls == [3]  # one window per clip, one layout: one call
+    for i in range(3):
+        code, _, err = run(capsys, "complete", tmp_path / "in" / f"walk{i}.bvh", "-o", tmp_path / f"single{i}.bvh",
+                           *args)
+        assert code == 0, err
+        a, b = io.load(tmp_path / "out" / f"walk{i}.bvh"), io.load(tmp_path / f"single{i}.bvh")
+        assert np.abs(a.positions - b.positions).max() < 1e-4 * np.abs(b.positions).max()

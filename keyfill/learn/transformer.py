@@ -519,44 +519,85 @@ def complete_motion(model: CompletionModel, motion, keys) -> tuple[object, dict]
 
     Reads only the key frames. Frames before the first key and after the last
     hold that key. Long key ranges are cut into spans that fit the model's
-    window (:func:`spans`). Returns ``(motion, info)``; keys are *not* yet
-    exact (see :func:`keyfill.learn.exact_keys.snap_to_keys`).
+    window (:func:`spans`), each completed on its own. Returns ``(motion,
+    info)``; keys are *not* yet exact (see :func:`keyfill.learn.exact_keys.snap_to_keys`).
+    """
+    result = complete_motions(model, [(motion, keys)], batch=False)[0]
+    if isinstance(result, Exception):
+        raise result
+    return result
+
+
+#: most windows sent through the network at once by :func:`complete_motions`
+MAX_WINDOWS = 64
+
+
+def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
+    """:func:`complete_motion` for many ``(motion, keys)``: ``(motion, info)`` or the error, per job.
+
+    With ``batch``, windows of the same length and key layout (from any of the
+    motions: clips keyed every N frames share most) go through the network
+    together, up to :data:`MAX_WINDOWS` at a time; a window's result then
+    depends on its batch in float32 rounding only. Without, every window is
+    completed alone, in order (what one ``keyfill complete`` does).
     """
     from keyfill.learn.baselines import linear
     from keyfill.learn.corpus import bone_difference, fold_root
     from keyfill.motion import Keys
 
-    k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
-    lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
-    q, p = lin.rotations, lin.positions
-    skel = motion.skeleton
-    if model.folded:
-        if len(skel.children(0)) != 1:
-            raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
-                             f"{len(skel.children(0))} children")
-        q, p = fold_root(q, p, skel.parents)
-    here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
-    diff = bone_difference(model.skeleton, here)
-    if diff is not None:
-        raise ModelError(f"the model serves another skeleton: {diff}")
-    q = R.quat_continuous_np(q, axis=0)
-    out_q, out_r = q.copy(), p[:, 0].copy()
-    parts = spans(k, model.config.max_frames)
-    for a, b in parts:
-        inside = k[(k >= a) & (k <= b)] - a
-        wq, wr = model.complete_windows(q[None, a : b + 1], out_r[None, a : b + 1], inside)
-        out_q[a + 1 : b], out_r[a + 1 : b] = wq[0, 1:-1], wr[0, 1:-1]
-    pos = p.copy()
-    pos[:, 0] = out_r
-    if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
-        c = skel.children(0)[0]
-        top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
-        inv = R.quat_conjugate(top_q)
-        out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
-        pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
-        out_q[:, 0], pos[:, 0] = top_q, top_p
-    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
-    return result, {"spans": len(parts), "max_frames": model.config.max_frames}
+    results: list = [None] * len(jobs)
+    prepared = {}
+    for j, (motion, keys) in enumerate(jobs):
+        try:
+            k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
+            lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
+            q, p = lin.rotations, lin.positions
+            skel = motion.skeleton
+            if model.folded:
+                if len(skel.children(0)) != 1:
+                    raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
+                                     f"{len(skel.children(0))} children")
+                q, p = fold_root(q, p, skel.parents)
+            here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
+            diff = bone_difference(model.skeleton, here)
+            if diff is not None:
+                raise ModelError(f"the model serves another skeleton: {diff}")
+            q = R.quat_continuous_np(q, axis=0)
+            parts = spans(k, model.config.max_frames)
+            prepared[j] = (k, lin, q, p, q.copy(), p[:, 0].copy(), parts)
+        except KeyfillError as e:
+            results[j] = e
+    # windows: (job, a, b, key frames inside); spans of one motion never overlap but at their boundary keys
+    windows = [(j, a, b, tuple(prep[0][(prep[0] >= a) & (prep[0] <= b)] - a))
+               for j, prep in prepared.items() for a, b in prep[6]]
+    if batch:
+        groups: dict = {}
+        for w in windows:
+            groups.setdefault((w[2] - w[1], w[3]), []).append(w)
+        runs = [g[i: i + MAX_WINDOWS] for g in groups.values() for i in range(0, len(g), MAX_WINDOWS)]
+    else:
+        runs = [[w] for w in windows]
+    for run in runs:
+        wq, wr = model.complete_windows(np.stack([prepared[j][2][a: b + 1] for j, a, b, _ in run]),
+                                        np.stack([prepared[j][5][a: b + 1] for j, a, b, _ in run]),
+                                        np.asarray(run[0][3]))
+        for i, (j, a, b, _) in enumerate(run):
+            out_q, out_r = prepared[j][4], prepared[j][5]
+            out_q[a + 1: b], out_r[a + 1: b] = wq[i, 1:-1], wr[i, 1:-1]
+    for j, (k, lin, q, p, out_q, out_r, parts) in prepared.items():
+        motion, skel = jobs[j][0], jobs[j][0].skeleton
+        pos = p.copy()
+        pos[:, 0] = out_r
+        if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
+            c = skel.children(0)[0]
+            top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
+            inv = R.quat_conjugate(top_q)
+            out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
+            pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
+            out_q[:, 0], pos[:, 0] = top_q, top_p
+        result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
+        results[j] = (result, {"spans": len(parts), "max_frames": model.config.max_frames})
+    return results
 
 
 def complete(motion, keys, options):
@@ -569,15 +610,42 @@ def complete(motion, keys, options):
 
 
 def _complete_with(model: CompletionModel, motion, keys, options):
+    return _finish(complete_motion(model, motion, keys), motion, keys, options)
+
+
+def _finish(completed, motion, keys, options):
+    """The :class:`Completion` of ``completed`` = ``(filled motion, info)`` (keys made exact if asked)."""
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
 
-    filled, info = complete_motion(model, motion, keys)
+    filled, info = completed
     info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
     return Completion(filled, info)
+
+
+def _complete_many_with(model: CompletionModel, jobs, options, extra=None) -> list:
+    out = []
+    for (motion, keys), done in zip(jobs, complete_motions(model, jobs, batch=True)):
+        if isinstance(done, KeyfillError):
+            out.append(done)
+            continue
+        result = _finish(done, motion, keys, options)
+        result.info.update(extra or {})
+        out.append(result)
+    return out
+
+
+def complete_many(jobs, options):
+    """:func:`complete` for many ``(motion, keys)``: the model loaded once, windows of the same length and
+    key layout batched (:func:`complete_motions`); a Completion or the error, per job."""
+    from keyfill.errors import UsageError
+
+    if options.model is None:
+        raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
+    return _complete_many_with(load_cached(options.model, options.device), jobs, options)
 
 
 def load_cached(path, device: str = "cpu") -> CompletionModel:
@@ -638,16 +706,7 @@ def model_from_graph(graph) -> CompletionModel:
 
 def complete_graph(jobs, options, graph):
     """``keyfill complete --method transformer`` through an exported graph: a Completion or the error, per job."""
-    model = model_from_graph(graph)
-    out = []
-    for motion, keys in jobs:
-        try:
-            result = _complete_with(model, motion, keys, options)
-            result.info["runtime"] = "onnx"
-            out.append(result)
-        except KeyfillError as e:
-            out.append(e)
-    return out
+    return _complete_many_with(model_from_graph(graph), jobs, options, {"runtime": "onnx"})
 
 
 def export_onnx(model: CompletionModel, folder, path) -> None:

@@ -96,6 +96,9 @@ def startup(work: Path, repeat: int) -> dict:
     with torch.random.fork_rng():
         torch.manual_seed(0)
         model = T.new_model(skeleton, T.ModelConfig(dropout=0.0), np.zeros(21), np.full(21, 30.0), folded=False)
+        with torch.no_grad():  # every layer random, the zero-initialised output too (else it returns its input)
+            for p in model.network.parameters():
+                p.add_(0.02 * torch.randn(p.shape))
     torch_folder, onnx_folder = work / "tf-torch", work / "tf-onnx"
     model.save(torch_folder)
     model.save(onnx_folder)

@@ -31,7 +31,7 @@ from keyfill.learn.registry import METHODS
                    "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
                    "one.")
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
+@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when IN is '-').")
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed, device, runtime, fmt, in_fmt,
@@ -52,6 +52,10 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
     are skipped, so an interrupted batch resumes (--force redoes them). A
     bad input is reported with its reason and the others go on; the exit
     code is then 1, and --json lists every input's outcome.
+
+    With an exported graph (keyfill export), --runtime onnx or auto runs
+    the model through onnxruntime and imports no torch (docs/onnx.md).
+
     \b
     Methods:
     {methods}
@@ -63,6 +67,7 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
       keyfill complete hops/ --method arnn -o filled/ --workers 2
       keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
+      keyfill complete keys.usda --method arnn --model lamp-arnn.onnx -o filled.usda
     """
     from keyfill import io
     from keyfill.io.batch import is_batch

@@ -36,11 +36,18 @@ RUNTIMES = ("auto", "torch", "onnx")
 
 
 def weights_digest(folder: str | os.PathLike) -> str:
-    """SHA-256 (hex) of a model folder's ``weights.safetensors``."""
+    """SHA-256 (hex) of a model folder's ``weights.safetensors`` (remembered while the file is unchanged)."""
     from keyfill.learn.modelfile import WEIGHTS
 
+    path = Path(folder) / WEIGHTS
+    st = path.stat()
+    return _digest(str(path.resolve()), (st.st_mtime_ns, st.st_size))
+
+
+@functools.lru_cache(maxsize=16)
+def _digest(path: str, stamp: tuple) -> str:
     h = hashlib.sha256()
-    with open(Path(folder) / WEIGHTS, "rb") as f:
+    with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()

@@ -244,3 +244,15 @@ def test_transformer_batch_sends_windows_of_one_layout_together(tmp_path, capsys
         assert code == 0, err
         a, b = io.load(tmp_path / "out" / f"walk{i}.bvh"), io.load(tmp_path / f"single{i}.bvh")
         assert np.abs(a.positions - b.positions).max() < 1e-4 * np.abs(b.positions).max()
+
+
+def test_an_unreachable_scheduler_is_one_error_and_writes_nothing(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    code, out, err = run(capsys, "complete", LAMP_KEYS, MIXAMO, "-o", tmp_path / "out", "--key-every", "5",
+                         "--scheduler", address, "--connect-timeout", "1")
+    assert code == 1 and err.startswith(f"keyfill: error: cannot reach the Dask scheduler at {address}")
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "out").exists()

@@ -210,14 +210,15 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
     skipped = [outcomes[it.src] for it in items if it.src in outcomes]
     if skipped and on_chunk is not None:
         on_chunk(skipped)
-    for job in jobs:  # output folders, once, in this process
-        for it in job:
-            if it.write:
-                Path(it.dst).parent.mkdir(parents=True, exist_ok=True)
     if jobs:
+        # Reach the cluster before touching the output folder: an unreachable scheduler leaves nothing behind.
         executor, window = make_executor(workers if workers is not None else (1 if len(jobs) == 1 else None),
                                          scheduler, connect_timeout)
         try:
+            for job in jobs:  # output folders, once, in this process
+                for it in job:
+                    if it.write:
+                        Path(it.dst).parent.mkdir(parents=True, exist_ok=True)
             in_flight: dict = {}
             pending = list(jobs)
             while pending or in_flight:

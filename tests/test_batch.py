@@ -212,7 +212,6 @@ def test_a_batch_runs_torch_on_one_thread_and_restores_it(lamps, tmp_path, monke
 
 def test_transformer_batch_sends_windows_of_one_layout_together(tmp_path, capsys, monkeypatch):
     import torch
-
     from synthetic_corpus import walker_motion, walker_skeleton
 
     from keyfill.learn import transformer as T
@@ -256,3 +255,36 @@ def test_an_unreachable_scheduler_is_one_error_and_writes_nothing(tmp_path, caps
                          "--scheduler", address, "--connect-timeout", "1")
     assert code == 1 and err.startswith(f"keyfill: error: cannot reach the Dask scheduler at {address}")
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
+def test_a_killed_batch_resumes_and_its_leftovers_go(tmp_path, capsys):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for i in range(40):
+        shutil.copy(MIXAMO, src / f"walk{i:02d}.bvh")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "keyfill", "complete", str(src), "-o", str(out), "--key-every", "3",
+           "--batch-size", "1", "--workers", "1", "--format", "usda"]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    def finished():
+        return [p for p in out.glob("*.usda") if not p.name.startswith(".")] if out.is_dir() else []
+
+    while time.monotonic() < deadline and len(finished()) < 3:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done_before = len(finished())
+    assert 3 <= done_before < 40, done_before
+    (out / ".walk39.abc123.part.usda").write_text("half a file")  # what a kill during a write leaves
+    code, stdout, err = run(capsys, "complete", src, "-o", out, "--key-every", "3", "--format", "usda", "--json")
+    assert code == 0, err
+    summary = json.loads(stdout)
+    assert summary["skipped"] >= done_before and summary["done"] + summary["skipped"] == 40
+    assert sorted(p.name for p in out.iterdir()) == [f"walk{i:02d}.usda" for i in range(40)]

@@ -171,6 +171,29 @@ class Summary:
         return "; ".join(parts)
 
 
+def prepare_outputs(items: list[Item]) -> None:
+    """Create the output folders of ``items`` and remove what a killed run left of their outputs.
+
+    An interrupted write (Ctrl-C) removes its temporary file itself; a run
+    killed outright (SIGKILL, a lost node) cannot, and leaves
+    ``.NAME.XXXX.partSUFFIX`` beside the output (:func:`keyfill.files.atomic_output`).
+    """
+    folders: dict[Path, set[str]] = {}
+    for it in items:
+        dst = Path(it.dst)
+        folders.setdefault(dst.parent, set()).add(dst.stem + "\0" + dst.suffix)
+    for folder, names in folders.items():
+        folder.mkdir(parents=True, exist_ok=True)
+        for entry in os.scandir(folder):
+            name = entry.name
+            if not (name.startswith(".") and ".part" in name and entry.is_file()):
+                continue
+            body, _, suffix = name[1:].rpartition(".part")
+            stem = body.rpartition(".")[0]
+            if stem + "\0" + suffix in names:
+                os.unlink(entry.path)
+
+
 def failure(item: Item, error: BaseException) -> dict:
     """The outcome of an item that failed with ``error``."""
     message = " ".join(str(error).split())
@@ -215,10 +238,7 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
         executor, window = make_executor(workers if workers is not None else (1 if len(jobs) == 1 else None),
                                          scheduler, connect_timeout)
         try:
-            for job in jobs:  # output folders, once, in this process
-                for it in job:
-                    if it.write:
-                        Path(it.dst).parent.mkdir(parents=True, exist_ok=True)
+            prepare_outputs([it for job in jobs for it in job if it.write])
             in_flight: dict = {}
             pending = list(jobs)
             while pending or in_flight:

@@ -5,7 +5,14 @@ from __future__ import annotations
 import click
 
 from keyfill.cli.common import (
-    FORMAT_CHOICE, batch_options, emit_json, keys_options, output_format, resolve_keys, run_batch, say,
+    FORMAT_CHOICE,
+    batch_options,
+    emit_json,
+    keys_options,
+    output_format,
+    resolve_keys,
+    run_batch,
+    say,
 )
 from keyfill.errors import UsageError
 from keyfill.learn.registry import METHODS
@@ -99,20 +106,13 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
 
 
 def check_method(spec) -> None:
-    """Before any file is read: the method and model of a batch can work (no torch is imported)."""
-    from keyfill.learn.registry import get, method_for_model
-
-    from keyfill.learn.onnx import is_graph, select
+    """Before any file is read: the method, model and runtime of a batch can work (no weights are loaded)."""
+    from keyfill.learn.onnx import select
+    from keyfill.learn.registry import checked_options, get
 
     m = get(spec.method)
-    select(m, spec.options.model, spec.options.runtime)  # a missing or foreign graph: refused before any work
-    if spec.options.model is not None and not is_graph(spec.options.model):
-        if not m.learned:
-            raise UsageError(f"--model applies to learned methods, not to {spec.method!r}")
-        kind = method_for_model(spec.options.model).name
-        if kind != spec.method:
-            raise UsageError(f"{spec.options.model}: a model of kind {kind!r}, not {spec.method!r}; "
-                             f"complete with --method {kind}")
+    options = checked_options(m, spec.options)
+    select(m, options.model, options.runtime)  # a missing or foreign graph: refused before any work
 
 
 complete.help = complete.help.replace(  # the docstring's indentation, so click's dedent keeps the block

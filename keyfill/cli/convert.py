@@ -5,7 +5,14 @@ from __future__ import annotations
 import click
 
 from keyfill.cli.common import (
-    FORMAT_CHOICE, batch_options, emit_json, keys_options, output_format, resolve_keys, run_batch, say,
+    FORMAT_CHOICE,
+    batch_options,
+    emit_json,
+    keys_options,
+    output_format,
+    resolve_keys,
+    run_batch,
+    say,
 )
 
 

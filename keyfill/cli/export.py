@@ -34,7 +34,7 @@ def export(model, dst, as_json):
     from keyfill.errors import UsageError
     from keyfill.learn.modelfile import model_folder
     from keyfill.learn.onnx import GRAPH
-    from keyfill.learn.registry import METHODS, load_model
+    from keyfill.learn.registry import METHODS, exportable, load_model
 
     if model in METHODS:
         folder = METHODS[model].default_model()
@@ -45,7 +45,7 @@ def export(model, dst, as_json):
     label, method, loaded = load_model(model)
     if method.export is None:
         raise UsageError(f"{method.name} models cannot be exported yet; exportable: "
-                         f"{', '.join(m.name for m in METHODS.values() if m.export)}")
+                         f"{', '.join(m.name for m in exportable())}")
     out = Path(dst) if dst is not None else Path(folder) / GRAPH
     if out.suffix.lower() != ".onnx":
         raise UsageError(f"{out}: an ONNX graph file ends in .onnx")
@@ -62,4 +62,10 @@ def export(model, dst, as_json):
         say(f"wrote {out} ({out.stat().st_size / 1024:.0f} KiB): the {method.name} network of {label}")
 
 
-export.help = export.help.replace("{methods}", "arnn (a step graph run once per frame), transformer")
+def _exportable() -> str:
+    from keyfill.learn.registry import exportable
+
+    return ", ".join(m.name for m in exportable())
+
+
+export.help = export.help.replace("{methods}", _exportable())

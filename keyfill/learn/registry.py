@@ -147,8 +147,8 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
     return str(name_or_path), method, method.implementation().load(name_or_path, device)
 
 
-def _checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
-    """``options`` once its ``--model`` is known to fit ``m``."""
+def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
+    """``options`` once its ``--model`` is known to fit ``m`` (a :class:`UsageError` otherwise); reads no weights."""
     if not m.learned and options.model is not None:
         raise UsageError(f"--model applies to learned methods, not to {m.name!r}")
     from keyfill.learn.onnx import is_graph
@@ -166,7 +166,7 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     options = options or CompleteOptions()
     m = get(method)
     keys = keys.check(motion.num_frames, min_keys=2)
-    options = _checked_options(m, options)
+    options = checked_options(m, options)
     graph = _graph(m, options)
     if graph is not None:
         result = importlib.import_module(m.onnx).complete_graph([(motion, keys)], options, graph)[0]
@@ -190,7 +190,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
     """
     options = options or CompleteOptions()
     m = get(method)
-    options = _checked_options(m, options)
+    options = checked_options(m, options)
     results: list = [None] * len(jobs)
     ready = []
     for i, (motion, keys) in enumerate(jobs):

@@ -1,5 +1,6 @@
 # keyfill: `make demo` and `make test` each create .venv, install keyfill with
-# pinned dependencies (torch==2.13.0, the local CPU build) and run.
+# pinned dependencies (torch==2.13.0, the local CPU build; the onnx extra for export and
+# the torch-free runtime) and run.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
@@ -13,7 +14,7 @@ OUT := out/demo
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx]'
 	@touch $(STAMP)
 
 demo: $(STAMP)

@@ -50,3 +50,10 @@ class ModelError(KeyfillError):
 
 class InfeasibleError(KeyfillError):
     """An edit or search whose constraints cannot all be met."""
+
+
+class BatchFailed(KeyfillError):
+    """Some inputs of a batch command failed. Each was reported on its own line already, so the CLI
+    prints nothing more for this error (``reported``) and exits with 1."""
+
+    reported = True

@@ -226,6 +226,22 @@ class Keys:
     def to_list(self) -> list[int]:
         return [int(f) for f in self.frames]
 
+    @classmethod
+    def resolve(cls, motion: "Motion", keys_text: str | None = None, key_every: int | None = None,
+                min_keys: int = 2) -> "Keys":
+        """The keys for ``motion``: from ``--keys`` text, ``--key-every`` N, or else the motion's own keys."""
+        if keys_text is not None and key_every is not None:
+            raise UsageError("give --keys or --key-every, not both")
+        if keys_text is not None:
+            keys = cls.parse(keys_text)
+        elif key_every is not None:
+            keys = cls.every(key_every, motion.num_frames)
+        elif motion.keys is not None:
+            keys = motion.keys
+        else:
+            raise UsageError("this file records no keys; give --keys (e.g. 0,12,30) or --key-every N")
+        return keys.check(motion.num_frames, min_keys=min_keys)
+
 
 def _turns_off(angles: np.ndarray) -> np.ndarray:
     """Distance of ``angles`` (radians) from the nearest whole number of turns."""

@@ -67,18 +67,8 @@ def keys_options(f):
 
 
 def resolve_keys(motion: Motion, keys_text: str | None, key_every: int | None, min_keys: int = 2) -> Keys:
-    """The keys for ``motion``: from ``--keys``, ``--key-every``, or the file's own keys."""
-    if keys_text is not None and key_every is not None:
-        raise UsageError("give --keys or --key-every, not both")
-    if keys_text is not None:
-        keys = Keys.parse(keys_text)
-    elif key_every is not None:
-        keys = Keys.every(key_every, motion.num_frames)
-    elif motion.keys is not None:
-        keys = motion.keys
-    else:
-        raise UsageError("this file records no keys; give --keys (e.g. 0,12,30) or --key-every N")
-    return keys.check(motion.num_frames, min_keys=min_keys)
+    """The keys for ``motion``: from ``--keys``, ``--key-every``, or the file's own keys (:meth:`Keys.resolve`)."""
+    return Keys.resolve(motion, keys_text, key_every, min_keys)
 
 
 def output_format(path: str, fmt: str | None) -> str | None:
@@ -112,3 +102,49 @@ def load_labelled(files, labels: str | None, in_fmt: str | None, keys_text: str 
             motion = motion.replace(keys=resolve_keys(motion, keys_text, key_every, min_keys=1))
         motions.append(motion)
     return motions, names
+
+
+def batch_options(f):
+    """``--workers``, ``--scheduler``, ``--connect-timeout``, ``--force`` and ``--batch-size`` of a batch command."""
+    f = click.option("--batch-size", default=64, show_default=True, type=int, metavar="N",
+                     help="Files per job (and per batch through a learned model).")(f)
+    f = click.option("--force", is_flag=True, help="Redo outputs that are newer than their input.")(f)
+    f = click.option("--connect-timeout", default=10.0, show_default=True, type=float, metavar="SECONDS",
+                     help="Give up reaching the --scheduler after this long.")(f)
+    f = click.option("--scheduler", metavar="ADDRESS",
+                     help="Run the batch on a Dask distributed cluster, e.g. tcp://host:8786.")(f)
+    f = click.option("--workers", type=int, metavar="N",
+                     help="Local worker processes for a batch [default: one per core when there is more than "
+                          "one job]; with --scheduler, jobs kept in flight.")(f)
+    return f
+
+
+def run_batch(inputs, outdir, fmt, job, spec, workers, scheduler, connect_timeout, force, batch_size, as_json,
+              verb, check=None) -> None:
+    """Run a many-in / folder-out command: plan, check, progress bar over files, one error line per failed
+    input, a summary; raises :class:`BatchFailed` (exit 1) when any input failed."""
+    import importlib
+
+    from keyfill.io.batch import plan, run
+
+    if fmt is not None and fmt.lower() not in ("bvh", "usda", "usdc", "usd"):
+        raise UsageError(f"unknown format {fmt!r}")
+    items = plan(inputs, outdir, fmt)
+    if check is not None:
+        check()
+    module, attr = job.split(":")
+    fn = getattr(importlib.import_module(module), attr)
+    with progress(total=len(items), unit="file", desc="files") as bar:
+        summary = run(items, fn, spec, workers=workers, scheduler=scheduler, force=force, chunk=batch_size,
+                      connect_timeout=connect_timeout, on_chunk=lambda done: bar.update(len(done)))
+    summary.output = str(outdir)
+    for f in summary.failed:
+        click.echo(f"keyfill: error: {f['error']}", err=True)
+    if as_json:
+        emit_json(summary.to_dict())
+    else:
+        say(summary.line(verb))
+    if summary.failed:
+        from keyfill.errors import BatchFailed
+
+        raise BatchFailed(f"{len(summary.failed)} of {len(items)} inputs failed")

@@ -4,32 +4,64 @@ from __future__ import annotations
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, output_format, resolve_keys, say
+from keyfill.cli.common import (
+    FORMAT_CHOICE,
+    batch_options,
+    emit_json,
+    keys_options,
+    output_format,
+    resolve_keys,
+    run_batch,
+    say,
+)
+from keyfill.errors import UsageError
 from keyfill.learn.registry import METHODS
 
 
 @click.command()
-@click.argument("src", type=click.Path(dir_okay=False, allow_dash=True))
-@click.option("-o", "--output", "dst", required=True, type=click.Path(dir_okay=False, allow_dash=True),
-              help="Output file (.bvh, .usda, .usdc, .usd) or '-' with --format.")
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(allow_dash=True), metavar="IN...")
+@click.option("-o", "--output", "dst", required=True, type=click.Path(allow_dash=True),
+              help="Output file (.bvh, .usda, .usdc, .usd) or '-' with --format; for several inputs, a folder "
+                   "(OUTDIR/).")
 @keys_options
 @click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
               help="In-betweening method.")
-@click.option("--model", type=click.Path(exists=True), help="Model folder for a learned method (default: the model shipped for it, if any).")
+@click.option("--model", type=click.Path(exists=True),
+              help="Model folder for a learned method (default: the model shipped for it, if any), or a graph file "
+                   "(.onnx) written by 'keyfill export'.")
 @click.option("--exact-keys/--no-exact-keys", default=True, show_default=True,
               help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")
 @click.option("--device", default="cpu", show_default=True, help="Torch device for learned methods.")
+@click.option("--runtime", type=click.Choice(["auto", "torch", "onnx"]), default="auto", show_default=True,
+              help="Run a learned model with torch or its exported ONNX graph (onnxruntime, no torch import; see "
+                   "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
+                   "one.")
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
+@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when IN is '-').")
+@batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, device, fmt, in_fmt, as_json):
-    """Fill in the frames between the keys of SRC and write the result.
+def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed, device, runtime, fmt, in_fmt,
+             workers, scheduler, connect_timeout, force, batch_size, as_json):
+    """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
-    authored time samples of a sparse USD file). Only the key frames of SRC
+    authored time samples of a sparse USD file). Only the key frames of IN
     are read; every other frame is generated. Frames at keys come out
     identical to the input keys.
+
+    Batch: with several inputs (files, folders, globs) or -o OUTDIR/, each
+    input gets an output of the same relative name in OUTDIR (--format sets
+    the suffix). A learned method loads its model once per process and
+    completes up to --batch-size files in one batch; --workers N spreads the
+    batches over local processes and --scheduler over a Dask cluster (the
+    outputs are the same bytes either way). Outputs newer than their input
+    are skipped, so an interrupted batch resumes (--force redoes them). A
+    bad input is reported with its reason and the others go on; the exit
+    code is then 1, and --json lists every input's outcome.
+
+    With an exported graph (keyfill export), --runtime onnx or auto runs
+    the model through onnxruntime and imports no torch (docs/onnx.md).
 
     \b
     Methods:
@@ -40,20 +72,47 @@ def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, de
       keyfill complete keys.usda -o filled.usda
       keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
+      keyfill complete hops/ --method arnn -o filled/ --workers 2
+      keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
+      keyfill complete keys.usda --method arnn --model lamp-arnn.onnx -o filled.usda
     """
     from keyfill import io
+    from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
 
+    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime)
+    if is_batch(inputs, dst):
+        from keyfill.learn.batch import CompleteSpec
+
+        if dst == "-" or in_fmt is not None:
+            raise UsageError("a batch reads files by their suffixes and writes into a folder (-o OUTDIR/); "
+                             "'-' and --in-format take one file")
+
+        spec = CompleteSpec(method, options, keys_text, key_every)
+        return run_batch(inputs, dst, fmt, "keyfill.learn.batch:complete_chunk", spec, workers, scheduler,
+                         connect_timeout, force, batch_size, as_json, "completed", check=lambda: check_method(spec))
+    if len(inputs) != 1:
+        raise UsageError("several inputs need an output folder: -o OUTDIR/")
+    src = inputs[0]
     motion = io.load(src, in_fmt)
     keys = resolve_keys(motion, keys_text, key_every)
-    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device)
     result = run(motion, keys, method, options)
     io.save(result.motion, dst, output_format(dst, fmt))
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})
     elif dst != "-":
         say(f"wrote {dst}: {motion.num_frames} frames completed from {len(keys)} keys with {method}")
+
+
+def check_method(spec) -> None:
+    """Before any file is read: the method, model and runtime of a batch can work (no weights are loaded)."""
+    from keyfill.learn.onnx import select
+    from keyfill.learn.registry import checked_options, get
+
+    m = get(spec.method)
+    options = checked_options(m, spec.options)
+    select(m, options.model, options.runtime)  # a missing or foreign graph: refused before any work
 
 
 complete.help = complete.help.replace(  # the docstring's indentation, so click's dedent keeps the block

@@ -4,19 +4,32 @@ from __future__ import annotations
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, output_format, resolve_keys, say
+from keyfill.cli.common import (
+    FORMAT_CHOICE,
+    batch_options,
+    emit_json,
+    keys_options,
+    output_format,
+    resolve_keys,
+    run_batch,
+    say,
+)
 
 
 @click.command()
-@click.argument("src", type=click.Path(dir_okay=False, allow_dash=True))
-@click.argument("dst", type=click.Path(dir_okay=False, allow_dash=True))
-@click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when DST is '-').")
+@click.argument("paths", nargs=-1, required=True, type=click.Path(allow_dash=True), metavar="SRC [DST]")
+@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False),
+              help="Output folder: every SRC (files, folders, globs) is converted into it.")
+@click.option("--format", "fmt", type=FORMAT_CHOICE,
+              help="Output format (needed when DST is '-'; with -o, the outputs' suffix).")
 @click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
 @click.option("--curves", is_flag=True,
               help="Fit editable Bezier curves through the keys and write a curves file (USD only).")
 @keys_options
+@batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def convert(src, dst, fmt, in_fmt, curves, keys_text, key_every, as_json):
+def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, scheduler, connect_timeout, force,
+            batch_size, as_json):
     """Convert a motion file between BVH and USD (.usda, .usdc, .usd).
 
     Formats come from the suffixes; '-' reads standard input or writes
@@ -29,15 +42,34 @@ def convert(src, dst, fmt, in_fmt, curves, keys_text, key_every, as_json):
     exact at the keys and least-squares in between. Reading a curves file
     bakes its curves, so converting it to BVH gives the motion it describes.
 
+    Many files: `keyfill convert SRC... -o OUTDIR/ --format FMT` converts
+    every SRC (files, folders recursively, globs) to OUTDIR with the same
+    relative names, skips outputs newer than their input (--force redoes
+    them), reports a bad input on its own line and goes on (exit code 1),
+    and runs on --workers local processes or a Dask --scheduler.
+
     \b
     Examples:
       keyfill convert walk.bvh walk.usda
       keyfill convert walk.usdc walk.bvh
       keyfill convert walk.bvh walk_curves.usda --curves --keys 0,10,20,30
       cat walk.bvh | keyfill convert - - --in-format bvh --format usda > walk.usda
+      keyfill convert mocap/ -o usd/ --format usdc --workers 2
     """
     from keyfill import io
     from keyfill.errors import UsageError
+
+    if outdir is not None:
+        if curves or keys_text is not None or key_every is not None or in_fmt is not None:
+            raise UsageError("-o OUTDIR converts motion files by their suffixes; --curves, --keys, --key-every "
+                             "and --in-format take one SRC and DST")
+        return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", None, workers, scheduler,
+                         connect_timeout, force, batch_size, as_json, "converted")
+    if len(paths) == 1:
+        raise click.UsageError("Missing argument 'DST' (or, for many files, -o OUTDIR/)")
+    if len(paths) != 2:
+        raise click.UsageError(f"got {len(paths)} paths: give SRC DST, or SRC... -o OUTDIR/")
+    src, dst = paths
 
     motion = io.load(src, in_fmt)
     if curves:

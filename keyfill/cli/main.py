@@ -32,6 +32,7 @@ COMMANDS = {
     "pose": "keyfill.cli.pose:pose",
     "plot": "keyfill.cli.plot:plot",
     "preview": "keyfill.cli.preview:preview",
+    "export": "keyfill.cli.export:export",
 }
 
 
@@ -110,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyfillError as e:
         if debug:
             raise
-        _error(str(e))
+        if not getattr(e, "reported", False):
+            _error(str(e))
         return e.exit_code
     except KeyboardInterrupt:
         _error("interrupted")

@@ -40,9 +40,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from keyfill.errors import DataError, ModelError, UsageError
+from keyfill.errors import ModelError, UsageError
 from keyfill.learn.lamp_features import (
-    NUM_VARIABLES, LampSequence, Normalizer, conditioning, make_batch, origin, wrap_angles,
+    NUM_VARIABLES, LampSequence, Normalizer, conditioning, make_batch, origin,
 )
 
 #: the model that ``keyfill complete --method arnn`` uses for lamp files without --model
@@ -379,45 +379,76 @@ def complete(motion, keys, options):
     ``options.exact_keys`` the small residual at the keys is removed by
     :func:`keyfill.learn.exact_keys.snap_to_keys` and its size reported.
     """
-    from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.completion import Completion
-    from keyfill.learn.modelfile import check_skeleton
-    from keyfill.characters.lamp import from_variables, is_lamp, to_variables
+    result = complete_many([(motion, keys)], options)[0]
+    if isinstance(result, Exception):
+        raise result
+    return result
 
-    if options.model is None:
-        if not is_lamp(motion.skeleton):
-            raise UsageError(
-                f"the built-in ARNN model serves the hopping lamp (joints base, leg, neck, head); this motion has "
-                f"joints {', '.join(motion.skeleton.names[:6])}{', ...' if motion.num_joints > 6 else ''}; "
-                f"give --model with a model trained for it"
-            )
-        path = DEFAULT_MODEL
-    else:
-        path = Path(options.model)
-    model = load_cached(path)
-    check_skeleton(model.config, motion.skeleton, path)
-    k = keys.frames
-    try:
-        key_values = wrap_angles(to_variables(motion.frames(k)))  # only the key frames are read
-    except DataError as e:
-        raise DataError(f"the ARNN completes lamp motions only: {e}") from None
-    values = np.zeros((motion.num_frames, key_values.shape[1]))
-    values[k] = key_values
-    span = model.predict([LampSequence(values, k)])[0]
-    out = np.empty_like(values)
-    out[k[0]: k[-1] + 1] = span
-    out[: k[0]] = span[0]  # hold; the exact-keys correction then moves them with their key
-    out[k[-1] + 1:] = span[-1]
-    positions = motion.positions.copy()
-    positions[:, 0, :2] = out[:, :2]
-    pred = motion.replace(rotations=from_variables(out, motion.fps).rotations, positions=positions, keys=keys)
-    residual = np.abs(wrap_angles(span[k - k[0]] - key_values)).max(axis=0)  # angles modulo a turn
-    residual = {"position_m": float(residual[:2].max()), "angle_rad": float(residual[2:].max())}
-    label = f"built-in {DEFAULT_MODEL.name}" if options.model is None else str(path)
-    info = {"model": label, "arch": model.arch, "exact_keys": bool(options.exact_keys)}
-    if options.exact_keys:
-        pred, _ = snap_to_keys(pred, motion, keys)
-        info["key_residual_removed"] = residual
-    else:
-        info["key_residual_left"] = residual
-    return Completion(pred, info)
+
+def complete_many(jobs, options):
+    """:func:`complete` for many ``(motion, keys)``: the model is loaded once and runs them as one batch.
+
+    Returns a :class:`~keyfill.learn.completion.Completion` or the
+    :class:`~keyfill.errors.KeyfillError` of each job. One job's result
+    depends on the jobs batched with it only in float32 rounding (about 1e-7).
+    """
+    from keyfill.learn.lamp_features import complete_lamp_many
+
+    path = DEFAULT_MODEL if options.model is None else Path(options.model)
+    return complete_lamp_many(jobs, options, lambda: load_cached(path), DEFAULT_MODEL.name)
+
+
+# --- ONNX export ------------------------------------------------------------------------------------
+
+#: what a lamp step graph takes and gives (written into its metadata; docs/onnx.md explains the loop)
+STEP_CONTRACT = {
+    "graph": "one step of the autoregressive loop: frame t from frame t-1, the keys around t and a state",
+    "inputs": {
+        "y_prev": ["batch", 6, "float32", "encoded frame t-1 (frame 0: the first key)"],
+        "key_before": ["batch", 6, "float32", "encoded key X_K at or before t-1 (the last key before t)"],
+        "key_after": ["batch", 6, "float32", "encoded key X_K+1 at or after t"],
+        "t_rel": ["batch", 1, "float32", "(t - T_K) / (T_K+1 - T_K), 1 on a key's own frame"],
+        "state": ["batch", 2, "state_size", "float32", "recurrent state: zeros at t = 1, then state_out"],
+    },
+    "outputs": {
+        "y": ["batch", 6, "float32", "encoded frame t"],
+        "state_out": ["batch", 2, "state_size", "float32", "the state for frame t+1"],
+    },
+    "encoding": "variables base_x, base_y (m), base/leg/neck/head angle (rad); relative: base_x minus the first "
+                "key's, angles less the whole turns of the first key's; then (v - normalizer.mean) / normalizer.std",
+}
+
+
+class StepGraph(nn.Module):
+    """One step of a lamp network with a packed state ``(B, 2, H)``: what ``keyfill export`` writes."""
+
+    def __init__(self, net: Completer):
+        super().__init__()
+        self.net = net.eval()
+
+    def forward(self, y_prev, key_before, key_after, t_rel, state):
+        cond = self.net.key_features(key_before, key_after, t_rel)
+        if isinstance(self.net, NoMemory):
+            y, _ = self.net.step(y_prev, cond, None, None)
+            return y, state + 0.0
+        y, (h1, h2) = self.net.step(y_prev, cond, (state[:, 0], state[:, 1]), None)
+        return y, torch.stack([h1, h2], dim=1)
+
+
+def state_size(net: Completer) -> int:
+    """``H`` of the packed state ``(B, 2, H)`` of :class:`StepGraph` (1 for the memoryless network)."""
+    return 1 if isinstance(net, NoMemory) else net.gru1.hidden_size
+
+
+def export_onnx(model: LampModel, folder, path) -> None:
+    """Write ``model`` (loaded from the model folder ``folder``) as a step graph to ``path`` (atomically)."""
+    from keyfill.learn.modelfile import read_config
+    from keyfill.learn.onnx import export_module, metadata
+
+    H = state_size(model.net)
+    args = (torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES),
+            torch.ones(2, 1), torch.zeros(2, 2, H))
+    batch = torch.export.Dim("batch")
+    contract = {**STEP_CONTRACT, "state_size": H}
+    export_module(StepGraph(model.net), args, path, list(STEP_CONTRACT["inputs"]), list(STEP_CONTRACT["outputs"]),
+                  tuple({0: batch} for _ in STEP_CONTRACT["inputs"]), metadata(KIND, folder, read_config(folder), contract))

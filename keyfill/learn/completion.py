@@ -22,12 +22,16 @@ class CompleteOptions:
         exact_keys: make frames at keys equal the input keys exactly.
         seed: seed for any randomness (e.g. dropout sampling, GAN noise).
         device: torch device for learned methods (``"cpu"``, ``"cuda"``).
+        runtime: ``"torch"``, ``"onnx"`` (an exported graph through onnxruntime, no torch) or ``"auto"``
+            (onnx when onnxruntime is installed and the model folder holds an exported graph);
+            see :mod:`keyfill.learn.onnx`.
     """
 
     model: str | None = None
     exact_keys: bool = True
     seed: int = 0
     device: str = "cpu"
+    runtime: str = "auto"
 
 
 @dataclass

@@ -183,10 +183,9 @@ class Batch:
         return Batch(self.frames[index, :T], self.is_key[index, :T], self.valid[index, :T], lengths)
 
 
-def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
-    """Encode and pad ``sequences`` (each cut to its first..last key) into one :class:`Batch`."""
-    import torch
-
+def batch_arrays(sequences: list[LampSequence], normalizer: Normalizer):
+    """Encode and pad ``sequences`` (each cut to its first..last key): numpy ``(frames (B, T, 6) float32,
+    is_key (B, T), valid (B, T), lengths (B,) int64)``, the arrays of a :class:`Batch`."""
     if not sequences:
         raise DataError("no sequences to batch")
     T = max(int(s.keys[-1] - s.keys[0] + 1) for s in sequences)
@@ -199,13 +198,18 @@ def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
         frames[b, :n] = normalizer.encode(s.span)
         is_key[b, s.keys - s.keys[0]] = True
         valid[b, :n] = True
-    lengths = valid.sum(axis=1)
-    return Batch(torch.from_numpy(frames), torch.from_numpy(is_key), torch.from_numpy(valid),
-                 torch.from_numpy(lengths.astype(np.int64)))
+    return frames, is_key, valid, valid.sum(axis=1).astype(np.int64)
+
+
+def make_batch(sequences: list[LampSequence], normalizer: Normalizer) -> Batch:
+    """Encode and pad ``sequences`` (each cut to its first..last key) into one :class:`Batch`."""
+    import torch
+
+    return Batch(*(torch.from_numpy(a) for a in batch_arrays(sequences, normalizer)))
 
 
 def conditioning(frames, is_key):
-    """The key inputs for frames ``1 .. T-1``.
+    """The key inputs for frames ``1 .. T-1`` (numpy arrays or torch tensors).
 
     Args:
         frames: ``(B, T, 6)`` frames (only those at keys are read).
@@ -217,6 +221,8 @@ def conditioning(frames, is_key):
         ``(t - T_K) / (T_{K+1} - T_K)``. Past a sequence's last key (padding) the
         last key is used for both and ``t_rel`` is 1.
     """
+    if isinstance(frames, np.ndarray):
+        return _conditioning_np(frames, is_key)
     import torch
 
     B, T = is_key.shape
@@ -232,6 +238,20 @@ def conditioning(frames, is_key):
     span = (next_idx - prev_idx).clamp(min=1).to(frames.dtype)
     t_rel = torch.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).to(frames.dtype) / span,
                         torch.ones_like(span))
+    return gather(prev_idx), gather(next_idx), t_rel[..., None], is_key[:, 1:]
+
+
+def _conditioning_np(frames: np.ndarray, is_key: np.ndarray):
+    """:func:`conditioning` in numpy, step for step (the runtime of exported lamp models imports no torch)."""
+    B, T = is_key.shape
+    t = np.broadcast_to(np.arange(T), (B, T))
+    prev_idx = np.maximum.accumulate(np.where(is_key, t, -1), axis=1)[:, :-1]
+    at_or_after = np.minimum.accumulate(np.where(is_key, t, T)[:, ::-1], axis=1)[:, ::-1][:, 1:]
+    next_idx = np.where(at_or_after >= T, prev_idx, at_or_after)
+    gather = lambda idx: np.take_along_axis(frames, idx[..., None], axis=1)  # noqa: E731
+    span = np.maximum(next_idx - prev_idx, 1).astype(frames.dtype)
+    t_rel = np.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).astype(frames.dtype) / span,
+                     np.ones_like(span))
     return gather(prev_idx), gather(next_idx), t_rel[..., None], is_key[:, 1:]
 
 
@@ -255,3 +275,69 @@ def delete_keys(is_key, valid, generator, max_deleted: int = 2, min_deleted: int
     score = torch.where(interior, score, torch.full_like(score, 2.0))
     rank = torch.argsort(torch.argsort(score, dim=1), dim=1)
     return is_key & ~(interior & (rank < count[:, None]))
+
+
+def complete_lamp_many(jobs, options, get_model, builtin_name: str):
+    """Complete lamp motions ``[(motion, keys), ...]`` with a lamp model: what ``complete --method arnn``
+    does around the network, for any runtime (torch or onnxruntime) and without torch.
+
+    Args:
+        options: :class:`~keyfill.learn.completion.CompleteOptions` (``model`` None: the built-in model).
+        get_model: ``() -> model`` with ``predict(sequences)``, ``config`` and ``arch`` (called once, if needed).
+        builtin_name: the built-in model's name, for the report.
+
+    Returns, per job, a :class:`~keyfill.learn.completion.Completion` or the
+    :class:`~keyfill.errors.KeyfillError` that stopped it. All jobs that reach
+    the network go through one ``predict`` call (one batch).
+    """
+    from keyfill.characters.lamp import from_variables, is_lamp, to_variables
+    from keyfill.errors import KeyfillError, UsageError
+    from keyfill.learn.completion import Completion
+    from keyfill.learn.exact_keys import snap_to_keys
+    from keyfill.learn.modelfile import check_skeleton
+
+    results: list = [None] * len(jobs)
+    model = None
+    ready = []
+    for i, (motion, keys) in enumerate(jobs):
+        try:
+            if options.model is None and not is_lamp(motion.skeleton):
+                raise UsageError(
+                    f"the built-in ARNN model serves the hopping lamp (joints base, leg, neck, head); this motion has "
+                    f"joints {', '.join(motion.skeleton.names[:6])}{', ...' if motion.num_joints > 6 else ''}; "
+                    f"give --model with a model trained for it"
+                )
+            if model is None:
+                model = get_model()
+            check_skeleton(model.config, motion.skeleton, model.path)
+            k = keys.frames
+            try:
+                key_values = wrap_angles(to_variables(motion.frames(k)))  # only the key frames are read
+            except DataError as e:
+                raise DataError(f"the ARNN completes lamp motions only: {e}") from None
+            values = np.zeros((motion.num_frames, key_values.shape[1]))
+            values[k] = key_values
+            ready.append((i, motion, keys, key_values, LampSequence(values, k)))
+        except KeyfillError as e:
+            results[i] = e
+    spans = model.predict([r[-1] for r in ready]) if ready else []
+    for (i, motion, keys, key_values, _), span in zip(ready, spans):
+        k = keys.frames
+        out = np.empty((motion.num_frames, NUM_VARIABLES))
+        out[k[0]: k[-1] + 1] = span
+        out[: k[0]] = span[0]  # hold; the exact-keys correction then moves them with their key
+        out[k[-1] + 1:] = span[-1]
+        positions = motion.positions.copy()
+        positions[:, 0, :2] = out[:, :2]
+        pred = motion.replace(rotations=from_variables(out, motion.fps).rotations, positions=positions, keys=keys)
+        residual = np.abs(wrap_angles(span[k - k[0]] - key_values)).max(axis=0)  # angles modulo a turn
+        residual = {"position_m": float(residual[:2].max()), "angle_rad": float(residual[2:].max())}
+        label = f"built-in {builtin_name}" if options.model is None else str(options.model)
+        info = {"model": label, "arch": model.arch, "exact_keys": bool(options.exact_keys)}
+        if options.exact_keys:
+            pred, _ = snap_to_keys(pred, motion, keys)
+            info["key_residual_removed"] = residual
+        else:
+            info["key_residual_left"] = residual
+        results[i] = Completion(pred, info)
+    return results

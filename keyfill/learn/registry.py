@@ -26,7 +26,7 @@ import importlib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from keyfill.errors import ModelError, UsageError
+from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.learn.completion import CompleteOptions, Completion
 from keyfill.motion import Keys, Motion
 
@@ -42,6 +42,10 @@ class Method:
         module: the learned method's module (``load``, ``DEFAULT_MODEL``); None for splines.
         protocol: the benchmark protocol that scores its models (``"lafan1"``, ``"keys"``).
         training: the module whose ``TRAINING`` trains it (``keyfill train NAME``); None if not trainable.
+        export: ``"module:function"`` writing a loaded model as an ONNX graph,
+            ``export_onnx(model, folder, path)`` (``keyfill export``); None if not exportable.
+        onnx: the module that completes with an exported graph and no torch:
+            ``complete_graph(jobs, options, graph)`` (:mod:`keyfill.learn.onnx`).
     """
 
     name: str
@@ -50,6 +54,8 @@ class Method:
     module: str | None = None
     protocol: str | None = None
     training: str | None = None
+    export: str | None = None
+    onnx: str | None = None
 
     @property
     def learned(self) -> bool:
@@ -83,10 +89,12 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("cubic", "C1 cubic splines (log-map cubic for rotations)", "keyfill.learn.baselines:complete_cubic"),
     Method("arnn", "keyframe-conditioned recurrent network for the hopping lamp (Zhang & van de Panne 2018)",
            "keyfill.learn.arnn:complete", module="keyfill.learn.arnn", protocol="keys",
-           training="keyfill.learn.train_arnn"),
+           training="keyfill.learn.train_arnn", export="keyfill.learn.arnn:export_onnx",
+           onnx="keyfill.learn.arnn_onnx"),
     Method("transformer", "BERT-style motion-completion transformer (Duan et al. 2021)",
            "keyfill.learn.transformer:complete", module="keyfill.learn.transformer", protocol="lafan1",
-           training="keyfill.learn.train_transformer"),
+           training="keyfill.learn.train_transformer", export="keyfill.learn.transformer:export_onnx",
+           onnx="keyfill.learn.transformer"),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
            training="keyfill.learn.gan.task"),
@@ -103,6 +111,11 @@ def get(name: str) -> Method:
 def learned() -> list[Method]:
     """The learned methods, in registry order."""
     return [m for m in METHODS.values() if m.learned]
+
+
+def exportable() -> list[Method]:
+    """The methods ``keyfill export`` can write as ONNX graphs."""
+    return [m for m in METHODS.values() if m.export is not None]
 
 
 def trainable() -> list[Method]:
@@ -137,18 +150,82 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
     return str(name_or_path), method, method.implementation().load(name_or_path, device)
 
 
+def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
+    """``options`` once its ``--model`` is known to fit ``m`` (a :class:`UsageError` otherwise); reads no weights."""
+    if not m.learned and options.model is not None:
+        raise UsageError(f"--model applies to learned methods, not to {m.name!r}")
+    from keyfill.learn.onnx import is_graph
+
+    if options.model is not None and not is_graph(options.model):
+        kind = method_for_model(options.model).name
+        if kind != m.name:
+            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {m.name!r}; complete with --method {kind}")
+        options = replace(options, model=str(options.model))
+    return options
+
+
 def complete(motion: Motion, keys: Keys, method: str = "cubic", options: CompleteOptions | None = None) -> Completion:
     """Fill the frames between ``keys`` of ``motion`` with ``method``."""
     options = options or CompleteOptions()
     m = get(method)
     keys = keys.check(motion.num_frames, min_keys=2)
-    if not m.learned and options.model is not None:
-        raise UsageError(f"--model applies to learned methods, not to {method!r}")
-    if options.model is not None:
-        kind = method_for_model(options.model).name
-        if kind != method:
-            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {method!r}; complete with --method {kind}")
-        options = replace(options, model=str(options.model))
-    result = m.function()(motion, keys, options)
+    options = checked_options(m, options)
+    graph = _graph(m, options)
+    if graph is not None:
+        result = importlib.import_module(m.onnx).complete_graph([(motion, keys)], options, graph)[0]
+        if isinstance(result, KeyfillError):
+            raise result
+    else:
+        result = m.function()(motion, keys, options)
     result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
     return result
+
+
+def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
+                  options: CompleteOptions | None = None) -> list[Completion | KeyfillError]:
+    """:func:`complete` for many ``(motion, keys)`` at once: a :class:`Completion` or the error, per job.
+
+    A method whose module has ``complete_many(jobs, options)`` (same return)
+    completes the jobs together (the ARNN runs them as one batch through its
+    network); the others are completed one by one. The model is loaded once.
+    An error of one job (bad keys, another skeleton) is that job's result;
+    an error of the method or model (a model of another kind) is raised.
+    """
+    options = options or CompleteOptions()
+    m = get(method)
+    options = checked_options(m, options)
+    results: list = [None] * len(jobs)
+    ready = []
+    for i, (motion, keys) in enumerate(jobs):
+        try:
+            ready.append((i, motion, keys.check(motion.num_frames, min_keys=2)))
+        except KeyfillError as e:
+            results[i] = e
+    graph = _graph(m, options)
+    many = getattr(m.implementation(), "complete_many", None) if m.learned and graph is None else None
+    if graph is not None:
+        outs = importlib.import_module(m.onnx).complete_graph(
+            [(motion, keys) for _, motion, keys in ready], options, graph) if ready else []
+    elif many is not None:
+        outs = many([(motion, keys) for _, motion, keys in ready], options) if ready else []
+    else:
+        outs = [_one(m.function(), motion, keys, options) for _, motion, keys in ready]
+    for (i, motion, keys), out in zip(ready, outs):
+        if isinstance(out, Completion):
+            out.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **out.info}
+        results[i] = out
+    return results
+
+
+def _graph(m: Method, options: CompleteOptions):
+    """The exported graph that completes for ``m`` under ``options.runtime``, or None (the torch path)."""
+    from keyfill.learn.onnx import select
+
+    return select(m, options.model, options.runtime)
+
+
+def _one(function, motion, keys, options):
+    try:
+        return function(motion, keys, options)
+    except KeyfillError as e:
+        return e

@@ -45,6 +45,7 @@ refuses anything else without executing code from it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import os
 from dataclasses import dataclass, field
@@ -352,7 +353,8 @@ class CompletionModel:
     info: dict = field(default_factory=dict)
 
     def to(self, device: str) -> CompletionModel:
-        self.network.to(device)
+        if not isinstance(self.network, GraphNetwork):
+            self.network.to(device)
         return self
 
     @property
@@ -371,8 +373,6 @@ class CompletionModel:
             ``(quats, root)`` of all ``T`` frames; frames outside the keys hold
             the nearest key.
         """
-        import torch
-
         keys = np.asarray(keys, dtype=np.int64)
         T = quats.shape[1]
         kinds = frame_kinds(T, keys)
@@ -382,12 +382,17 @@ class CompletionModel:
         turn, shift = canonical_transform(q, r, keys, self.config.facing_axis, up)
         q, r = apply_transform(q, r, turn, shift)
         q, r = interpolation(None, q, r, keys)
-        dev = self.device
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
-        with torch.inference_mode():
-            k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
-            y = self.network(torch.as_tensor(x, dtype=torch.float32, device=dev), k)
-        pq, pr = self.features.decode(y.double().cpu().numpy())
+        if isinstance(self.network, GraphNetwork):
+            y = self.network(x, np.broadcast_to(kinds, (len(q), T)))
+        else:
+            import torch
+
+            dev = self.device
+            with torch.inference_mode():
+                k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
+                y = self.network(torch.as_tensor(x, dtype=torch.float32, device=dev), k).double().cpu().numpy()
+        pq, pr = self.features.decode(y)
         outside = kinds == IGNORED
         pq[:, outside], pr[:, outside] = q[:, outside], r[:, outside]
         pq, pr = apply_transform(pq, pr, turn, shift, inverse=True)
@@ -428,12 +433,26 @@ class CompletionModel:
         save_model(path, KIND, self.network.state_dict(), self.model_config())
 
 
+def _features(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std) -> Features:
+    std = np.where(np.asarray(pos_std) > 1e-6, pos_std, 1.0)
+    return Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
+                    np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
+
+
 def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: bool, info=None) -> CompletionModel:
     """A freshly initialised :class:`CompletionModel` (weights from torch's current generator)."""
-    std = np.where(np.asarray(pos_std) > 1e-6, pos_std, 1.0)
-    feat = Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
-                    np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
+    feat = _features(skeleton, cfg, pos_mean, pos_std)
     return CompletionModel(cfg, skeleton, feat, build_network(feat.size, cfg), folded, dict(info or {}))
+
+
+def _config_parts(config: dict):
+    """``(ModelConfig, Skeleton, statistics, folded, training)`` of a model's ``config.json`` content."""
+    cfg = ModelConfig(**config["architecture"])
+    s = config["skeleton"]
+    skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
+                    channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
+                    meters_per_unit=s["meters_per_unit"])
+    return cfg, skel, config["statistics"], bool(config["folded_root"]), config.get("training")
 
 
 def torch_device(name: str):
@@ -458,14 +477,9 @@ def load(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
     dev = torch_device(device)
     tensors, config = modelfile.load_model(path, kind=KIND)
     try:
-        cfg = ModelConfig(**config["architecture"])
-        s = config["skeleton"]
-        skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
-                        channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
-                        meters_per_unit=s["meters_per_unit"])
-        st = config["statistics"]
+        cfg, skel, st, folded, training = _config_parts(config)
         model = modelfile.build_for_loading(lambda: new_model(skel, cfg, st["pos_mean"], st["pos_std"],
-                                                              bool(config["folded_root"]), config.get("training")))
+                                                              folded, training))
     except (KeyError, TypeError, ValueError, KeyfillError) as e:
         raise ModelError(f"{modelfile.model_folder(path)}: damaged transformer model config ({e})") from None
     modelfile.load_state(model.network, tensors, path)
@@ -505,58 +519,209 @@ def complete_motion(model: CompletionModel, motion, keys) -> tuple[object, dict]
 
     Reads only the key frames. Frames before the first key and after the last
     hold that key. Long key ranges are cut into spans that fit the model's
-    window (:func:`spans`). Returns ``(motion, info)``; keys are *not* yet
-    exact (see :func:`keyfill.learn.exact_keys.snap_to_keys`).
+    window (:func:`spans`), each completed on its own. Returns ``(motion,
+    info)``; keys are *not* yet exact (see :func:`keyfill.learn.exact_keys.snap_to_keys`).
+    """
+    result = complete_motions(model, [(motion, keys)], batch=False)[0]
+    if isinstance(result, Exception):
+        raise result
+    return result
+
+
+#: most windows sent through the network at once by :func:`complete_motions`
+MAX_WINDOWS = 64
+
+
+def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
+    """:func:`complete_motion` for many ``(motion, keys)``: ``(motion, info)`` or the error, per job.
+
+    With ``batch``, windows of the same length and key layout (from any of the
+    motions: clips keyed every N frames share most) go through the network
+    together, up to :data:`MAX_WINDOWS` at a time; a window's result then
+    depends on its batch in float32 rounding only. Without, every window is
+    completed alone, in order (what one ``keyfill complete`` does).
     """
     from keyfill.learn.baselines import linear
     from keyfill.learn.corpus import bone_difference, fold_root
     from keyfill.motion import Keys
 
-    k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
-    lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
-    q, p = lin.rotations, lin.positions
-    skel = motion.skeleton
-    if model.folded:
-        if len(skel.children(0)) != 1:
-            raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
-                             f"{len(skel.children(0))} children")
-        q, p = fold_root(q, p, skel.parents)
-    here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
-    diff = bone_difference(model.skeleton, here)
-    if diff is not None:
-        raise ModelError(f"the model serves another skeleton: {diff}")
-    q = R.quat_continuous_np(q, axis=0)
-    out_q, out_r = q.copy(), p[:, 0].copy()
-    parts = spans(k, model.config.max_frames)
-    for a, b in parts:
-        inside = k[(k >= a) & (k <= b)] - a
-        wq, wr = model.complete_windows(q[None, a : b + 1], out_r[None, a : b + 1], inside)
-        out_q[a + 1 : b], out_r[a + 1 : b] = wq[0, 1:-1], wr[0, 1:-1]
-    pos = p.copy()
-    pos[:, 0] = out_r
-    if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
-        c = skel.children(0)[0]
-        top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
-        inv = R.quat_conjugate(top_q)
-        out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
-        pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
-        out_q[:, 0], pos[:, 0] = top_q, top_p
-    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
-    return result, {"spans": len(parts), "max_frames": model.config.max_frames}
+    results: list = [None] * len(jobs)
+    prepared = {}
+    for j, (motion, keys) in enumerate(jobs):
+        try:
+            k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
+            lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
+            q, p = lin.rotations, lin.positions
+            skel = motion.skeleton
+            if model.folded:
+                if len(skel.children(0)) != 1:
+                    raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
+                                     f"{len(skel.children(0))} children")
+                q, p = fold_root(q, p, skel.parents)
+            here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
+            diff = bone_difference(model.skeleton, here)
+            if diff is not None:
+                raise ModelError(f"the model serves another skeleton: {diff}")
+            q = R.quat_continuous_np(q, axis=0)
+            parts = spans(k, model.config.max_frames)
+            prepared[j] = (k, lin, q, p, q.copy(), p[:, 0].copy(), parts)
+        except KeyfillError as e:
+            results[j] = e
+    # windows: (job, a, b, key frames inside); spans of one motion never overlap but at their boundary keys
+    windows = [(j, a, b, tuple(prep[0][(prep[0] >= a) & (prep[0] <= b)] - a))
+               for j, prep in prepared.items() for a, b in prep[6]]
+    if batch:
+        groups: dict = {}
+        for w in windows:
+            groups.setdefault((w[2] - w[1], w[3]), []).append(w)
+        runs = [g[i: i + MAX_WINDOWS] for g in groups.values() for i in range(0, len(g), MAX_WINDOWS)]
+    else:
+        runs = [[w] for w in windows]
+    for run in runs:
+        wq, wr = model.complete_windows(np.stack([prepared[j][2][a: b + 1] for j, a, b, _ in run]),
+                                        np.stack([prepared[j][5][a: b + 1] for j, a, b, _ in run]),
+                                        np.asarray(run[0][3]))
+        for i, (j, a, b, _) in enumerate(run):
+            out_q, out_r = prepared[j][4], prepared[j][5]
+            out_q[a + 1: b], out_r[a + 1: b] = wq[i, 1:-1], wr[i, 1:-1]
+    for j, (k, lin, q, p, out_q, out_r, parts) in prepared.items():
+        motion, skel = jobs[j][0], jobs[j][0].skeleton
+        pos = p.copy()
+        pos[:, 0] = out_r
+        if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
+            c = skel.children(0)[0]
+            top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
+            inv = R.quat_conjugate(top_q)
+            out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
+            pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
+            out_q[:, 0], pos[:, 0] = top_q, top_p
+        result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
+        results[j] = (result, {"spans": len(parts), "max_frames": model.config.max_frames})
+    return results
 
 
 def complete(motion, keys, options):
     """``keyfill complete --method transformer``: see :func:`complete_motion`."""
     from keyfill.errors import UsageError
-    from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.completion import Completion
 
     if options.model is None:
         raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    model = load(options.model, options.device)
-    filled, info = complete_motion(model, motion, keys)
+    return _complete_with(load_cached(options.model, options.device), motion, keys, options)
+
+
+def _complete_with(model: CompletionModel, motion, keys, options):
+    return _finish(complete_motion(model, motion, keys), motion, keys, options)
+
+
+def _finish(completed, motion, keys, options):
+    """The :class:`Completion` of ``completed`` = ``(filled motion, info)`` (keys made exact if asked)."""
+    from keyfill.learn.completion import Completion
+    from keyfill.learn.exact_keys import snap_to_keys
+
+    filled, info = completed
     info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
     return Completion(filled, info)
+
+
+def _complete_many_with(model: CompletionModel, jobs, options, extra=None) -> list:
+    out = []
+    for (motion, keys), done in zip(jobs, complete_motions(model, jobs, batch=True)):
+        if isinstance(done, KeyfillError):
+            out.append(done)
+            continue
+        result = _finish(done, motion, keys, options)
+        result.info.update(extra or {})
+        out.append(result)
+    return out
+
+
+def complete_many(jobs, options):
+    """:func:`complete` for many ``(motion, keys)``: the model loaded once, windows of the same length and
+    key layout batched (:func:`complete_motions`); a Completion or the error, per job."""
+    from keyfill.errors import UsageError
+
+    if options.model is None:
+        raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
+    return _complete_many_with(load_cached(options.model, options.device), jobs, options)
+
+
+def load_cached(path, device: str = "cpu") -> CompletionModel:
+    """:func:`load`, remembering the last few models while their files stay unchanged (a batch loads once)."""
+    from keyfill.learn.modelfile import CONFIG, WEIGHTS, model_folder
+
+    folder = model_folder(path)
+    stamp = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None
+                  for f in (folder / CONFIG, folder / WEIGHTS))
+    return _load_cached(str(path), device, stamp)
+
+
+@functools.lru_cache(maxsize=4)
+def _load_cached(path: str, device: str, stamp: tuple) -> CompletionModel:
+    return load(path, device)
+
+
+# --- ONNX: export (torch) and the graph runtime (no torch) ---------------------------------------------
+
+#: what a transformer graph takes and gives (written into its metadata; docs/onnx.md)
+CONTRACT = {
+    "graph": "the whole network: pre-filled, encoded frames of windows and the kind of each frame -> "
+             "completed encoded frames",
+    "inputs": {
+        "features": ["batch", "frames", "feature_size", "float32",
+                     "frames in the canonical frame, unknown frames pre-filled by LERP/SLERP, encoded by Features"],
+        "kinds": ["batch", "frames", "int64", "0 key, 1 unknown (to fill), 2 ignored (outside the keys)"],
+    },
+    "outputs": {"completed": ["batch", "frames", "feature_size", "float32", "completed encoded frames"]},
+}
+
+
+class GraphNetwork:
+    """The transformer network as an exported graph: ``(x (B, T, F) float64, kinds (B, T)) -> (B, T, F) float64``."""
+
+    def __init__(self, graph):
+        self.graph = graph
+
+    def __call__(self, x: np.ndarray, kinds: np.ndarray) -> np.ndarray:
+        y = self.graph.run({"features": np.ascontiguousarray(x, dtype=np.float32),
+                            "kinds": np.ascontiguousarray(kinds, dtype=np.int64)})[0]
+        return y.astype(np.float64)
+
+
+def model_from_graph(graph) -> CompletionModel:
+    """A :class:`CompletionModel` whose network is an exported graph (:class:`keyfill.learn.onnx.Graph`)."""
+    model = getattr(graph, "_transformer_model", None)
+    if model is None:
+        try:
+            cfg, skel, st, folded, training = _config_parts(graph.config)
+            model = CompletionModel(cfg, skel, _features(skel, cfg, st["pos_mean"], st["pos_std"]),
+                                    GraphNetwork(graph), folded, dict(training or {}))
+        except (KeyError, TypeError, ValueError, KeyfillError) as e:
+            raise ModelError(f"{graph.path}: damaged transformer model metadata ({e})") from None
+        graph._transformer_model = model
+    return model
+
+
+def complete_graph(jobs, options, graph):
+    """``keyfill complete --method transformer`` through an exported graph: a Completion or the error, per job."""
+    return _complete_many_with(model_from_graph(graph), jobs, options, {"runtime": "onnx"})
+
+
+def export_onnx(model: CompletionModel, folder, path) -> None:
+    """Write ``model``'s network (loaded from the model folder ``folder``) as a graph to ``path`` (atomically).
+
+    Batch and frame counts are free (frames up to the model's window).
+    """
+    import torch
+
+    from keyfill.learn.modelfile import read_config
+    from keyfill.learn.onnx import export_module, metadata
+
+    T = min(30, model.config.max_frames)
+    args = (torch.zeros(2, T, model.features.size), torch.zeros(2, T, dtype=torch.int64))
+    batch, frames = torch.export.Dim("batch"), torch.export.Dim("frames", min=2, max=model.config.max_frames)
+    contract = {**CONTRACT, "feature_size": model.features.size, "max_frames": model.config.max_frames}
+    export_module(model.network.cpu(), args, path, list(CONTRACT["inputs"]), list(CONTRACT["outputs"]),
+                  ({0: batch, 1: frames}, {0: batch, 1: frames}), metadata(KIND, folder, read_config(folder), contract))

@@ -16,33 +16,22 @@ order and runs that finished beyond the last needed one are dropped.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import json
-import multiprocessing
 import os
-import signal
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from keyfill.errors import DataError, KeyfillError, UsageError
-from keyfill.motion import Motion
+from keyfill.errors import DataError, UsageError
 from keyfill.io import hops as ds
+from keyfill.motion import Motion
+from keyfill.parallel import executor as make_executor
 from keyfill.sim.extract import extract
 from keyfill.sim.search import anneal, run_generator
 from keyfill.sim.settings import DEFAULT_SETTINGS, Settings
 
 MAX_SEED = 2**63 - 1
-
-
-def available_cpus() -> int:
-    """CPU cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 @dataclass(frozen=True)
@@ -216,104 +205,6 @@ def _rewrite(folder: Path, lines: dict[int, dict], records: dict[int, dict]) -> 
             tmp.write_text("".join(json.dumps(items[r], sort_keys=True) + "\n" for r in sorted(items)), encoding="utf-8")
 
 
-# --- executors ------------------------------------------------------------------------------------
-
-
-class _Inline:
-    """Runs each job in this process when submitted (``workers=1``)."""
-
-    def submit(self, fn, *args):
-        fut: cf.Future = cf.Future()
-        try:
-            fut.set_result(fn(*args))
-        except BaseException as e:  # delivered through the future, like a pool would
-            if isinstance(e, KeyboardInterrupt):
-                raise
-            fut.set_exception(e)
-        return fut
-
-    def wait(self, futures):
-        return set(futures)
-
-    def close(self, cancel: bool = False):
-        pass
-
-
-def _worker_init() -> None:
-    """Worker processes leave Ctrl-C to the parent, which stops them, and end when the parent dies
-    (killed outright, it cannot stop them)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    parent = os.getppid()
-
-    def watch():
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True).start()
-
-
-class _Processes:
-    """Local worker processes (spawned, so they never inherit the parent's threads or state)."""
-
-    def __init__(self, workers: int):
-        self.pool = cf.ProcessPoolExecutor(
-            max_workers=workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
-        )
-
-    def submit(self, fn, *args):
-        return self.pool.submit(fn, *args)
-
-    def wait(self, futures):
-        return cf.wait(futures, return_when=cf.FIRST_COMPLETED).done
-
-    def close(self, cancel: bool = False):
-        if cancel:
-            for proc in list(getattr(self.pool, "_processes", {}).values()):
-                proc.terminate()
-        self.pool.shutdown(wait=True, cancel_futures=cancel)
-
-
-class _Dask:
-    """A Dask distributed cluster."""
-
-    def __init__(self, address: str, timeout: float):
-        import logging
-
-        from distributed import Client
-
-        # A refused connection is reported by our own message, not by distributed's retry warnings.
-        log = logging.getLogger("distributed")
-        level = log.level
-        log.setLevel(logging.CRITICAL)
-        try:
-            self.client = Client(address, timeout=f"{timeout}s", set_as_default=False)
-        except (OSError, TimeoutError) as e:
-            raise KeyfillError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({e})") from None
-        except ValueError as e:
-            raise UsageError(f"--scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})") from None
-        finally:
-            log.setLevel(level)
-        from distributed import as_completed
-
-        self.finished = as_completed(loop=self.client.loop)
-
-    @property
-    def threads(self) -> int:
-        return max(1, sum(self.client.nthreads().values()))
-
-    def submit(self, fn, *args):
-        fut = self.client.submit(fn, *args, pure=False)
-        self.finished.add(fut)
-        return fut
-
-    def wait(self, futures):
-        return {next(self.finished)}
-
-    def close(self, cancel: bool = False):
-        self.client.close()
-
-
 # --- the build ------------------------------------------------------------------------------------
 
 
@@ -383,13 +274,11 @@ def simulate(
     config = config_of(job, fmt)
     max_runs = 20 * count + 20 if max_runs is None else max_runs
     # Reach the cluster before touching the folder: an unreachable scheduler leaves nothing behind.
-    executor = _Dask(scheduler, connect_timeout) if scheduler else None
+    executor, window = make_executor(workers, scheduler, connect_timeout) if scheduler else (None, None)
     try:
         prepare_folder(folder, config, force)
         if executor is None:
-            workers = workers or available_cpus()
-            executor = _Processes(workers) if workers > 1 else _Inline()
-        window = workers or executor.threads
+            executor, window = make_executor(workers)
         summary = _build(folder, job, fmt, count, max_runs, executor, window, on_run)
     except BaseException:
         if executor is not None:

@@ -1,0 +1,154 @@
+"""Where independent jobs run: in this process, in local worker processes, or on a Dask cluster.
+
+``keyfill simulate`` (:mod:`keyfill.sim.runner`) and batch completion and
+conversion (:mod:`keyfill.batch`) hand their jobs to one of three executors
+with the same small interface:
+
+* ``submit(fn, *args) -> future``: start ``fn(*args)`` (``fn`` must be a
+  module-level function, so spawned processes and Dask workers can import it);
+* ``wait(futures) -> set``: at least one finished future of ``futures``;
+* ``close(cancel=False)``: stop; with ``cancel`` also the jobs in flight.
+
+:func:`executor` picks one: a Dask cluster for ``scheduler``, spawned local
+processes for ``workers > 1``, this process otherwise. Jobs must not depend on
+where they run, so results are the same bytes on each.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+import signal
+import threading
+import time
+
+from keyfill.errors import KeyfillError, UsageError
+
+
+def available_cpus() -> int:
+    """CPU cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+class Inline:
+    """Runs each job in this process when submitted (``workers=1``)."""
+
+    threads = 1
+
+    def submit(self, fn, *args):
+        fut: cf.Future = cf.Future()
+        try:
+            fut.set_result(fn(*args))
+        except BaseException as e:  # delivered through the future, like a pool would
+            if isinstance(e, KeyboardInterrupt):
+                raise
+            fut.set_exception(e)
+        return fut
+
+    def wait(self, futures):
+        return set(futures)
+
+    def close(self, cancel: bool = False):
+        pass
+
+
+def _worker_init() -> None:
+    """Worker processes leave Ctrl-C to the parent, which stops them, and end when the parent dies
+    (killed outright, it cannot stop them)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+class Processes:
+    """Local worker processes (spawned, so they never inherit the parent's threads or state)."""
+
+    def __init__(self, workers: int):
+        self.threads = workers
+        self.pool = cf.ProcessPoolExecutor(
+            max_workers=workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
+        )
+
+    def submit(self, fn, *args):
+        return self.pool.submit(fn, *args)
+
+    def wait(self, futures):
+        return cf.wait(futures, return_when=cf.FIRST_COMPLETED).done
+
+    def close(self, cancel: bool = False):
+        if cancel:
+            for proc in list(getattr(self.pool, "_processes", {}).values()):
+                proc.terminate()
+        self.pool.shutdown(wait=True, cancel_futures=cancel)
+
+
+class DaskCluster:
+    """A Dask distributed cluster."""
+
+    def __init__(self, address: str, timeout: float):
+        import logging
+
+        from distributed import Client
+
+        # A refused connection is reported by our own message, not by distributed's retry warnings.
+        log = logging.getLogger("distributed")
+        level = log.level
+        log.setLevel(logging.CRITICAL)
+        try:
+            self.client = Client(address, timeout=f"{timeout}s", set_as_default=False)
+        except (OSError, TimeoutError) as e:
+            raise KeyfillError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({e})") from None
+        except ValueError as e:
+            raise UsageError(f"--scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})") from None
+        finally:
+            log.setLevel(level)
+        from distributed import as_completed
+
+        self.finished = as_completed(loop=self.client.loop)
+
+    @property
+    def threads(self) -> int:
+        return max(1, sum(self.client.nthreads().values()))
+
+    def submit(self, fn, *args):
+        fut = self.client.submit(fn, *args, pure=False)
+        self.finished.add(fut)
+        return fut
+
+    def wait(self, futures):
+        return {next(self.finished)}
+
+    def close(self, cancel: bool = False):
+        self.client.close()
+
+
+def check_options(workers: int | None, connect_timeout: float = 10.0) -> None:
+    """:class:`UsageError` for a ``--workers`` or ``--connect-timeout`` no executor can use."""
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {workers}")
+    if not connect_timeout > 0:
+        raise UsageError(f"--connect-timeout must be positive, got {connect_timeout}")
+
+
+def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = 10.0):
+    """The executor for ``--workers`` / ``--scheduler``: ``(executor, jobs to keep in flight)``.
+
+    ``workers`` defaults to one process per available core (1 runs everything
+    in this process); with ``scheduler`` it is the number of jobs kept in
+    flight on the cluster (default: its thread count).
+    """
+    if scheduler:
+        ex = DaskCluster(scheduler, connect_timeout)
+        return ex, workers or ex.threads
+    workers = workers or available_cpus()
+    return (Processes(workers) if workers > 1 else Inline()), workers

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, output_format, resolve_keys, say
+from keyfill.cli.common import (FORMAT_CHOICE, apply_partial_keys, emit_json, keys_options, output_format,
+                                partial_keys_options, resolve_keys, say)
 from keyfill.learn.registry import METHODS
 
 
@@ -13,6 +14,7 @@ from keyfill.learn.registry import METHODS
 @click.option("-o", "--output", "dst", required=True, type=click.Path(dir_okay=False, allow_dash=True),
               help="Output file (.bvh, .usda, .usdc, .usd) or '-' with --format.")
 @keys_options
+@partial_keys_options
 @click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
               help="In-betweening method.")
 @click.option("--model", type=click.Path(exists=True), help="Model folder for a learned method (default: the model shipped for it, if any).")
@@ -23,13 +25,18 @@ from keyfill.learn.registry import METHODS
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
 @click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, device, fmt, in_fmt, as_json):
+def complete(src, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed, device, fmt, in_fmt, as_json):
     """Fill in the frames between the keys of SRC and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
     authored time samples of a sparse USD file). Only the key frames of SRC
     are read; every other frame is generated. Frames at keys come out
     identical to the input keys.
+
+    Partial keys give only some joints (--key-joints), only positions
+    (--key-positions) or 2-D positions in a view plane (--key-plane); methods
+    that accept them say so below (the others refuse). Exact keys then fix only
+    what the keys give.
 
     \b
     Methods:
@@ -40,13 +47,15 @@ def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, de
       keyfill complete keys.usda -o filled.usda
       keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
+      keyfill complete path.bvh --keys 0,200,400 --key-joints Hips --key-positions --method gan --model m -o out.bvh
     """
     from keyfill import io
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
 
     motion = io.load(src, in_fmt)
-    keys = resolve_keys(motion, keys_text, key_every)
+    keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
+                              key_plane)
     options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device)
     result = run(motion, keys, method, options)
     io.save(result.motion, dst, output_format(dst, fmt))
@@ -57,4 +66,4 @@ def complete(src, dst, keys_text, key_every, method, model, exact_keys, seed, de
 
 
 complete.help = complete.help.replace(  # the docstring's indentation, so click's dedent keeps the block
-    "    {methods}", "\n".join(f"      {m.name:<12} {m.summary}" for m in METHODS.values()))
+    "    {methods}", "\n".join(f"      {m.name:<12} {m.summary}{' (accepts partial keys)' if m.partial_keys else ''}" for m in METHODS.values()))

@@ -42,6 +42,8 @@ class Method:
         module: the learned method's module (``load``, ``DEFAULT_MODEL``); None for splines.
         protocol: the benchmark protocol that scores its models (``"lafan1"``, ``"keys"``).
         training: the module whose ``TRAINING`` trains it (``keyfill train NAME``); None if not trainable.
+        partial_keys: whether it accepts partial keys (:attr:`keyfill.motion.Keys.partial`); :func:`complete`
+            refuses them for the others.
     """
 
     name: str
@@ -50,6 +52,7 @@ class Method:
     module: str | None = None
     protocol: str | None = None
     training: str | None = None
+    partial_keys: bool = False
 
     @property
     def learned(self) -> bool:
@@ -89,7 +92,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            training="keyfill.learn.train_transformer"),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
-           training="keyfill.learn.gan.task"),
+           training="keyfill.learn.gan.task", partial_keys=True),
 )}
 
 
@@ -142,6 +145,11 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     options = options or CompleteOptions()
     m = get(method)
     keys = keys.check(motion.num_frames, min_keys=2)
+    keys.joint_mask(motion.num_joints)  # a mask of another skeleton is a usage error
+    if keys.partial and not m.partial_keys:
+        accept = [n.name for n in METHODS.values() if n.partial_keys]
+        raise UsageError(f"{method} needs whole poses at every key; partial keys (some joints, positions or "
+                         f"2-D positions) are accepted by: {', '.join(accept)}")
     if not m.learned and options.model is not None:
         raise UsageError(f"--model applies to learned methods, not to {method!r}")
     if options.model is not None:

@@ -233,19 +233,22 @@ class Keys:
             np.array([a in self.given for a in "XYZ"])
         return self.joint_mask(num_joints)[..., None] & axes
 
-    def channel_masks(self, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    def channel_masks(self, skeleton: "Skeleton") -> tuple[np.ndarray, np.ndarray]:
         """``(rotation (K, J), translation (K, J, 3))`` bool: the local channels the keys fix.
 
         With ``given="pose"`` a keyed joint fixes its rotation and translation. Positions
-        are world values, so with ``"position"`` or a plane only the root's translation
-        (which is its world position) is a channel the keys fix, in the given coordinates;
-        other joints' positions are not channels (they are met by the method, not fixed).
+        are world values: with ``"position"`` or a plane, a keyed joint whose channels
+        hold a position (the root; Bandai-Namco's hips below a static top joint) fixes its
+        translation in the given coordinates; other joints' positions are not channels,
+        so they are met by the method, not fixed.
         """
-        joints = self.joint_mask(num_joints)
+        J = skeleton.num_joints
+        joints = self.joint_mask(J)
         if self.given == "pose":
             return joints, np.repeat(joints[..., None], 3, axis=-1)
-        trans = np.zeros((len(self.frames), num_joints, 3), dtype=bool)
-        trans[:, 0] = self.coordinate_mask(num_joints)[:, 0]
+        movable = np.array([any(c in POSITION_CHANNELS for c in chans) for chans in skeleton.channels])
+        movable[0] = True
+        trans = self.coordinate_mask(J) & movable[None, :, None]
         return np.zeros_like(joints), trans
 
     def restrict(self, skeleton: "Skeleton", joints: Sequence[str] | None = None, given: str = "pose") -> "Keys":

@@ -30,7 +30,7 @@ def test_full_keys_are_not_partial_and_masks_cover_everything(motion):
     keys = Keys(np.array([0, 40, 119]))
     assert not keys.partial
     assert not Keys(keys.frames, np.ones((3, motion.num_joints), bool)).partial
-    rot, pos = keys.channel_masks(motion.num_joints)
+    rot, pos = keys.channel_masks(motion.skeleton)
     assert rot.all() and pos.all()
 
 
@@ -64,9 +64,10 @@ def test_root_positions_and_2d_keys_fix_only_the_given_root_coordinates(motion):
     sk = motion.skeleton
     pred = perturbed(motion, np.random.default_rng(2))
     k = np.array([0, 60, 119])
-    spots = Keys(k).restrict(sk, ["joint_Root"], "position")
+    spots = Keys(k).restrict(sk, ["Hips"], "position")  # the hips hold a position below the static joint_Root
     out, _ = snap_to_keys(pred, motion, spots)
-    assert np.array_equal(out.positions[k, 0], motion.positions[k, 0])
+    assert np.array_equal(out.positions[k, 1], motion.positions[k, 1])
+    assert np.allclose(out.positions[k, 0], pred.positions[k, 0])
     assert np.allclose(out.rotations[k], pred.rotations[k])  # positions do not fix rotations
     flat = Keys(k, None, "xz")
     assert flat.given == "XZ"

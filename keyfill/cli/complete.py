@@ -22,10 +22,18 @@ from keyfill.learn.registry import METHODS
               help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")
 @click.option("--device", default="cpu", show_default=True, help="Torch device for learned methods.")
+@click.option("--dna", metavar="FILE[:FRAMES]",
+              help="Motion DNA (gan models trained with --dna): the representative frames of FILE, or the listed "
+                   "frames of it (e.g. salsa.bvh:12,80,140), steer the style of the in-betweens. Without it the "
+                   "poses are drawn from the model's own bank by --seed.")
+@click.option("--dna-count", type=int, metavar="K",
+              help="How many representative frames of the DNA file (or the bank) to use (default: one per 3 s of "
+                   "the gaps between keys).")
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
 @click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def complete(src, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed, device, fmt, in_fmt, as_json):
+def complete(src, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed, device,
+             dna, dna_count, fmt, in_fmt, as_json):
     """Fill in the frames between the keys of SRC and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -48,6 +56,7 @@ def complete(src, dst, keys_text, key_every, key_joints, key_positions, key_plan
       keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
       keyfill complete path.bvh --keys 0,200,400 --key-joints Hips --key-positions --method gan --model m -o out.bvh
+      keyfill complete walk.bvh --keys 0,300,600 --method gan --model m --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
     """
     from keyfill import io
     from keyfill.learn.completion import CompleteOptions
@@ -56,7 +65,8 @@ def complete(src, dst, keys_text, key_every, key_joints, key_positions, key_plan
     motion = io.load(src, in_fmt)
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)
-    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device)
+    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, dna=dna,
+                              dna_count=dna_count)
     result = run(motion, keys, method, options)
     io.save(result.motion, dst, output_format(dst, fmt))
     if as_json:

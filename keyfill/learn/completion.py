@@ -22,12 +22,16 @@ class CompleteOptions:
         exact_keys: make frames at keys equal the input keys exactly.
         seed: seed for any randomness (e.g. dropout sampling, GAN noise).
         device: torch device for learned methods (``"cpu"``, ``"cuda"``).
+        dna: Motion DNA source ``"FILE[:FRAMES]"`` (methods with the ``dna`` capability).
+        dna_count: how many representative poses the Motion DNA takes (None: one per 3 s of gap).
     """
 
     model: str | None = None
     exact_keys: bool = True
     seed: int = 0
     device: str = "cpu"
+    dna: str | None = None
+    dna_count: int | None = None
 
 
 @dataclass

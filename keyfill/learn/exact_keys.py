@@ -59,7 +59,7 @@ def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict
 def _snap_partial(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict]:
     """:func:`snap_to_keys` for partial keys: residuals of unkeyed channels count as zero."""
     k = keys.frames
-    rot_mask, pos_mask = keys.channel_masks(pred.num_joints)  # (K, J), (K, J, 3)
+    rot_mask, pos_mask = keys.channel_masks(pred.skeleton)  # (K, J), (K, J, 3)
     res_pos = np.where(pos_mask, source.positions[k] - pred.positions[k], 0.0)
     res_rot = R.quat_mul(source.rotations[k], R.quat_conjugate(pred.rotations[k]))
     res_rot = np.where(rot_mask[..., None], res_rot, np.array([1.0, 0.0, 0.0, 0.0]))
@@ -75,6 +75,6 @@ def _snap_partial(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dic
         "key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
         "key_residual_rotation_rad": float(np.where(rot_mask, angle, 0.0).max(initial=0.0)),
         "exact_channels": "keyed joints' rotations and translations" if keys.given == "pose"
-        else "the root's given translation coordinates (other joints' positions are not channels)",
+        else "the given translation coordinates of keyed joints with position channels",
     }
     return pred.replace(rotations=rot, positions=pos, keys=keys), report

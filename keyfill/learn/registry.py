@@ -44,6 +44,7 @@ class Method:
         training: the module whose ``TRAINING`` trains it (``keyfill train NAME``); None if not trainable.
         partial_keys: whether it accepts partial keys (:attr:`keyfill.motion.Keys.partial`); :func:`complete`
             refuses them for the others.
+        dna: whether it takes a Motion DNA (``CompleteOptions.dna`` / ``dna_count``).
     """
 
     name: str
@@ -53,6 +54,7 @@ class Method:
     protocol: str | None = None
     training: str | None = None
     partial_keys: bool = False
+    dna: bool = False
 
     @property
     def learned(self) -> bool:
@@ -92,7 +94,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            training="keyfill.learn.train_transformer"),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
-           training="keyfill.learn.gan.task", partial_keys=True),
+           training="keyfill.learn.gan.task", partial_keys=True, dna=True),
 )}
 
 
@@ -150,6 +152,9 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
         accept = [n.name for n in METHODS.values() if n.partial_keys]
         raise UsageError(f"{method} needs whole poses at every key; partial keys (some joints, positions or "
                          f"2-D positions) are accepted by: {', '.join(accept)}")
+    if (options.dna is not None or options.dna_count is not None) and not m.dna:
+        raise UsageError(f"--dna and --dna-count apply to methods with Motion DNA "
+                         f"({', '.join(n.name for n in METHODS.values() if n.dna)}), not to {method!r}")
     if not m.learned and options.model is not None:
         raise UsageError(f"--model applies to learned methods, not to {method!r}")
     if options.model is not None:

@@ -173,3 +173,36 @@ def test_partial_keys_need_a_partial_key_model(models, motion):
         complete(motion, keys, CompleteOptions(model=str(models[1])))
     with pytest.raises(UsageError, match="root's position at one key"):
         complete(motion, KEYS.restrict(motion.skeleton, ["Spine"]), CompleteOptions(model=str(models[0].model)))
+
+
+def test_command_line_dna_partial_keys_and_bad_input(models, motion, tmp_path, capsys):
+    from keyfill import io
+    from keyfill.cli.main import main
+
+    model = str(models[0].model)
+    io.save(motion, tmp_path / "walk.bvh")
+    io.save(walker_motion(walker_skeleton(), 120, np.random.default_rng(9)), tmp_path / "dna.bvh")
+    io.save(walker_motion(walker_skeleton(leg_length=55.0), 60, np.random.default_rng(1)), tmp_path / "tall.bvh")
+    src = ["complete", str(tmp_path / "walk.bvh"), "--keys", "0,50,130,200"]
+    base = src + ["--method", "gan", "--model", model]
+    capsys.readouterr()
+    assert main(base + ["-o", str(tmp_path / "a.bvh"), "--dna", str(tmp_path / "dna.bvh"), "--dna-count", "3"]) == 0
+    assert main(base + ["-o", str(tmp_path / "b.bvh"), "--key-joints", "Hips", "--key-positions"]) == 0
+    assert main(base + ["-o", str(tmp_path / "c.bvh"), "--key-plane", "XY", "--dna", f"{tmp_path / 'dna.bvh'}:5,60"]) == 0
+    assert io.load(tmp_path / "a.bvh").num_frames == 240
+    capsys.readouterr()
+    bad = [
+        (["--dna", str(tmp_path / "tall.bvh")], 1, "another skeleton"),
+        (["--dna", f"{tmp_path / 'dna.bvh'}:5,120"], 2, "DNA frame 120 is outside"),
+        (["--key-joints", "Tail"], 2, "unknown joint 'Tail'"),
+        (["--key-plane", "XW"], 2, "view plane"),
+    ]
+    cubic = [(src + ["--method", "cubic", "--key-joints", "Hips"], 2, "accepted by: gan"),
+             (src + ["--method", "cubic", "--dna", str(tmp_path / "dna.bvh")], 2, "apply to methods with Motion DNA")]
+    for args, code, text in [(base + extra, code, text) for extra, code, text in bad] + cubic:
+        args = args + ["-o", str(tmp_path / "bad.bvh")]
+        assert main(args) == code, (args, capsys.readouterr().err)
+        out = capsys.readouterr()
+        assert out.out == "" and out.err.startswith("keyfill: error:") and text in out.err
+        assert len(out.err.strip().splitlines()) == 1
+        assert not (tmp_path / "bad.bvh").exists()

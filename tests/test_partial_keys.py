@@ -99,3 +99,17 @@ def test_frames_keeps_the_key_mask(motion):
     assert cut.keys.to_list() == [10, 89] and cut.keys.given == "XY"
     assert cut.keys.mask.shape == (2, motion.num_joints) and cut.keys.mask[:, 1].all()
     assert linear(motion, Keys(np.array([0, 119]))).num_frames == 120
+
+
+def test_usd_files_carry_the_key_mask(motion, tmp_path):
+    pytest.importorskip("pxr")
+    from keyfill import io
+
+    keys = Keys(np.array([0, 40, 119])).restrict(motion.skeleton, ["Hips", "Leg_L"], "XY")
+    io.save(motion.replace(keys=keys), tmp_path / "k.usda")
+    back = io.load(tmp_path / "k.usda").keys
+    assert back.to_list() == keys.to_list() and back.given == "XY" and np.array_equal(back.mask, keys.mask)
+    io.save(motion.replace(keys=Keys(keys.frames)), tmp_path / "full.usda")
+    full = io.load(tmp_path / "full.usda").keys
+    assert full.mask is None and not full.partial
+    assert "keyMask" not in (tmp_path / "full.usda").read_text()

@@ -38,6 +38,7 @@ state_dict / load_state_dict, save).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -49,7 +50,7 @@ import numpy as np
 
 from keyfill.errors import DataError, UsageError
 from keyfill.learn.gan import KIND
-from keyfill.learn.gan.config import GanConfig
+from keyfill.learn.gan.config import DNA_WIDTHS, SPARSE_RECEPTIVE_FIELD, GanConfig
 from keyfill.learn.gan.dna import build_bank, pad_dna
 from keyfill.learn.gan.poses import clip_pool
 from keyfill.learn.gan.ranges import estimate_ranges
@@ -505,6 +506,11 @@ def _make_task(common, options: dict, progress) -> GanTask:
     from keyfill.learn.train_transformer import select_clips
 
     cfg = read_config(options["config"], options["preset"], common.seed)
+    if options["dna"] and not cfg.dna:
+        width = DNA_WIDTHS.get(cfg.preset, DNA_WIDTHS["cpu"])
+        cfg = dataclasses.replace(cfg, style_dim=cfg.style_dim or width, dna_width=width)
+    if options["partial_keys"] and not cfg.partial_keys:
+        cfg = dataclasses.replace(cfg, partial_keys=True, max_gap=min(cfg.max_gap, SPARSE_RECEPTIVE_FIELD))
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
     corpus = select_clips(corpus, options["include"], options["exclude"])
@@ -549,6 +555,8 @@ TRAINING = TrainingSpec(
       keyfill train gan bandai2/data -o models/gan-path --stage path
       keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path
       keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path --resume
+      keyfill train gan bandai2/data -o models/gan-dna --stage generator --path-model models/gan-path --dna \\
+          --partial-keys
     """,
     options=(
         Option("stage", "path", "Which stage to train: the path predictor, or the generator.",
@@ -561,6 +569,10 @@ TRAINING = TrainingSpec(
         Option("include", (), "Train only on files matching one of these patterns.", multiple=True, metavar="GLOB"),
         Option("exclude", (), "Leave out files matching these patterns (e.g. a test style).", multiple=True,
                metavar="GLOB"),
+        Option("dna", False, "Give the generator a Motion DNA encoder (style_dim and its width from the preset: "
+               "cpu 128, paper 1024) trained with Eqs. 11-12; complete then takes --dna.", flag=True),
+        Option("partial_keys", False, "Train on partial keys too (root paths, half bodies, 2-D keys) with the "
+               "sparse input format; max_gap becomes at most 318 frames.", flag=True),
         Option("fold_root", None, "Fold a static top joint (like Bandai's joint_Root) into the hips. "
                "Default: when it is static.", flag=True),
     ),

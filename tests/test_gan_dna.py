@@ -206,3 +206,19 @@ def test_command_line_dna_partial_keys_and_bad_input(models, motion, tmp_path, c
         assert out.out == "" and out.err.startswith("keyfill: error:") and text in out.err
         assert len(out.err.strip().splitlines()) == 1
         assert not (tmp_path / "bad.bvh").exists()
+
+
+def test_quality_report_of_a_tiny_model(models):
+    """The figures of docs/gan.md come out of a model: all finite, in cm, for every kind of key."""
+    from keyfill.learn.corpus import load_corpus
+    from keyfill.learn.gan.quality import quality_report
+
+    model = load_model(models[0].model)
+    clips_dir = models[0].model.parent / "clips"
+    corpus = load_corpus([clips_dir], cache=False)
+    report = quality_report(model, corpus, range(len(corpus)), sequences=2, frames=200, seed=0)
+    assert set(report["key_errors"]) == {"full", "root", "half", "plane"}
+    assert report["key_errors"]["root"]["joints_cm"] is None  # root-only keys give no joint
+    assert all(np.isfinite(v["root_cm"]) for v in report["key_errors"].values())
+    assert all(np.isfinite(report["key_errors"][k]["joints_cm"]) for k in ("full", "half", "plane"))
+    assert report["dna_error_1_cm"] > 0 and report["variety_cm"]["dnas"] > 0 and report["variety_cm"]["seeds"] > 0

@@ -222,3 +222,15 @@ def test_quality_report_of_a_tiny_model(models):
     assert all(np.isfinite(v["root_cm"]) for v in report["key_errors"].values())
     assert all(np.isfinite(report["key_errors"][k]["joints_cm"]) for k in ("full", "half", "plane"))
     assert report["dna_error_1_cm"] > 0 and report["variety_cm"]["dnas"] > 0 and report["variety_cm"]["seeds"] > 0
+
+
+def test_benchmark_windows_of_a_dna_model_draw_their_dna_from_the_bank(models, motion):
+    from keyfill.learn.corpus import fold_root
+
+    model = load_model(models[0].model)
+    q, p = fold_root(motion.rotations, motion.positions, motion.skeleton.parents)
+    keys = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 40])
+    quats, root = q[None, :65], p[None, :65, 0]
+    a = model.benchmark_method(seed=0)(model.skeleton, quats, root, keys)
+    b = model.benchmark_method(seed=0)(model.skeleton, quats, root, keys)
+    assert np.array_equal(a[0], b[0]) and np.allclose(a[0][:, keys], quats[:, keys])

@@ -488,7 +488,8 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         poses[b], shift = centre_keys(poses[b], model.skeleton.up_axis)
         shifts.append(shift)
     k0, end = int(k[0]), int(k[-1])
-    gq, groot = generate(model, k - k0, poses, seed)
+    dna = dna_poses(model, key_frames=k, seed=seed) if model.config.dna else None  # from the bank, as complete
+    gq, groot = generate(model, k - k0, poses, seed, dna=dna)
     out_q, out_r = [], []
     undriven = _undriven(model, skeleton.num_joints)
     for b in range(len(poses)):

@@ -408,7 +408,8 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=keys)
     info = {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0)}
     if keys.partial:
-        info["partial_keys"] = keys.given if keys.mask is None else f"{keys.given} of {int(keys.mask[0].sum())} joints"
+        keyed = "all" if keys.mask is None else f"{int(keys.mask.any(0).sum())} of {motion.num_joints}"
+        info["partial_keys"] = f"{keys.given}, {keyed} joints keyed"
     if dna is not None:
         info["dna_poses"] = len(dna)
     return result, info

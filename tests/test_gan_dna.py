@@ -234,3 +234,39 @@ def test_benchmark_windows_of_a_dna_model_draw_their_dna_from_the_bank(models, m
     a = model.benchmark_method(seed=0)(model.skeleton, quats, root, keys)
     b = model.benchmark_method(seed=0)(model.skeleton, quats, root, keys)
     assert np.array_equal(a[0], b[0]) and np.allclose(a[0][:, keys], quats[:, keys])
+
+
+def test_a_model_folder_from_before_motion_dna_loads_and_completes_as_before(models, motion, tmp_path):
+    """config.json of a model written before the DNA and partial-key settings existed: the defaults apply."""
+    import json
+    import shutil
+
+    old = tmp_path / "old"
+    shutil.copytree(models[1], old)
+    config = json.loads((old / "config.json").read_text())
+    for name in ("dna_width", "dna_weight", "dna_seconds", "partial_keys", "partial_fraction"):
+        del config["gan"][name]
+    (old / "config.json").write_text(json.dumps(config))
+    a = complete(motion, KEYS, CompleteOptions(model=str(models[1]), seed=4)).motion
+    b = complete(motion, KEYS, CompleteOptions(model=str(old), seed=4)).motion
+    assert np.array_equal(a.rotations, b.rotations) and np.array_equal(a.positions, b.positions)
+
+
+def test_training_sequences_draw_one_dna_pose_per_three_seconds_of_gap(models):
+    from keyfill.learn.corpus import load_corpus
+    from keyfill.learn.gan.dna import build_bank
+    from keyfill.learn.gan.poses import clip_pool
+    from keyfill.learn.gan.sampling import training_sequence
+
+    model = load_model(models[0].model)
+    corpus = load_corpus([models[0].model.parent / "clips"], cache=False)
+    cfg = model.config
+    pool, bank = clip_pool(corpus), build_bank(corpus, range(len(corpus)))
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        seq = training_sequence(pool, rng, cfg, [], bank)
+        keys = np.flatnonzero(seq["key_mask"])
+        assert len(seq["dna"]) == dna_count(keys, corpus.fps, cfg.dna_seconds)
+        J = corpus.skeleton.num_joints
+        mask = seq["dense"][3 * J :]  # the sparse format's 0/1 mask: 1 only at key frames
+        assert set(np.unique(mask)) <= {0.0, 1.0} and not mask[:, np.setdiff1d(np.arange(mask.shape[1]), keys)].any()

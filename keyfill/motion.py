@@ -160,18 +160,35 @@ class Skeleton:
         return dataclasses.replace(self, **changes)
 
 
+#: what a keyed joint gives at a key (:attr:`Keys.given`): its local channels, its 3-D position, or the
+#: two coordinates of its position in a view plane (world axes, file units)
+KEY_GIVEN = ("pose", "position", "XY", "XZ", "YZ")
+
+
 @dataclass(frozen=True, eq=False)
 class Keys:
-    """Keyframe indices of a motion.
+    """Keyframe indices of a motion, and for partial keys which joints and values each key gives.
 
     Attributes:
         frames: ``(K,)`` strictly increasing non-negative frame indices.
         mask: optional ``(K, J)`` bool, which joints are keyed at each key
             (``None``: all joints at every key).
+        given: what a keyed joint gives (one of :data:`KEY_GIVEN`): ``"pose"`` (the
+            default) its local rotation and translation, so its position follows by
+            forward kinematics when its ancestors are keyed too; ``"position"`` only
+            its 3-D position (the root's: a spot on the path); ``"XY"``, ``"XZ"`` or
+            ``"YZ"`` only the two coordinates of its world position in that view plane
+            (2-D keys, as a sketch in a front or top view). The values themselves are
+            those of the motion at the key frames.
+
+    Keys are *partial* (:attr:`partial`) when some joint is unkeyed somewhere or
+    when they give less than a pose; only methods whose registry entry says so
+    accept them (:mod:`keyfill.learn.registry`).
     """
 
     frames: np.ndarray
     mask: np.ndarray | None = field(default=None)
+    given: str = "pose"
 
     def __post_init__(self):
         frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
@@ -189,7 +206,72 @@ class Keys:
             mask = np.asarray(self.mask, dtype=bool)
             if mask.ndim != 2 or mask.shape[0] != len(frames):
                 raise UsageError(f"key mask of shape {mask.shape} for {len(frames)} keys")
+            mask.setflags(write=False)
             object.__setattr__(self, "mask", mask)
+        given = self.given.upper() if self.given.upper() in KEY_GIVEN else self.given.lower()
+        if given not in KEY_GIVEN:
+            raise UsageError(f"unknown view plane or key content {self.given!r}; keys give one of: "
+                             f"{', '.join(KEY_GIVEN)}")
+        object.__setattr__(self, "given", given)
+
+    @property
+    def partial(self) -> bool:
+        """True when some key leaves a joint unkeyed or the keys give less than whole poses."""
+        return self.given != "pose" or (self.mask is not None and not bool(self.mask.all()))
+
+    def joint_mask(self, num_joints: int) -> np.ndarray:
+        """``(K, J)`` bool: the keyed joints of each key (all when :attr:`mask` is None)."""
+        if self.mask is None:
+            return np.ones((len(self.frames), num_joints), dtype=bool)
+        if self.mask.shape[1] != num_joints:
+            raise UsageError(f"the key mask names {self.mask.shape[1]} joints; the motion has {num_joints}")
+        return self.mask
+
+    def coordinate_mask(self, num_joints: int) -> np.ndarray:
+        """``(K, J, 3)`` bool: the world position coordinates each key gives (all three, or a plane's two)."""
+        axes = np.ones(3, dtype=bool) if self.given in ("pose", "position") else \
+            np.array([a in self.given for a in "XYZ"])
+        return self.joint_mask(num_joints)[..., None] & axes
+
+    def channel_masks(self, skeleton: "Skeleton") -> tuple[np.ndarray, np.ndarray]:
+        """``(rotation (K, J), translation (K, J, 3))`` bool: the local channels the keys fix.
+
+        With ``given="pose"`` a keyed joint fixes its rotation and translation. Positions
+        are world values: with ``"position"`` or a plane, a keyed joint whose channels
+        hold a position (the root; Bandai-Namco's hips below a static top joint) fixes its
+        translation in the given coordinates; other joints' positions are not channels,
+        so they are met by the method, not fixed.
+        """
+        J = skeleton.num_joints
+        joints = self.joint_mask(J)
+        if self.given == "pose":
+            return joints, np.repeat(joints[..., None], 3, axis=-1)
+        movable = np.array([any(c in POSITION_CHANNELS for c in chans) for chans in skeleton.channels])
+        movable[0] = True
+        trans = self.coordinate_mask(J) & movable[None, :, None]
+        return np.zeros_like(joints), trans
+
+    def restrict(self, skeleton: "Skeleton", joints: Sequence[str] | None = None, given: str = "pose") -> "Keys":
+        """These key frames, keying only the joints named ``joints`` (all when None) at every key, giving ``given``.
+
+        ``keys.restrict(sk, [sk.names[0]], "position")`` is a path of root spots (the
+        paper's 5.1); a list of the legs' joints is a half-body key (5.2);
+        ``given="XY"`` gives 2-D keys in the XY view plane (5.3). An unknown joint
+        name is a :class:`UsageError` listing the skeleton's joints.
+        """
+        mask = None
+        if joints is not None:
+            if not joints:
+                raise UsageError("partial keys need at least one keyed joint")
+            row = np.zeros(skeleton.num_joints, dtype=bool)
+            row[[skeleton.index(n) for n in joints]] = True
+            mask = np.repeat(row[None], len(self.frames), axis=0)
+        return Keys(self.frames, mask, given)
+
+    def select(self, index) -> "Keys":
+        """The keys ``index`` (an index array or a bool array over the keys) with their mask rows."""
+        mask = None if self.mask is None else self.mask[index]
+        return Keys(self.frames[index], mask, self.given)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -354,8 +436,11 @@ class Motion:
         keys = None
         if self.keys is not None:
             lookup = {int(f): i for i, f in enumerate(idx)}
-            kept = [lookup[int(f)] for f in self.keys.frames if int(f) in lookup]
-            keys = Keys(np.array(sorted(kept), dtype=np.int64))
+            inside = np.array([int(f) in lookup for f in self.keys.frames], dtype=bool)
+            kept = self.keys.select(inside)
+            order = np.argsort([lookup[int(f)] for f in kept.frames], kind="stable")
+            keys = Keys(np.array([lookup[int(f)] for f in kept.frames], dtype=np.int64)[order],
+                        None if kept.mask is None else kept.mask[order], kept.given)
         return self.replace(rotations=self.rotations[idx], positions=self.positions[idx], keys=keys)
 
     @classmethod

@@ -71,6 +71,39 @@ def resolve_keys(motion: Motion, keys_text: str | None, key_every: int | None, m
     return Keys.resolve(motion, keys_text, key_every, min_keys)
 
 
+def partial_keys_options(f):
+    """``--key-joints``, ``--key-positions`` and ``--key-plane``: keys that give only part of each pose."""
+    f = click.option(
+        "--key-plane", metavar="PLANE",
+        help="2-D keys: the keyed joints give only their position in this view plane (XY, XZ or YZ of the "
+             "file's world axes; e.g. XY is the front view of a Y-up, Z-forward file).",
+    )(f)
+    f = click.option(
+        "--key-positions", is_flag=True,
+        help="The keyed joints give only their 3-D positions, not rotations (with --key-joints ROOT: a path of "
+             "spots on the ground).",
+    )(f)
+    f = click.option(
+        "--key-joints", metavar="NAMES",
+        help="Key only these joints (comma-separated names, e.g. Hips,LeftUpLeg,LeftLeg); the others are free.",
+    )(f)
+    return f
+
+
+def apply_partial_keys(motion: Motion, keys: Keys, joints_text: str | None, positions: bool,
+                       plane: str | None) -> Keys:
+    """``keys`` restricted by ``--key-joints`` / ``--key-positions`` / ``--key-plane`` (unchanged without them)."""
+    if positions and plane is not None:
+        raise UsageError("give --key-positions (3-D) or --key-plane (2-D), not both")
+    if joints_text is None and not positions and plane is None:
+        return keys
+    joints = None if joints_text is None else [t.strip() for t in joints_text.split(",") if t.strip()]
+    given = plane if plane is not None else ("position" if positions else "pose")
+    if joints is None and keys.mask is not None:
+        return Keys(keys.frames, keys.mask, given)
+    return keys.restrict(motion.skeleton, joints, given)
+
+
 def output_format(path: str, fmt: str | None) -> str | None:
     """``--format`` is required for ``-`` (stdout) and otherwise overrides the suffix."""
     if path == "-" and fmt is None:

@@ -6,10 +6,12 @@ import click
 
 from keyfill.cli.common import (
     FORMAT_CHOICE,
+    apply_partial_keys,
     batch_options,
     emit_json,
     keys_options,
     output_format,
+    partial_keys_options,
     resolve_keys,
     run_batch,
     say,
@@ -24,6 +26,7 @@ from keyfill.learn.registry import METHODS
               help="Output file (.bvh, .usda, .usdc, .usd) or '-' with --format; for several inputs, a folder "
                    "(OUTDIR/).")
 @keys_options
+@partial_keys_options
 @click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
               help="In-betweening method.")
 @click.option("--model", type=click.Path(exists=True),
@@ -33,6 +36,13 @@ from keyfill.learn.registry import METHODS
               help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")
 @click.option("--device", default="cpu", show_default=True, help="Torch device for learned methods.")
+@click.option("--dna", metavar="FILE[:FRAMES]",
+              help="Motion DNA (gan models trained with --dna): the representative frames of FILE, or the listed "
+                   "frames of it (e.g. salsa.bvh:12,80,140), steer the style of the in-betweens. Without it the "
+                   "poses are drawn from the model's own bank by --seed.")
+@click.option("--dna-count", type=int, metavar="K",
+              help="How many representative frames of the DNA file (or the bank) to use (default: one per 3 s of "
+                   "the gaps between keys).")
 @click.option("--runtime", type=click.Choice(["auto", "torch", "onnx"]), default="auto", show_default=True,
               help="Run a learned model with torch or its exported ONNX graph (onnxruntime, no torch import; see "
                    "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
@@ -41,8 +51,9 @@ from keyfill.learn.registry import METHODS
 @click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when IN is '-').")
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed, device, runtime, fmt, in_fmt,
-             workers, scheduler, connect_timeout, force, batch_size, as_json):
+def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
+             device, dna, dna_count, runtime, fmt, in_fmt, workers, scheduler, connect_timeout, force, batch_size,
+             as_json):
     """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -60,6 +71,11 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
     bad input is reported with its reason and the others go on; the exit
     code is then 1, and --json lists every input's outcome.
 
+    Partial keys give only some joints (--key-joints), only positions
+    (--key-positions) or 2-D positions in a view plane (--key-plane); methods
+    that accept them say so below (the others refuse). Exact keys then fix only
+    what the keys give.
+
     With an exported graph (keyfill export), --runtime onnx or auto runs
     the model through onnxruntime and imports no torch (docs/onnx.md).
 
@@ -75,19 +91,24 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
       keyfill complete hops/ --method arnn -o filled/ --workers 2
       keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
       keyfill complete keys.usda --method arnn --model lamp-arnn.onnx -o filled.usda
+      keyfill complete path.bvh --keys 0,200,400 --key-joints Hips --key-positions --method gan --model m -o out.bvh
+      keyfill complete walk.bvh --keys 0,300,600 --method gan --model m --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
     """
     from keyfill import io
     from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
 
-    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime)
+    options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime, dna=dna,
+                              dna_count=dna_count)
     if is_batch(inputs, dst):
         from keyfill.learn.batch import CompleteSpec
 
         if dst == "-" or in_fmt is not None:
             raise UsageError("a batch reads files by their suffixes and writes into a folder (-o OUTDIR/); "
                              "'-' and --in-format take one file")
+        if key_joints or key_positions or key_plane:
+            raise UsageError("partial keys (--key-joints, --key-positions, --key-plane) take one file at a time")
 
         spec = CompleteSpec(method, options, keys_text, key_every)
         return run_batch(inputs, dst, fmt, "keyfill.learn.batch:complete_chunk", spec, workers, scheduler,
@@ -96,7 +117,8 @@ def complete(inputs, dst, keys_text, key_every, method, model, exact_keys, seed,
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
     motion = io.load(src, in_fmt)
-    keys = resolve_keys(motion, keys_text, key_every)
+    keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
+                              key_plane)
     result = run(motion, keys, method, options)
     io.save(result.motion, dst, output_format(dst, fmt))
     if as_json:
@@ -116,4 +138,5 @@ def check_method(spec) -> None:
 
 
 complete.help = complete.help.replace(  # the docstring's indentation, so click's dedent keeps the block
-    "    {methods}", "\n".join(f"      {m.name:<12} {m.summary}" for m in METHODS.values()))
+    "    {methods}", "\n".join(f"      {m.name:<12} {m.summary}{' (accepts partial keys)' if m.partial_keys else ''}"
+              for m in METHODS.values()))

@@ -42,8 +42,11 @@ def describe(motion, path: str) -> dict:
 @click.command()
 @click.argument("file", type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Input format (needed when FILE is '-').")
+@click.option("--representative", type=int, metavar="N",
+              help="Also list the N representative frames (largest joint-rotation change; the frames a Motion DNA "
+                   "takes from this file, see docs/gan.md).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
-def info(file, fmt, as_json):
+def info(file, fmt, representative, as_json):
     """Show what a BVH or USD motion file holds.
 
     Skeleton (joints, channels, Euler orders), frame count, frame rate,
@@ -54,11 +57,16 @@ def info(file, fmt, as_json):
       keyfill info walk.bvh
       keyfill info keys.usda --json | jq .keys
       cat walk.bvh | keyfill info - --format bvh
+      keyfill info salsa.bvh --representative 8 --json | jq .representative_frames
     """
     from keyfill import io
 
     motion = io.load(file, fmt)
     d = describe(motion, file)
+    if representative is not None:
+        from keyfill.learn.representative import representative_frames
+
+        d["representative_frames"] = representative_frames(motion, representative).tolist()
     if as_json:
         emit_json(d)
         return
@@ -67,6 +75,8 @@ def info(file, fmt, as_json):
     click.echo(f"units: {d['meters_per_unit']:g} m, up axis {d['up_axis']}")
     keys = d["keys"]
     click.echo(f"keys: {', '.join(map(str, keys)) if keys is not None else 'none recorded'}")
+    if representative is not None:
+        click.echo(f"representative frames: {', '.join(map(str, d['representative_frames']))}")
     if d["bounding_box"]:
         lo, hi = d["bounding_box"]["min"], d["bounding_box"]["max"]
         click.echo("bounding box: " + " ".join(f"{a}[{l:.4g}, {h:.4g}]" for a, l, h in zip("xyz", lo, hi)))

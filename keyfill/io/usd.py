@@ -14,7 +14,11 @@ Stage metadata: ``timeCodesPerSecond`` = ``framesPerSecond`` = fps,
 ``startTimeCode`` 0, ``endTimeCode`` F-1, ``upAxis``, ``metersPerUnit``. The
 Skeleton's ``customData["keyfill"]`` keeps what USD has no place for, so that
 BVH -> USD -> BVH gives the same file: original joint names (USD joint paths
-must be identifiers), BVH channel layouts and End Sites, and the keys.
+must be identifiers), BVH channel layouts and End Sites, and the keys. Partial
+keys (:attr:`keyfill.motion.Keys.partial`) add ``keyMask`` (int[], ``K x J``
+row-major in the skeleton's joint order, 1 where a joint is keyed) and
+``keyGiven`` (``"pose"``, ``"position"``, or a view plane ``"XY"``, ``"XZ"``,
+``"YZ"``), so a keyframe file can say "only the root's path" or "only the legs".
 
 Reading accepts any UsdSkel file: the first Skeleton under the default prim (or
 anywhere) and its animation source (or the first SkelAnimation). The
@@ -130,6 +134,9 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
     }
     if motion.keys is not None:
         custom["keys"] = Vt.IntArray(motion.keys.to_list())
+        if motion.keys.partial:
+            custom["keyGiven"] = motion.keys.given
+            custom["keyMask"] = Vt.IntArray(motion.keys.joint_mask(sk.num_joints).astype(int).ravel().tolist())
     skel.GetPrim().SetCustomDataByKey(CUSTOM_KEY, custom)
 
     anim.CreateJointsAttr(paths)
@@ -304,7 +311,15 @@ def read_stage(stage, label) -> Motion:
     skeleton = _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label)
     keys = None
     if "keys" in custom:
-        keys = Keys(np.array(list(custom["keys"]), dtype=np.int64))
+        frames = np.array(list(custom["keys"]), dtype=np.int64)
+        mask = None
+        if "keyMask" in custom:
+            mask = np.array(list(custom["keyMask"]), dtype=bool)
+            J = skeleton.num_joints
+            if mask.size != len(frames) * J:
+                raise DataError(f"{label}: keyMask holds {mask.size} values for {len(frames)} keys of {J} joints")
+            mask = mask.reshape(len(frames), J)
+        keys = Keys(frames, mask, str(custom.get("keyGiven", "pose")))
     elif times and len(times) < num_frames:
         frames = np.array([t - start for t in times])
         if np.any(np.abs(frames - np.round(frames)) > 1e-6):

@@ -25,6 +25,8 @@ class CompleteOptions:
         runtime: ``"torch"``, ``"onnx"`` (an exported graph through onnxruntime, no torch) or ``"auto"``
             (onnx when onnxruntime is installed and the model folder holds an exported graph);
             see :mod:`keyfill.learn.onnx`.
+        dna: Motion DNA source ``"FILE[:FRAMES]"`` (methods with the ``dna`` capability).
+        dna_count: how many representative poses the Motion DNA takes (None: one per 3 s of gap).
     """
 
     model: str | None = None
@@ -32,6 +34,8 @@ class CompleteOptions:
     seed: int = 0
     device: str = "cpu"
     runtime: str = "auto"
+    dna: str | None = None
+    dna_count: int | None = None
 
 
 @dataclass

@@ -7,6 +7,12 @@ between two keys with smoothstep weights ``3u^2 - 2u^3``: the correction is
 the full residual at each key and has zero slope there, so the corrected curve
 keeps the prediction's velocity at the keys. Frames at keys are then copied
 from the source, so they are bit-identical to the input.
+
+Partial keys (:attr:`keyfill.motion.Keys.partial`) fix only the local channels
+they give (:meth:`keyfill.motion.Keys.channel_masks`): a keyed joint's residual
+is spread as above, an unkeyed one counts as a zero residual at that key, so it
+stays as predicted there and is corrected only by its keyed neighbours' share;
+at a key frame only the keyed channels are copied from the source.
 """
 
 from __future__ import annotations
@@ -24,13 +30,15 @@ def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict
     Args:
         pred: the predicted motion, ``F`` frames.
         source: the motion whose key frames are the truth (same skeleton, ``F`` frames).
-        keys: key frames (at least 2).
+        keys: key frames (at least 2); partial keys correct only the channels they give.
 
     Returns:
         ``(corrected motion, report)``, where the report gives the largest
         residual removed: ``key_residual_position`` (file units) and
         ``key_residual_rotation_rad``.
     """
+    if keys.partial:
+        return _snap_partial(pred, source, keys)
     k = keys.frames
     res_pos = source.positions[k] - pred.positions[k]  # (K, J, 3)
     res_rot = R.quat_mul(source.rotations[k], R.quat_conjugate(pred.rotations[k]))  # (K, J, 4)
@@ -44,5 +52,29 @@ def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict
     report = {
         "key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
         "key_residual_rotation_rad": float(R.quat_angle(source.rotations[k], pred.rotations[k]).max(initial=0.0)),
+    }
+    return pred.replace(rotations=rot, positions=pos, keys=keys), report
+
+
+def _snap_partial(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict]:
+    """:func:`snap_to_keys` for partial keys: residuals of unkeyed channels count as zero."""
+    k = keys.frames
+    rot_mask, pos_mask = keys.channel_masks(pred.skeleton)  # (K, J), (K, J, 3)
+    res_pos = np.where(pos_mask, source.positions[k] - pred.positions[k], 0.0)
+    res_rot = R.quat_mul(source.rotations[k], R.quat_conjugate(pred.rotations[k]))
+    res_rot = np.where(rot_mask[..., None], res_rot, np.array([1.0, 0.0, 0.0, 0.0]))
+    s, u = segment_coordinates(pred.num_frames, k)
+    w = (3 * u**2 - 2 * u**3)[:, None]
+    pos = pred.positions + (1 - w[..., None]) * res_pos[s] + w[..., None] * res_pos[s + 1]
+    corr = R.quat_slerp(res_rot[s], res_rot[s + 1], np.broadcast_to(w, res_rot[s].shape[:2]))
+    rot = R.quat_normalize(R.quat_mul(corr, pred.rotations))
+    rot[k] = np.where(rot_mask[..., None], source.rotations[k], rot[k])
+    pos[k] = np.where(pos_mask, source.positions[k], pos[k])
+    angle = R.quat_angle(source.rotations[k], pred.rotations[k])
+    report = {
+        "key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
+        "key_residual_rotation_rad": float(np.where(rot_mask, angle, 0.0).max(initial=0.0)),
+        "exact_channels": "keyed joints' rotations and translations" if keys.given == "pose"
+        else "the given translation coordinates of keyed joints with position channels",
     }
     return pred.replace(rotations=rot, positions=pos, keys=keys), report

@@ -46,6 +46,9 @@ class Method:
             ``export_onnx(model, folder, path)`` (``keyfill export``); None if not exportable.
         onnx: the module that completes with an exported graph and no torch:
             ``complete_graph(jobs, options, graph)`` (:mod:`keyfill.learn.onnx`).
+        partial_keys: whether it accepts partial keys (:attr:`keyfill.motion.Keys.partial`); :func:`complete`
+            refuses them for the others.
+        dna: whether it takes a Motion DNA (``CompleteOptions.dna`` / ``dna_count``).
     """
 
     name: str
@@ -56,6 +59,8 @@ class Method:
     training: str | None = None
     export: str | None = None
     onnx: str | None = None
+    partial_keys: bool = False
+    dna: bool = False
 
     @property
     def learned(self) -> bool:
@@ -97,7 +102,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            onnx="keyfill.learn.transformer"),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
-           training="keyfill.learn.gan.task"),
+           training="keyfill.learn.gan.task", partial_keys=True, dna=True),
 )}
 
 
@@ -150,8 +155,23 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
     return str(name_or_path), method, method.implementation().load(name_or_path, device)
 
 
+def checked_keys(m: Method, motion: Motion, keys: Keys) -> Keys:
+    """``keys`` once they are known to fit ``motion`` and ``m`` (partial keys only for methods that take them)."""
+    keys = keys.check(motion.num_frames, min_keys=2)
+    keys.joint_mask(motion.num_joints)  # a mask of another skeleton is a usage error
+    if keys.partial and not m.partial_keys:
+        accept = [n.name for n in METHODS.values() if n.partial_keys]
+        raise UsageError(f"{m.name} needs whole poses at every key; partial keys (some joints, positions or "
+                         f"2-D positions) are accepted by: {', '.join(accept)}")
+    return keys
+
+
 def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
-    """``options`` once its ``--model`` is known to fit ``m`` (a :class:`UsageError` otherwise); reads no weights."""
+    """``options`` once its ``--model`` and ``--dna`` are known to fit ``m`` (a :class:`UsageError` otherwise);
+    reads no weights."""
+    if (options.dna is not None or options.dna_count is not None) and not m.dna:
+        raise UsageError(f"--dna and --dna-count apply to methods with Motion DNA "
+                         f"({', '.join(n.name for n in METHODS.values() if n.dna)}), not to {m.name!r}")
     if not m.learned and options.model is not None:
         raise UsageError(f"--model applies to learned methods, not to {m.name!r}")
     from keyfill.learn.onnx import is_graph
@@ -168,7 +188,7 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     """Fill the frames between ``keys`` of ``motion`` with ``method``."""
     options = options or CompleteOptions()
     m = get(method)
-    keys = keys.check(motion.num_frames, min_keys=2)
+    keys = checked_keys(m, motion, keys)
     options = checked_options(m, options)
     graph = _graph(m, options)
     if graph is not None:
@@ -198,7 +218,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
     ready = []
     for i, (motion, keys) in enumerate(jobs):
         try:
-            ready.append((i, motion, keys.check(motion.num_frames, min_keys=2)))
+            ready.append((i, motion, checked_keys(m, motion, keys)))
         except KeyfillError as e:
             results[i] = e
     graph = _graph(m, options)

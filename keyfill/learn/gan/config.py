@@ -40,6 +40,11 @@ _LAYERS = {"encoder": 6, "decoder": 13, "discriminator": 6, "path": 8}
 #: the longest gap a key layout may have: twice the 318-frame receptive field of a latent step, as the
 #: dense input copies each key halfway towards its neighbours (section 3.5; tested against the layers)
 EFFECTIVE_RECEPTIVE_FIELD = 636
+#: the longest gap with the sparse input format of partial-key models: a key is seen only where it is,
+#: so a frame must have both keys within the 318-frame receptive field of a latent step
+SPARSE_RECEPTIVE_FIELD = 318
+#: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
+DNA_WIDTHS = {"paper": 1024, "cpu": 128}
 
 
 @dataclass(frozen=True)
@@ -52,7 +57,19 @@ class GanConfig:
         noise_dim: channels of Gaussian noise joined to every latent step (keyfill's
             source of variety until Motion DNA lands; the seed of ``complete`` draws it).
         style_dim: channels of the per-sequence style vector joined to every latent
-            step (the Motion DNA hook; 0: none, the decoder then takes no style).
+            step (the Motion DNA vector ``w``; 0: none, the decoder then takes no style).
+        dna_width: hidden width of the Motion DNA encoder (section 3.5.1, Table 5), which
+            makes the style vector from representative poses; 0: no encoder (models
+            trained before Motion DNA). Needs ``style_dim`` > 0.
+        dna_weight: weight of each of the two DNA losses (Eqs. 11-12; Appendix A: 50).
+        dna_seconds: one representative frame per this many seconds of the gaps between
+            keys (Appendix D), and the shortest gap Eq. 12 places a pose in (3 s).
+        partial_keys: train on partial keys too (section 5), with the sparse input format
+            (keyed coordinates at key frames and a 0/1 mask, Fig. 4's top rows), so the
+            model serves whole, root-only, half-body and 2-D keys; ``max_gap`` is then at
+            most 318 frames (a key is seen only where it is).
+        partial_fraction: the share of training sequences keyed partially (the rest get
+            whole poses), split equally between root paths, half bodies and 2-D keys.
         mask_scale: the dense mask (distance to the nearest key, frames) is divided by this.
         sequence_frames: frames ``N`` of a generator training sequence (a multiple of 64).
         min_gap, max_gap: key gaps drawn in training, frames (the paper: up to 600 of
@@ -87,6 +104,11 @@ class GanConfig:
     widths: dict = field(default_factory=lambda: {k: list(v) for k, v in PRESETS["cpu"].items()})
     noise_dim: int = 32
     style_dim: int = 0
+    dna_width: int = 0
+    dna_weight: float = 50.0
+    dna_seconds: float = 3.0
+    partial_keys: bool = False
+    partial_fraction: float = 0.6
     mask_scale: float = 64.0
     sequence_frames: int = 1024
     min_gap: int = 1
@@ -129,8 +151,15 @@ class GanConfig:
         if self.max_gap > EFFECTIVE_RECEPTIVE_FIELD:
             raise UsageError(f"max_gap {self.max_gap} is longer than the generator's effective receptive field "
                              f"({EFFECTIVE_RECEPTIVE_FIELD} frames): frames in such a gap could not see both keys")
-        if self.noise_dim < 0 or self.style_dim < 0:
-            raise UsageError("noise_dim and style_dim cannot be negative")
+        if self.noise_dim < 0 or self.style_dim < 0 or self.dna_width < 0:
+            raise UsageError("noise_dim, style_dim and dna_width cannot be negative")
+        if self.dna_width and not self.style_dim:
+            raise UsageError("a Motion DNA encoder (dna_width > 0) needs style_dim > 0 channels for its vector")
+        if self.partial_keys and self.max_gap > SPARSE_RECEPTIVE_FIELD:
+            raise UsageError(f"partial-key models see each key only where it is (the sparse input format): "
+                             f"max_gap {self.max_gap} must be at most {SPARSE_RECEPTIVE_FIELD} frames")
+        if not 0 <= self.partial_fraction <= 1 or self.dna_seconds <= 0:
+            raise UsageError("partial_fraction must be in [0, 1] and dna_seconds positive")
         if self.batch_size < 1 or self.path_batch < 1 or self.crops_per_sequence < 1 or self.steps_per_epoch < 1:
             raise UsageError("batch sizes, crops and steps per epoch must be positive")
         if self.real_frames > self.sequence_frames:
@@ -144,6 +173,11 @@ class GanConfig:
         widths = {k: list(v) for k, v in PRESETS[name].items()}
         return cls(preset=name, widths=widths, **changes)
 
+    @property
+    def dna(self) -> bool:
+        """Whether the model has a Motion DNA encoder."""
+        return self.dna_width > 0
+
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
 
@@ -151,7 +185,7 @@ class GanConfig:
     def from_json(cls, data: dict) -> GanConfig:
         """The config from :meth:`to_json` output; unknown keys are a :class:`UsageError`."""
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - names
+        unknown = set(data) - names  # fields added later (Motion DNA, partial keys) take their defaults
         if unknown:
             raise UsageError(f"unknown GAN setting {min(unknown)!r}")
         return cls(**data)

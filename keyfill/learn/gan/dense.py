@@ -12,6 +12,12 @@ joints' positions relative to the root (world axes), all in metres. The
 generator's input is ``(6 J, T)``: the ``3 J`` pose values, then the mask
 repeated for every coordinate (the paper's ``3 M`` mask channels, which leave
 room for partial keys).
+
+Partial-key models (``GanConfig.partial_keys``, section 5) take the *sparse*
+format instead (:func:`sparse_input`, Fig. 4's top rows): the given coordinates
+at the key frames and zero elsewhere, then a mask that is 1 where a coordinate
+is given and 0 elsewhere, again ``(6 J, T)``. Coordinates are given per key,
+joint and axis (``coords (K, J, 3)`` bool, :meth:`keyfill.motion.Keys.coordinate_mask`).
 """
 
 from __future__ import annotations
@@ -40,16 +46,35 @@ def dense_input(num_frames: int, key_frames, key_poses, mask_scale: float = 64.0
     return np.concatenate([pos, mask], axis=0)
 
 
-def centre_keys(key_poses: np.ndarray, up_axis: str = "Y") -> tuple[np.ndarray, np.ndarray]:
+def sparse_input(num_frames: int, key_frames, key_poses, coords) -> np.ndarray:
+    """The sparse generator input ``(6 J, T)`` float32: ``key_poses (K, J, 3)`` where ``coords (K, J, 3)`` gives them."""
+    key_poses = np.asarray(key_poses, dtype=np.float32)
+    K, J = key_poses.shape[:2]
+    pos = np.zeros((num_frames, J, 3), np.float32)
+    mask = np.zeros((num_frames, J, 3), np.float32)
+    pos[key_frames] = np.where(coords, key_poses, 0.0)
+    mask[key_frames] = coords
+    return np.concatenate([pos.reshape(num_frames, 3 * J).T, mask.reshape(num_frames, 3 * J).T], axis=0)
+
+
+def centre_keys(key_poses: np.ndarray, up_axis: str = "Y", coords=None) -> tuple[np.ndarray, np.ndarray]:
     """``(poses, shift (3,))``: key poses ``(K, J, 3)`` with the keys' mean ground position of the root moved to 0.
 
-    Only the two ground axes move (the height stays); ``shift`` is what was subtracted.
+    Only the two ground axes move (the height stays); ``shift`` is what was
+    subtracted. With partial keys (``coords (K, J, 3)`` bool) each ground axis is
+    centred on the keys that give the root's coordinate on it (not moved when none does).
     """
     from keyfill.learn.facing import horizontal_axes
 
     h = list(horizontal_axes(up_axis))
     shift = np.zeros(3)
-    shift[h] = np.asarray(key_poses)[:, 0, h].mean(axis=0)
+    if coords is None:
+        shift[h] = np.asarray(key_poses)[:, 0, h].mean(axis=0)
+    else:
+        given = np.asarray(coords)[:, 0]
+        for a in h:
+            if given[:, a].any():
+                shift[a] = np.asarray(key_poses)[given[:, a], 0, a].mean()
     out = np.array(key_poses, dtype=np.float64)
     out[:, 0] -= shift
     return out, shift

@@ -1,9 +1,11 @@
-"""The losses of Zhou et al. 2020 (torch): Eqs. 5, 7, 8 and 10.
+"""The losses of Zhou et al. 2020 (torch): Eqs. 5, 7, 8, 10 and the Motion DNA losses, Eqs. 11-12.
 
 Shapes: velocities ``(B, 3, T)`` (entry ``t`` is ``root[t + 1] - root[t]``, the
 last one unused), root paths ``(B, T, 3)``, joint positions ``(B, T, J, 3)``,
-key masks ``(B, T)`` bool. Positions are in whatever unit the caller gives
-(keyfill's networks work in metres), and the losses are in that unit squared.
+key masks ``(B, T)`` bool, or for partial keys coordinate masks ``(B, T, J, 3)``
+bool (which coordinates each key gives), root-free poses ``(B, T, J - 1, 3)``.
+Positions are in whatever unit the caller gives (keyfill's networks work in
+metres), and the losses are in that unit squared.
 """
 
 from __future__ import annotations
@@ -74,6 +76,87 @@ def key_joint_loss(positions, key_positions, key_mask):
     d = ((positions[:, :, 1:] - key_positions[:, :, 1:]) ** 2).sum(-1).mean(-1)  # (B, T)
     m = key_mask.to(d.dtype)
     return ((d * m).sum(1) / m.sum(1).clamp_min(1)).mean()
+
+
+def masked_key_joint_loss(positions, key_positions, coords):
+    """:func:`key_joint_loss` over the coordinates partial keys give (``coords (B, T, J, 3)`` bool).
+
+    Per row, the summed squared differences of the given coordinates of joints 1..,
+    divided by a third of their number (so with every coordinate given it is
+    :func:`key_joint_loss`); rows giving no joint count as zero.
+    """
+    m = coords[:, :, 1:].to(positions.dtype)
+    d = ((positions[:, :, 1:] - key_positions[:, :, 1:]) ** 2 * m).sum((1, 2, 3))
+    return (d / (m.sum((1, 2, 3)) / 3).clamp_min(1)).mean()
+
+
+def masked_key_root_loss(root, key_root, coords):
+    """Eq. 10 over the root coordinates partial keys give (``coords (B, T, 3)`` bool).
+
+    Each axis is re-centred on its mean over the keys that give it; the sum of the
+    squared differences is divided by a third of the given coordinates (so with
+    every coordinate given it is :func:`key_root_loss`).
+    """
+    m = coords.to(root.dtype)
+    n = m.sum(1, keepdim=True).clamp_min(1)  # (B, 1, 3) keys per axis
+    c = (root * m).sum(1, keepdim=True) / n
+    ck = (key_root * m).sum(1, keepdim=True) / n
+    d = (((root - c) - (key_root - ck)) ** 2 * m).sum((1, 2))
+    return (d / (m.sum((1, 2)) / 3).clamp_min(1)).mean()
+
+
+def root_free(quats, relative):
+    """The paper's ``Lambda``: ``relative (B, T, J, 3)`` root-relative world-axis positions turned into the root's
+    axes by the inverse of the root rotation ``quats[:, :, 0] (B, T, 4)`` -> ``(B, T, J - 1, 3)``."""
+    from keyfill import rotations as R
+
+    inv = R.quat_conjugate(quats[:, :, :1]).expand(*relative[:, :, 1:].shape[:-1], 4)
+    return R.quat_rotate(inv, relative[:, :, 1:])
+
+
+def pose_errors(poses, reps, squared: bool = True):
+    """``(T, P)``: per frame and representative pose, the mean over joints of the squared distance (or the
+    distance, ``squared=False``) between ``poses (T, J - 1, 3)`` and ``reps (P, J - 1, 3)``."""
+    d = ((poses[:, None] - reps[None]) ** 2).sum(-1)  # (T, P, J - 1)
+    return d.mean(-1) if squared else d.clamp_min(1e-12).sqrt().mean(-1)
+
+
+def dna_losses(poses, reps, valid, key_mask, min_frames: int, squared: bool = True):
+    """Eqs. 11 and 12: ``(L_DNA1, L_DNA2)`` for a batch.
+
+    Args:
+        poses: ``(B, T, J - 1, 3)`` root-free generated poses (:func:`root_free`).
+        reps: ``(B, P, J - 1, 3)`` root-free representative poses; ``valid (B, P)`` bool marks the real ones.
+        key_mask: ``(B, T)`` bool, the key frames that cut the sequence into intervals.
+        min_frames: the 3 s of the paper in frames: an interval of ``N_k >= min_frames``
+            frames holds ``floor(N_k / min_frames)`` poses.
+        squared: the loss (mean squared joint distance); ``False`` gives the error in
+            distance units (mean joint distance), as the paper reports it in cm.
+
+    Eq. 11, per row: the mean over representative poses of the error of the closest
+    generated frame. Eq. 12, per row: for each interval ``[k_i, k_{i+1})`` between
+    consecutive keys long enough, each frame's error to its closest representative
+    pose, the ``floor(N_k / min_frames)`` lowest of them collected over the row and
+    averaged. The batch's values are the means over the rows that have terms (zero
+    when none has).
+    """
+    l1, l2 = [], []
+    for b in range(poses.shape[0]):
+        r = reps[b][valid[b]]
+        if len(r) == 0:
+            continue
+        err = pose_errors(poses[b], r, squared)  # (T, P_b)
+        l1.append(err.min(0).values.mean())
+        keys = torch.nonzero(key_mask[b]).flatten().tolist()
+        picked = []
+        for a, c in zip(keys, keys[1:]):
+            count = (c - a) // min_frames
+            if count:
+                picked.append(torch.topk(err[a:c].min(1).values, count, largest=False).values)
+        if picked:
+            l2.append(torch.cat(picked).mean())
+    zero = poses.sum() * 0
+    return (torch.stack(l1).mean() if l1 else zero), (torch.stack(l2).mean() if l2 else zero)
 
 
 def key_root_loss(root, key_root, key_mask):

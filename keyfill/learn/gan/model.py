@@ -7,7 +7,10 @@ corpus folded a static top joint into the hips, the frame rate, the
 :class:`~keyfill.learn.gan.config.GanConfig`, the joint ranges of the RC-FK
 layer (plain arrays, :class:`~keyfill.learn.gan.ranges.JointRanges`), the
 ``stage`` (``"path"``: only the path predictor, from the first training stage;
-``"full"``: both networks) and a training summary. The discriminator is a
+``"full"``: both networks) and a training summary. A model with a Motion DNA
+encoder (``GanConfig.dna_width`` > 0) also keeps the representative poses of its
+training clips (:class:`~keyfill.learn.gan.dna.DnaBank`) under ``dna_bank.``, the
+DNA ``complete`` draws by the seed when no DNA file is given. The discriminator is a
 training tool and is not saved in the model (training checkpoints keep it).
 
 :func:`complete_motion` fills a motion between its keys:
@@ -23,8 +26,14 @@ training tool and is not saved in the model (training checkpoints keep it).
    frames outside the key range hold the generated first or last frame, so
    the exact-key correction puts them on the nearest key.
 
-Keys are not yet exact; ``complete_method`` applies the shared correction
+Keys are not yet exact; :func:`complete` applies the shared correction
 (:func:`keyfill.learn.exact_keys.snap_to_keys`) when asked.
+
+Partial keys (:attr:`keyfill.motion.Keys.partial`) need a model trained with
+``partial_keys``; its input is the sparse format with the coordinates the keys
+give, and the root path is moved onto the key roots along the axes they give.
+A Motion DNA (:func:`dna_poses`) is a set of representative poses of a motion
+file (its representative frames, or listed frames) or of the model's bank.
 """
 
 from __future__ import annotations
@@ -39,7 +48,8 @@ from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
-from keyfill.learn.gan.dense import centre_keys, dense_input
+from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
+from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
 from keyfill.learn.gan.ranges import JointRanges
 from keyfill.motion import Skeleton
 
@@ -60,7 +70,7 @@ def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> d
     rcfk = RCFK(skeleton.parents, skeleton.offsets * skeleton.meters_per_unit, ranges)
     w = cfg.widths
     return {
-        "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim),
+        "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim, cfg.dna_width),
         "discriminator": Discriminator(3 * (J - 1), w["discriminator"]),
         "path": PathPredictor(3 * (J - 1), w["path"]),
     }
@@ -90,6 +100,7 @@ class GanModel:
     fps: float = 30.0
     stage: str = "full"
     info: dict = field(default_factory=dict)
+    bank: DnaBank | None = None
 
     def model_config(self) -> dict:
         """The ``config.json`` content of this model."""
@@ -120,6 +131,11 @@ class GanModel:
         out = {f"path.{k}": v for k, v in self.path.state_dict().items()}
         if self.generator is not None:
             out.update({f"generator.{k}": v for k, v in self.generator.state_dict().items()})
+        if self.bank is not None and self.config.dna:
+            import torch
+
+            out["dna_bank.poses"] = torch.as_tensor(self.bank.poses)
+            out["dna_bank.clips"] = torch.as_tensor(self.bank.clips)
         return out
 
     def save(self, path: str | os.PathLike):
@@ -160,8 +176,13 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
         part = {k[len(name) + 1 :]: v for k, v in tensors.items() if k.startswith(name + ".")}
         modelfile.load_state(net, part, folder)
         net.eval().to(dev)
+    bank = None
+    if cfg.dna and model_stage == "full":
+        if "dna_bank.poses" not in tensors or "dna_bank.clips" not in tensors:
+            raise ModelError(f"{folder}: a gan model with Motion DNA but no bank of representative poses")
+        bank = DnaBank(tensors["dna_bank.poses"].numpy(), tensors["dna_bank.clips"].numpy())
     return GanModel(cfg, skel, ranges, gen, nets["path"], bool(config["folded_root"]), float(config["fps"]),
-                    model_stage, dict(config.get("training") or {}))
+                    model_stage, dict(config.get("training") or {}), bank)
 
 
 def load(path: str | os.PathLike, device: str = "cpu") -> GanModel:
@@ -185,7 +206,8 @@ def check_keys(model: GanModel, frames: np.ndarray) -> None:
                          f"at most {cfg.max_frames} frames at once")
 
 
-def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None):
+def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None,
+             dna=None, coords=None):
     """Run both networks over the key range.
 
     Args:
@@ -193,8 +215,12 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         key_poses: ``(K, J, 3)``, or ``(B, K, J, 3)`` for ``B`` sequences sharing the keys; metres:
             root positions (re-centred) and root-relative joints.
         seed: the seed of the noise (``torch.Generator().manual_seed(seed)``, one draw for the batch).
-        style: optional ``(style_dim,)`` or ``([B,] style_dim)`` per-sequence style vector (the Motion DNA
-            hook; None: zeros).
+        style: optional ``(style_dim,)`` or ``([B,] style_dim)`` per-sequence style vector (None: zeros).
+        dna: optional ``(P, J - 1, 3)`` or ``([B,] P, J - 1, 3)`` root-free representative poses
+            (metres) for a model with a Motion DNA encoder (instead of ``style``).
+        coords: ``(K, J, 3)`` bool, the coordinates partial keys give (a ``partial_keys`` model's
+            sparse input; None: every coordinate). The root path is moved onto the key roots
+            along the axes they give.
 
     Returns:
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
@@ -212,21 +238,78 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     T = int(key_frames[-1]) + 1
     Tp = T + (-T) % GENERATOR_MULTIPLE
     dev = next(model.generator.parameters()).device
-    x = torch.as_tensor(np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale) for p in poses]), device=dev)
+    if cfg.partial_keys:
+        given = np.ones(poses.shape[1:], dtype=bool) if coords is None else np.asarray(coords, dtype=bool)
+        x = np.stack([sparse_input(Tp, key_frames, p, given) for p in poses])
+    else:
+        x = np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale) for p in poses])
+    x = torch.as_tensor(x, device=dev)
     g = torch.Generator().manual_seed(int(seed))
     noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
-    w = None
+    w = d = None
     if style is not None:
         w = torch.as_tensor(np.asarray(style, dtype=np.float32), device=dev).reshape(-1, cfg.style_dim).expand(B, -1)
+    if dna is not None:
+        d = torch.as_tensor(np.asarray(dna, dtype=np.float32), device=dev)
+        d = (d[None] if d.ndim == 3 else d).expand(B, -1, -1, -1)
     with torch.inference_mode():
-        v = model.generator(x, noise, w)
+        v = model.generator(x, noise, w, dna=d)
         quats, rel = model.generator.rcfk(v)
         root = root_path(model.path(joint_channels(rel)))[:, :T].double().cpu().numpy()
     q = quats[:, :T].double().cpu().numpy()
     kr = poses[:, :, 0]
-    root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
+    if coords is None:
+        root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
+    else:
+        cr = np.asarray(coords)[:, 0]  # (K, 3)
+        n = np.maximum(cr.sum(0), 1)
+        root = root + (((kr - root[:, key_frames]) * cr).sum(1) / n)[:, None]
     q = R.quat_normalize(q)
     return (q[0], root[0]) if single else (q, root)
+
+
+def dna_poses(model: GanModel, source=None, frames=None, count: int | None = None, key_frames=None,
+              seed: int = 0) -> np.ndarray:
+    """The Motion DNA for :func:`generate`: ``(P, J - 1, 3)`` root-free poses in metres.
+
+    Args:
+        source: a :class:`~keyfill.motion.Motion` of the model's skeleton to take the poses from,
+            or None for the model's bank of its training clips' representative poses.
+        frames: the frames of ``source`` to use (None: its ``count`` representative frames).
+        count: how many poses (None: Appendix D's count for ``key_frames``, one per 3 s of gap).
+        key_frames: the keys, for the default count.
+        seed: the draw from the bank (``numpy.random.default_rng(seed)``).
+    """
+    from keyfill.learn.corpus import bone_difference, fold_root
+    from keyfill.learn.representative import pick_frames, root_free_poses, rotation_change
+
+    cfg = model.config
+    if not cfg.dna:
+        raise UsageError("this gan model has no Motion DNA encoder (it was trained without --dna)")
+    if count is None:
+        count = dna_count(key_frames, model.fps, cfg.dna_seconds) if key_frames is not None else 1
+    if count < 1:
+        raise UsageError(f"--dna-count must be at least 1, got {count}")
+    if source is None:
+        return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
+    q, p = source.rotations, source.positions
+    skel = source.skeleton
+    if model.folded:
+        if len(skel.children(0)) != 1:
+            raise ModelError(f"the DNA motion does not have the model's skeleton: {skel.names[0]!r} has "
+                             f"{len(skel.children(0))} children")
+        q, p = fold_root(q, p, skel.parents)
+    diff = bone_difference(model.skeleton, skel.replace(offsets=np.vstack([np.zeros(3), p[0, 1:]])))
+    if diff is not None:
+        raise ModelError(f"the DNA motion has another skeleton than the gan model: {diff}")
+    if frames is None:
+        frames = pick_frames(rotation_change(q), int(count))
+    frames = np.asarray(frames, dtype=np.int64)
+    bad = frames[(frames < 0) | (frames >= len(q))]
+    if len(bad):
+        raise UsageError(f"DNA frame {int(bad[0])} is outside the motion (frames 0-{len(q) - 1})")
+    m = model.skeleton.meters_per_unit
+    return root_free_poses(q[frames], model.skeleton.offsets * m, model.skeleton.parents).astype(np.float32)
 
 
 def _undriven(model: GanModel, num_joints: int) -> np.ndarray:
@@ -254,10 +337,12 @@ def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray
     return rot, pos
 
 
-def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[object, dict]:
+def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> tuple[object, dict]:
     """Fill every frame of ``motion`` between its ``keys`` (reads only the key frames; see the module docstring).
 
-    Returns ``(motion, info)``; keys are not yet exact.
+    ``keys`` is a :class:`~keyfill.motion.Keys` (partial keys need a ``partial_keys`` model) or
+    key frames; ``dna`` the ``(P, J - 1, 3)`` poses of :func:`dna_poses` (a DNA model without
+    them draws from its bank by ``seed``). Returns ``(motion, info)``; keys are not yet exact.
     """
     from keyfill.learn.corpus import bone_difference, fold_root
     from keyfill.learn.gan.poses import relative_positions
@@ -265,8 +350,17 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
 
     if model.generator is None:
         raise ModelError("this gan model holds only the global path predictor; train its generator first")
-    k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
+    keys = keys if isinstance(keys, Keys) else Keys(np.asarray(keys, dtype=np.int64))
+    k = keys.frames
+    coords = None
+    if keys.partial:
+        if not model.config.partial_keys:
+            raise UsageError("this gan model was trained on whole poses only; partial keys need a model trained "
+                             "with partial_keys (see docs/gan.md)")
+        coords = keys.coordinate_mask(motion.num_joints)
     check_keys(model, k)
+    if model.config.dna and dna is None:
+        dna = dna_poses(model, key_frames=k, seed=seed)
     lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
     q, p = lin_q, lin_p
     skel = motion.skeleton
@@ -275,6 +369,14 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
             raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
                              f"{len(skel.children(0))} children")
         q, p = fold_root(q, p, skel.parents)
+        if coords is not None:  # the folded top joint is the hips: it is keyed where either of them is
+            c = skel.children(0)[0]
+            coords = coords.copy()
+            coords[:, 0] |= coords[:, c]
+            coords[:, c] = coords[:, 0]
+    if coords is not None and not coords[:, 0].any():
+        raise UsageError("partial keys must give the root's position at one key at least (the path has no "
+                         "anchor otherwise)")
     here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
     diff = bone_difference(model.skeleton, here)
     if diff is not None:
@@ -282,9 +384,9 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
     m = model.skeleton.meters_per_unit
     poses = relative_positions(q[k], model.skeleton.offsets * m, model.skeleton.parents)
     poses[:, 0] = p[k, 0] * m
-    poses, shift = centre_keys(poses, model.skeleton.up_axis)
+    poses, shift = centre_keys(poses, model.skeleton.up_axis, coords)
     k0 = int(k[0])
-    gq, groot = generate(model, k - k0, poses, seed)
+    gq, groot = generate(model, k - k0, poses, seed, dna=dna, coords=coords)
     span = slice(k0, int(k[-1]) + 1)
     out_q = q.copy()
     driven = np.concatenate([[0], model.ranges.driven])
@@ -303,20 +405,55 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0) -> tuple[objec
         out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
         pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
         out_q[:, 0], pos[:, 0] = top_q, top_p
-    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
-    return result, {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0)}
+    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=keys)
+    info = {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0)}
+    if keys.partial:
+        keyed = "all" if keys.mask is None else f"{int(keys.mask.any(0).sum())} of {motion.num_joints}"
+        info["partial_keys"] = f"{keys.given}, {keyed} joints keyed"
+    if dna is not None:
+        info["dna_poses"] = len(dna)
+    return result, info
+
+
+def parse_dna(text: str) -> tuple[str, list[int] | None]:
+    """``"FILE[:FRAMES]"`` -> ``(file, frames or None)``; a file name holding ``:`` is read whole when it exists."""
+    import os
+
+    if os.path.exists(text) or ":" not in text:
+        return text, None
+    path, _, listed = text.rpartition(":")
+    try:
+        frames = [int(t) for t in listed.split(",") if t.strip()]
+    except ValueError:
+        raise UsageError(f"--dna takes FILE or FILE:FRAMES with frames separated by commas; got {text!r}") from None
+    if not frames:
+        raise UsageError(f"--dna {text!r} lists no frames")
+    return path, frames
 
 
 def complete(motion, keys, options):
-    """``keyfill complete --method gan``: :func:`complete_motion`, then exact keys when ``options.exact_keys``."""
+    """``keyfill complete --method gan``: :func:`complete_motion`, then exact keys when ``options.exact_keys``.
+
+    ``options.dna`` (``FILE[:FRAMES]``) and ``options.dna_count`` choose the Motion DNA.
+    """
+    from keyfill import io
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
 
     if options.model is None:
         raise UsageError("the gan method needs --model FOLDER (train one with 'keyfill train gan')")
     model = load_model(options.model, options.device)
-    filled, info = complete_motion(model, motion, keys, options.seed)
+    dna = None
+    if options.dna is not None or options.dna_count is not None:
+        source, frames = (None, None)
+        if options.dna is not None:
+            path, frames = parse_dna(options.dna)
+            source = io.load(path)
+        dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)
+    filled, info = complete_motion(model, motion, keys, options.seed, dna)
     info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
+    if options.dna is not None:
+        info["dna"] = options.dna
     if options.exact_keys:
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
@@ -352,7 +489,8 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         poses[b], shift = centre_keys(poses[b], model.skeleton.up_axis)
         shifts.append(shift)
     k0, end = int(k[0]), int(k[-1])
-    gq, groot = generate(model, k - k0, poses, seed)
+    dna = dna_poses(model, key_frames=k, seed=seed) if model.config.dna else None  # from the bank, as complete
+    gq, groot = generate(model, k - k0, poses, seed, dna=dna)
     out_q, out_r = [], []
     undriven = _undriven(model, skeleton.num_joints)
     for b in range(len(poses)):

@@ -17,7 +17,12 @@ path predictor a multiple of 16 (:func:`pad_frames` pads by repeating the last f
   stride-2 layers encode to ``T / 64`` latent steps; per-step noise
   (``noise_dim`` channels) and a per-sequence style vector (``style_dim``
   channels; the Motion DNA hook, zero when not given) are joined to every latent
-  step; the decoder goes back up with six transposed layers.
+  step; the decoder goes back up with six transposed layers. With a Motion DNA
+  encoder (:class:`DnaEncoder`, ``generator.dna``) the style vector is made from
+  representative poses.
+* :class:`DnaEncoder`: ``(B, 3 (J - 1), P)`` root-free representative poses
+  (:mod:`keyfill.learn.representative`), and which of the ``P`` are real ->
+  ``(B, style_dim)``.
 * :class:`Discriminator`: ``(B, 3 (J - 1), T)`` root-relative joint positions ->
   ``(B, T / 64)`` scores, one per overlapping sub-sequence (receptive field 190 frames).
 * :class:`PathPredictor`: ``(B, 3 (J - 1), T)`` root-relative joint positions ->
@@ -78,6 +83,40 @@ def discriminator_receptive_field() -> int:
     return receptive_field([(k, s, t) for k, s, _, t in DISCRIMINATOR])
 
 
+class DnaEncoder(nn.Module):
+    """The Motion DNA encoder (section 3.5.1, Table 5): a per-pose MLP shared by the poses, average pooling, linear.
+
+    conv_1 (1x1) -> affine -> PReLU -> conv_2 (1x1) -> affine, over each pose; the mean
+    over the real poses; a linear layer to ``style_dim`` channels (the "additional
+    linear layer" of the text, which Table 5 leaves out).
+
+    Args:
+        channels: ``3 (J - 1)`` values of a root-free pose.
+        width: hidden width (Table 5: 1024).
+        style_dim: channels of the vector ``w``.
+    """
+
+    def __init__(self, channels: int, width: int, style_dim: int):
+        super().__init__()
+        self.conv1 = nn.Conv1d(channels, width, 1, bias=False)
+        self.scale1, self.bias1 = nn.Parameter(torch.ones(width)), nn.Parameter(torch.zeros(width))
+        self.act = nn.PReLU(width)
+        self.conv2 = nn.Conv1d(width, width, 1, bias=False)
+        self.scale2, self.bias2 = nn.Parameter(torch.ones(width)), nn.Parameter(torch.zeros(width))
+        self.linear = nn.Linear(width, style_dim)
+
+    def forward(self, poses, valid=None):
+        """``poses (B, 3 (J - 1), P)`` metres, ``valid (B, P)`` bool (None: all) -> ``w (B, style_dim)``."""
+        h = self.act(self.conv1(poses) * self.scale1[:, None] + self.bias1[:, None])
+        h = self.conv2(h) * self.scale2[:, None] + self.bias2[:, None]
+        if valid is None:
+            pooled = h.mean(-1)
+        else:
+            m = valid.to(h.dtype)[:, None]
+            pooled = (h * m).sum(-1) / m.sum(-1).clamp_min(1)
+        return self.linear(pooled)
+
+
 class Generator(nn.Module):
     """Encoder, latent joining, decoder, and the RC-FK layer (parameter-free) as ``self.rcfk``.
 
@@ -86,12 +125,17 @@ class Generator(nn.Module):
         rcfk: the RC-FK layer of the skeleton; the output has ``rcfk.channels``.
         encoder, decoder: widths (6 and 13).
         noise_dim, style_dim: channels joined to every latent step.
+        dna_width: hidden width of a :class:`DnaEncoder` (``self.dna``) making the style
+            vector from representative poses; 0: none (the style is given directly).
     """
 
-    def __init__(self, num_joints: int, rcfk: RCFK, encoder, decoder, noise_dim: int = 0, style_dim: int = 0):
+    def __init__(self, num_joints: int, rcfk: RCFK, encoder, decoder, noise_dim: int = 0, style_dim: int = 0,
+                 dna_width: int = 0):
         super().__init__()
         self.num_joints = num_joints
         self.noise_dim, self.style_dim = noise_dim, style_dim
+        if dna_width:
+            self.dna = DnaEncoder(3 * (num_joints - 1), dna_width, style_dim)
         self.encoder = _stack(6 * num_joints, encoder, ENCODER, ENCODER_RATIOS)
         self.decoder = _stack(encoder[-1] + noise_dim + style_dim, decoder, DECODER, DECODER_RATIOS)
         k, s, p = DECODER_OUT
@@ -99,14 +143,17 @@ class Generator(nn.Module):
         self.rcfk = rcfk
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D), persistent=False)
 
-    def forward(self, dense, noise=None, style=None):
+    def forward(self, dense, noise=None, style=None, dna=None, dna_valid=None):
         """``dense (B, 6 J, T)`` -> ``(B, 6 + 3 D, T)``; ``noise (B, noise_dim, T / 64)``, ``style (B, style_dim)``.
 
-        Missing noise or style count as zeros.
+        ``dna (B, P, J - 1, 3)`` root-free representative poses (metres) with ``dna_valid (B, P)``
+        make the style through ``self.dna`` (instead of ``style``). Missing noise or style count as zeros.
         """
         B, _, T = dense.shape
         if T % GENERATOR_MULTIPLE:
             raise ValueError(f"the generator takes a multiple of {GENERATOR_MULTIPLE} frames, got {T}")
+        if dna is not None:
+            style = self.dna(dna.flatten(2).transpose(1, 2), dna_valid)
         z = self.encoder(dense)
         parts = [z]
         if self.noise_dim:

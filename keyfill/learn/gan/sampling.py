@@ -28,6 +28,13 @@ used), each turned to a random heading. The fake sequences the discriminator
 sees are crops of the same length from the generated sequences, at starts
 drawn by :func:`crop_starts`, so both kinds have the same length and borders.
 
+**Partial keys** (:func:`partial_coords`, for ``GanConfig.partial_keys``): a
+share of the sequences key only part of each pose, the same part at every key,
+in equal shares: the root's position (a path of spots, section 5.1), one half
+of the body with the root (5.2; :func:`body_halves`), or every joint's
+position in one of the three view planes XY, XZ, YZ (5.3; the sequences are at
+random headings, so a plane is a camera at a random azimuth).
+
 **Path predictor batches** (:func:`clip_batch`) are whole clips (crops of at
 most ``max_frames`` for long ones), turned to random headings and padded at
 the end by repeating the last frame; ``lengths`` tells the loss where each
@@ -41,7 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from keyfill.errors import DataError
-from keyfill.learn.gan.dense import centre_keys
+from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
+from keyfill.learn.gan.dna import dna_count, draw_dna
 from keyfill.learn.gan.poses import ClipPool, turn
 
 
@@ -124,6 +132,79 @@ def sample_keys(pool: ClipPool, rng: np.random.Generator, frames: int, min_gap: 
         clips.append(c)
     poses_arr, _ = centre_keys(np.array(poses), pool.up_axis)
     return KeyLayout(np.array(frames_out, dtype=np.int64), poses_arr, np.array(clips, dtype=np.int64))
+
+
+def body_halves(skeleton) -> list[np.ndarray]:
+    """The two halves of a body, ``(J,)`` bool each, or ``[]`` when the skeleton does not branch into both.
+
+    From the root down the chain of single children to the first joint with several
+    children (the pelvis); that chain belongs to both halves; the child subtrees whose
+    rest positions lie above that joint on average make the upper half, the others
+    the lower.
+    """
+    J = skeleton.num_joints
+    up = 1 if skeleton.up_axis == "Y" else 2
+    rest = skeleton.rest_world_positions()
+    b = 0
+    while len(skeleton.children(b)) == 1:
+        b = skeleton.children(b)[0]
+    chain = np.zeros(J, dtype=bool)
+    j = b
+    while j >= 0:
+        chain[j] = True
+        j = int(skeleton.parents[j])
+    upper, lower = chain.copy(), chain.copy()
+    for c in skeleton.children(b):
+        sub = np.zeros(J, dtype=bool)
+        sub[c] = True
+        for k in range(c + 1, J):
+            sub[k] = sub[k] or (skeleton.parents[k] >= 0 and sub[skeleton.parents[k]])
+        (upper if rest[sub, up].mean() > rest[b, up] else lower)[sub] = True
+    halves = [upper, lower]
+    return halves if all((h & ~chain).any() for h in halves) else []
+
+
+def partial_coords(rng: np.random.Generator, num_keys: int, num_joints: int, halves, fraction: float) -> np.ndarray:
+    """``(K, J, 3)`` bool: the coordinates the keys of one sequence give (see the module docstring)."""
+    coords = np.ones((num_keys, num_joints, 3), dtype=bool)
+    if rng.random() >= fraction:
+        return coords
+    modes = ["root", "plane"] + (["half"] if halves else [])
+    mode = modes[int(rng.integers(len(modes)))]
+    if mode == "root":
+        coords[:, 1:] = False
+    elif mode == "half":
+        coords[:, ~halves[int(rng.integers(len(halves)))]] = False
+    else:
+        coords[..., int(rng.integers(3))] = False  # the axis the view plane leaves out
+    return coords
+
+
+def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None) -> dict:
+    """One generator training sequence of ``cfg.sequence_frames`` (``N``) frames as arrays.
+
+    The keys span the first ``N - tail`` frames, ``tail`` drawn from 0 to 63: the
+    last frames hold the last key, as the padding to a multiple of 64 frames does
+    at inference. Returns ``dense (6 J, N)`` (the sparse format with partial keys
+    for a ``cfg.partial_keys`` config, :func:`partial_coords`), ``key_mask (N,)``
+    bool, and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)`` poses, as many as
+    :func:`~keyfill.learn.gan.dna.dna_count` says for the keys (Appendix D).
+    """
+    N = cfg.sequence_frames
+    tail = int(rng.integers(0, 64))
+    lay = sample_keys(pool, rng, N - tail, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
+    key_mask = np.zeros(N, dtype=bool)
+    key_mask[lay.frames] = True
+    out = {"key_mask": key_mask}
+    if cfg.partial_keys:
+        coords = partial_coords(rng, len(lay.frames), lay.poses.shape[1], halves, cfg.partial_fraction)
+        poses, _ = centre_keys(lay.poses, pool.up_axis, coords)
+        out["dense"] = sparse_input(N, lay.frames, poses, coords)
+    else:
+        out["dense"] = dense_input(N, lay.frames, lay.poses, cfg.mask_scale)
+    if bank is not None:
+        out["dna"] = draw_dna(bank, rng, dna_count(lay.frames, pool.fps, cfg.dna_seconds))
+    return out
 
 
 def real_crops(pool: ClipPool, rng: np.random.Generator, count: int, frames: int) -> np.ndarray:

@@ -17,7 +17,10 @@ is frozen and the local motion generator is trained against the discriminator.
     its residual layers;
   - generator: ``adv_weight`` * Eq. 8 + ``br_weight`` * Eq. 9 over its residual
     layers + ``joint_weight`` * the key joint loss + the root weight (growing
-    with the step, Appendix A) * Eq. 10 on the path the frozen predictor gives.
+    with the step, Appendix A) * Eq. 10 on the path the frozen predictor gives,
+    + ``dna_weight`` * (Eq. 11 + Eq. 12) with a Motion DNA encoder (each sequence
+    draws its representative poses from the training clips' bank, Appendix D).
+    With ``partial_keys`` the key losses cover the coordinates the keys give.
 
   :meth:`GanTask.save` writes a ``"gan"`` model folder of stage ``"full"``.
 
@@ -35,6 +38,7 @@ state_dict / load_state_dict, save).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -46,11 +50,11 @@ import numpy as np
 
 from keyfill.errors import DataError, UsageError
 from keyfill.learn.gan import KIND
-from keyfill.learn.gan.config import GanConfig
-from keyfill.learn.gan.dense import dense_input
+from keyfill.learn.gan.config import DNA_WIDTHS, SPARSE_RECEPTIVE_FIELD, GanConfig
+from keyfill.learn.gan.dna import build_bank, pad_dna
 from keyfill.learn.gan.poses import clip_pool
 from keyfill.learn.gan.ranges import estimate_ranges
-from keyfill.learn.gan.sampling import clip_batch, crop_starts, real_crops, sample_keys
+from keyfill.learn.gan.sampling import body_halves, clip_batch, crop_starts, real_crops, training_sequence
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask
 
 STAGES = ("path", "generator")
@@ -114,6 +118,9 @@ class GanTask(TrainingTask):
         self.val_pool = clip_pool(corpus, self.val_clips) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
+        self.halves = body_halves(self.skeleton) if self.cfg.partial_keys else []
+        self.train_bank = build_bank(corpus, self.train_clips) if self.cfg.dna else None
+        self.val_bank = build_bank(corpus, self.val_clips) if self.cfg.dna and n_val else None
         self.step_count = 0
         self.nets: dict = {}
         self.path_net = None
@@ -232,7 +239,7 @@ class GanTask(TrainingTask):
         info = {"stage": self.stage, "steps": int(self.step_count), "epochs": len(history),
                 "clips": len(self.train_clips), "validation_clips": len(self.val_clips), "final": final}
         model = GanModel(self.cfg, self.skeleton, self.ranges, gen, path, bool(self.corpus.folded),
-                         float(self.corpus.fps), stage, info)
+                         float(self.corpus.fps), stage, info, self.train_bank)
         return Path(model.save(output))
 
     # --- batches ---
@@ -243,16 +250,25 @@ class GanTask(TrainingTask):
 
     def generator_batch(self, rng: np.random.Generator, pool) -> Batch:
         cfg = self.cfg
-        N, B = cfg.sequence_frames, cfg.batch_size
-        dense, mask = zip(*(self._sequence(rng, pool) for _ in range(B)))
-        arrays = {"dense": np.stack(dense), "key_mask": np.stack(mask),
-                  "noise": rng.standard_normal((B, cfg.noise_dim, N // 64)).astype(np.float32)}
+        B = cfg.batch_size
+        arrays = self._sequences(rng, pool, B)
         if self.stage == "generator":
             crops = cfg.crops_per_sequence
             real = real_crops(self.train_pool, rng, B * crops, cfg.real_frames)
             arrays["real"] = real.reshape(B, crops, *real.shape[1:])
-            arrays["starts"] = crop_starts(rng, B, crops, N, cfg.real_frames)
+            arrays["starts"] = crop_starts(rng, B, crops, cfg.sequence_frames, cfg.real_frames)
         return Batch("generator", arrays)
+
+    def _sequences(self, rng, pool, count: int) -> dict:
+        """``dense``, ``key_mask``, ``noise`` (and ``dna``, ``dna_valid``) of ``count`` sequences of ``pool``."""
+        cfg = self.cfg
+        bank = self.train_bank if pool is self.train_pool else self.val_bank
+        seqs = [training_sequence(pool, rng, cfg, self.halves, bank) for _ in range(count)]
+        arrays = {"dense": np.stack([q["dense"] for q in seqs]), "key_mask": np.stack([q["key_mask"] for q in seqs]),
+                  "noise": rng.standard_normal((count, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)}
+        if bank is not None:
+            arrays["dna"], arrays["dna_valid"] = pad_dna([q["dna"] for q in seqs])
+        return arrays
 
     # --- steps ---
 
@@ -278,14 +294,41 @@ class GanTask(TrainingTask):
             p.to(dev)
         return p
 
-    def generator_outputs(self, G, dense, noise):
+    def generator_outputs(self, G, dense, noise, dna=None, dna_valid=None):
         """``(v, quats, relative (B, T, J, 3), root (B, T, 3))`` of the generator and the frozen path predictor."""
         from keyfill.learn.gan.networks import joint_channels, root_path
 
-        v = G(dense, noise)
+        v = G(dense, noise, dna=dna, dna_valid=dna_valid)
         quats, rel = _unwrap(G).rcfk(v)
         root = root_path(self._frozen_path(dense.device)(joint_channels(rel)))
         return v, quats, rel, root
+
+    def _key_targets(self, dense, key_mask):
+        """``(key poses (B, T, J, 3), their root-relative part, given coordinates (B, T, J, 3) bool)`` of the input.
+
+        The dense format gives every coordinate at the keys; the sparse one (partial keys) those its mask marks.
+        """
+        import torch
+
+        B, _, N = dense.shape
+        J = self.skeleton.num_joints
+        keypose = dense[:, : 3 * J].transpose(1, 2).reshape(B, N, J, 3)  # each frame's nearest key; the key at keys
+        key_rel = torch.cat([torch.zeros_like(keypose[:, :, :1]), keypose[:, :, 1:]], dim=2)
+        if self.cfg.partial_keys:
+            coords = dense[:, 3 * J :].transpose(1, 2).reshape(B, N, J, 3) > 0.5
+        else:
+            coords = key_mask[:, :, None, None].expand(B, N, J, 3)
+        return keypose, key_rel, coords
+
+    def _inputs(self, a: dict, dev):
+        """The generator's tensors of a batch's arrays: ``(dense, key_mask, noise, dna, dna_valid)``."""
+        import torch
+
+        def get(name):
+            return torch.as_tensor(a[name], device=dev) if name in a else None
+
+        return get("dense"), get("key_mask"), get("noise") if self.cfg.noise_dim else None, get("dna"), \
+            get("dna_valid")
 
     def _generator_step(self, batch: Batch, update):
         import torch
@@ -298,17 +341,12 @@ class GanTask(TrainingTask):
         G, D = self.nets["generator"], self.nets["discriminator"]
         dev = next(G.parameters()).device
         a = batch.arrays
-        dense = torch.as_tensor(a["dense"], device=dev)
-        key_mask = torch.as_tensor(a["key_mask"], device=dev)
-        noise = torch.as_tensor(a["noise"], device=dev) if cfg.noise_dim else None
-        B, _, N = dense.shape
-        J = self.skeleton.num_joints
-        keypose = dense[:, : 3 * J].transpose(1, 2).reshape(B, N, J, 3)  # each frame's nearest key; the key at keys
-        key_rel = torch.cat([torch.zeros_like(keypose[:, :, :1]), keypose[:, :, 1:]], dim=2)
+        dense, key_mask, noise, dna, dna_valid = self._inputs(a, dev)
+        keypose, key_rel, coords = self._key_targets(dense, key_mask)
 
         clear_statistics(G)
-        _, _, rel, root = self.generator_outputs(G, dense, noise)
-        pasted = torch.where(key_mask[:, :, None, None], key_rel, rel)  # keys pasted in before D sees the motion
+        _, quats, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
+        pasted = torch.where(coords, key_rel, rel)  # keys pasted in before D sees the motion
         fake = self._crops(joint_channels(pasted), torch.as_tensor(a["starts"], device=dev), cfg.real_frames)
         real = torch.as_tensor(a["real"], device=dev)
         real = joint_channels(real.reshape(-1, *real.shape[2:]))
@@ -326,17 +364,26 @@ class GanTask(TrainingTask):
         try:
             g_adv = L.generator_loss(D(fake))
             g_br = batch_regularisation(G)
-            joint = L.key_joint_loss(rel, key_rel, key_mask)
-            root_l = L.key_root_loss(root, keypose[:, :, 0], key_mask)
+            if cfg.partial_keys:
+                joint = L.masked_key_joint_loss(rel, key_rel, coords)
+                root_l = L.masked_key_root_loss(root, keypose[:, :, 0], coords[:, :, 0])
+            else:
+                joint = L.key_joint_loss(rel, key_rel, key_mask)
+                root_l = L.key_root_loss(root, keypose[:, :, 0], key_mask)
             w_root = cfg.root_weight(self.step_count)
             total = cfg.adv_weight * g_adv + cfg.br_weight * g_br + cfg.joint_weight * joint + w_root * root_l
+            out = {}
+            if cfg.dna:
+                out["dna_1"], out["dna_2"] = L.dna_losses(L.root_free(quats, rel), dna, dna_valid, key_mask,
+                                                          round(cfg.dna_seconds * self.corpus.fps))
+                total = total + cfg.dna_weight * (out["dna_1"] + out["dna_2"])
             update("generator", total)
         finally:
             for p in D.parameters():
                 p.requires_grad_(True)
         self.step_count += 1
-        out = {"d_adv": d_adv, "d_br": d_br, "g_adv": g_adv, "g_br": g_br, "key_joint": joint, "key_root": root_l,
-               "generator": total}
+        out.update({"d_adv": d_adv, "d_br": d_br, "g_adv": g_adv, "g_br": g_br, "key_joint": joint,
+                    "key_root": root_l, "generator": total})
         return {k: float(v.detach()) for k, v in out.items()} | {"root_weight": w_root}, batch.rows
 
     @staticmethod
@@ -371,55 +418,43 @@ class GanTask(TrainingTask):
         return {"path_loss": float(loss)}
 
     def _validate_generator(self) -> dict:
+        """Mean key errors over the given coordinates (joints, and the root after Eq. 10's re-centring) and,
+        with Motion DNA, the errors of Eqs. 11-12 as mean joint distances; file units."""
         import torch
+
+        from keyfill.learn.gan.losses import dna_losses, root_free
 
         G = self.nets["generator"]
         was = G.training
         G.eval()
         rng = np.random.default_rng([self.cfg.seed, 98])
         cfg = self.cfg
-        joint_err, root_err = [], []
+        errors = {"key_joint_error": [], "key_root_error": [], "dna_error_1": [], "dna_error_2": []}
         dev = next(G.parameters()).device
         with torch.no_grad():
             for _ in range(cfg.val_sequences):
-                b = self.generator_batch_for(rng)
-                dense = torch.as_tensor(b["dense"], device=dev)
-                noise = torch.as_tensor(b["noise"], device=dev) if cfg.noise_dim else None
-                _, _, rel, root = self.generator_outputs(G, dense, noise)
-                J = self.skeleton.num_joints
-                N = dense.shape[-1]
-                keypose = dense[:, : 3 * J].transpose(1, 2).reshape(1, N, J, 3)[0].cpu().numpy()
-                k = np.flatnonzero(b["key_mask"][0])
-                rel_k, root_k = rel[0, k].cpu().numpy(), root[0, k].cpu().numpy()
-                joint_err.append(np.linalg.norm(rel_k[:, 1:] - keypose[k, 1:], axis=-1).mean())
-                kr = keypose[k, 0]
-                aligned = root_k - root_k.mean(0) + kr.mean(0)
-                root_err.append(np.linalg.norm(aligned - kr, axis=-1).mean())
+                dense, key_mask, noise, dna, dna_valid = self._inputs(self._sequences(rng, self.val_pool, 1), dev)
+                _, quats, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
+                keypose, _, coords = self._key_targets(dense, key_mask)
+                k = torch.nonzero(key_mask[0]).flatten()
+                c = coords[0, k].cpu().numpy()
+                d = (rel[0, k] - keypose[0, k]).cpu().numpy()
+                joints = c[:, 1:].any(-1)
+                if joints.any():
+                    errors["key_joint_error"].append(np.sqrt((d[:, 1:] ** 2 * c[:, 1:]).sum(-1))[joints].mean())
+                rk, kr, cr = root[0, k].cpu().numpy(), keypose[0, k, 0].cpu().numpy(), c[:, 0]
+                n = np.maximum(cr.sum(0), 1)
+                aligned = rk - (rk * cr).sum(0) / n + (kr * cr).sum(0) / n
+                if cr.any():
+                    errors["key_root_error"].append(np.sqrt(((aligned - kr) ** 2 * cr).sum(-1))[cr.any(-1)].mean())
+                if cfg.dna:
+                    e1, e2 = dna_losses(root_free(quats, rel), dna, dna_valid, key_mask,
+                                        round(cfg.dna_seconds * self.corpus.fps), squared=False)
+                    errors["dna_error_1"].append(float(e1))
+                    errors["dna_error_2"].append(float(e2))
         G.train(was)
         m = self.skeleton.meters_per_unit
-        return {"key_joint_error": float(np.mean(joint_err) / m), "key_root_error": float(np.mean(root_err) / m)}
-
-    def generator_batch_for(self, rng) -> dict:
-        """One held-out sequence's ``dense``, ``key_mask`` and ``noise`` (batch of one)."""
-        cfg = self.cfg
-        dense, mask = self._sequence(rng, self.val_pool)
-        return {"dense": dense[None], "key_mask": mask[None],
-                "noise": rng.standard_normal((1, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)}
-
-    def _sequence(self, rng, pool) -> tuple[np.ndarray, np.ndarray]:
-        """``(dense (6 J, N), key mask (N,))`` of one training sequence.
-
-        The keys span the first ``N - tail`` frames, ``tail`` drawn from 0 to 63: the
-        last frames hold the last key, as the padding to a multiple of 64 frames does
-        at inference.
-        """
-        cfg = self.cfg
-        N = cfg.sequence_frames
-        tail = int(rng.integers(0, 64))
-        lay = sample_keys(pool, rng, N - tail, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
-        m = np.zeros(N, dtype=bool)
-        m[lay.frames] = True
-        return dense_input(N, lay.frames, lay.poses, cfg.mask_scale), m
+        return {name: float(np.mean(v) / m) for name, v in errors.items() if v}
 
     # --- the path predictor of the generator stage ---
 
@@ -471,6 +506,11 @@ def _make_task(common, options: dict, progress) -> GanTask:
     from keyfill.learn.train_transformer import select_clips
 
     cfg = read_config(options["config"], options["preset"], common.seed)
+    if options["dna"] and not cfg.dna:
+        width = DNA_WIDTHS.get(cfg.preset, DNA_WIDTHS["cpu"])
+        cfg = dataclasses.replace(cfg, style_dim=cfg.style_dim or width, dna_width=width)
+    if options["partial_keys"] and not cfg.partial_keys:
+        cfg = dataclasses.replace(cfg, partial_keys=True, max_gap=min(cfg.max_gap, SPARSE_RECEPTIVE_FIELD))
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
     corpus = select_clips(corpus, options["include"], options["exclude"])
@@ -515,6 +555,8 @@ TRAINING = TrainingSpec(
       keyfill train gan bandai2/data -o models/gan-path --stage path
       keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path
       keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path --resume
+      keyfill train gan bandai2/data -o models/gan-dna --stage generator --path-model models/gan-path --dna \\
+          --partial-keys
     """,
     options=(
         Option("stage", "path", "Which stage to train: the path predictor, or the generator.",
@@ -527,6 +569,10 @@ TRAINING = TrainingSpec(
         Option("include", (), "Train only on files matching one of these patterns.", multiple=True, metavar="GLOB"),
         Option("exclude", (), "Leave out files matching these patterns (e.g. a test style).", multiple=True,
                metavar="GLOB"),
+        Option("dna", False, "Give the generator a Motion DNA encoder (style_dim and its width from the preset: "
+               "cpu 128, paper 1024) trained with Eqs. 11-12; complete then takes --dna.", flag=True),
+        Option("partial_keys", False, "Train on partial keys too (root paths, half bodies, 2-D keys) with the "
+               "sparse input format; max_gap becomes at most 318 frames.", flag=True),
         Option("fold_root", None, "Fold a static top joint (like Bandai's joint_Root) into the hips. "
                "Default: when it is static.", flag=True),
     ),

@@ -1,0 +1,74 @@
+"""Motion DNA and partial-key figures of a trained gan model on held-out Bandai-Namco dataset-2 clips.
+
+The table of docs/benchmarks.md (gan: Motion DNA and partial keys), from a model
+trained with ``--dna --partial-keys`` and the ``normal`` style held out::
+
+    .venv/bin/keyfill train gan data/bandai2/bandai_namco_motiondataset2/data --exclude '*_normal_*' \\
+        -o data/models/bandai2-gan-path --stage path --seed 0
+    .venv/bin/keyfill train gan data/bandai2/bandai_namco_motiondataset2/data --exclude '*_normal_*' \\
+        -o data/models/bandai2-gan-dna --stage generator --path-model data/models/bandai2-gan-path \\
+        --dna --partial-keys --seed 0
+    .venv/bin/python benchmarks/bench_gan_dna.py data/models/bandai2-gan-dna --sequences 50
+
+On the ``normal`` clips (:func:`keyfill.learn.gan.quality.quality_report`):
+the DNA errors of Eqs. 11-12 in cm (the paper: 8.4 and 6.5 cm), keyframe
+errors for whole, root-only, half-body and 2-D keys, and the variety (mean
+pairwise joint distance of the in-betweens) for 4 DNAs through the same keys
+against 4 noise seeds. Without the corpus the script says ``skipped`` and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from keyfill.errors import DataError
+from keyfill.learn.corpus import load_corpus, locate
+from keyfill.learn.gan.model import load_model
+from keyfill.learn.gan.quality import quality_report
+from keyfill.learn.train_transformer import select_clips
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", help="a full gan model folder (trained with --dna --partial-keys for every figure)")
+    ap.add_argument("--data", default=None, help="BVH folder (default: Bandai-Namco dataset-2)")
+    ap.add_argument("--test-pattern", default="*_normal_*", help="held-out clips (file-name pattern)")
+    ap.add_argument("--sequences", type=int, default=50, help="key layouts scored")
+    ap.add_argument("--frames", type=int, default=None, help="frames per sequence (default: the model's)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        data = args.data or str(locate("bandai2"))
+    except DataError as e:
+        print(f"skipped: {e}")
+        return 0
+    print(f"load average before: {os.getloadavg()[0]:.2f}", file=sys.stderr)
+    model = load_model(args.model)
+    corpus = select_clips(load_corpus([data], fold=model.folded), include=(args.test_pattern,))
+    report = quality_report(model, corpus, range(len(corpus)), args.sequences, args.frames, args.seed)
+    print(f"load average after: {os.getloadavg()[0]:.2f}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+
+    def cm(v):
+        return "-" if v is None else f"{v:.1f}"
+
+    print(f"{report['sequences']} sequences of {report['frames']} frames over {report['clips']} held-out clips")
+    if "dna_error_1_cm" in report:
+        print(f"DNA errors (cm): Eq. 11 {cm(report['dna_error_1_cm'])} (paper 8.4), "
+              f"Eq. 12 {cm(report['dna_error_2_cm'])} (paper 6.5)")
+    print("key errors (cm)   joints   root")
+    for kind, e in report["key_errors"].items():
+        print(f"  {kind:<15} {cm(e['joints_cm']):>6} {cm(e['root_cm']):>6}")
+    v = report["variety_cm"]
+    print(f"variety (cm): 4 DNAs {cm(v.get('dnas'))}, 4 noise seeds {cm(v['seeds'])}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -62,7 +62,7 @@ def main(argv=None) -> int:
 
     load_before = os.getloadavg()
     if args.model:
-        model = T.load_model(args.model)
+        model = T.load(args.model)
     else:
         torch.manual_seed(0)
         skel = bandai_like_skeleton()

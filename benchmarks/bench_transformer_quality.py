@@ -38,7 +38,7 @@ import numpy as np
 from keyfill.errors import DataError
 from keyfill.learn import benchmark as B
 from keyfill.learn.corpus import locate
-from keyfill.learn.transformer import load_model
+from keyfill.learn.transformer import load
 
 SSMCT = {  # Table 1 of the paper: (SSMCT, interpolation) at 5, 15, 30 frames
     "L2Q": {5: (0.14, 0.22), 15: (0.36, 0.62), 30: (0.61, 0.98)},
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
         print(f"skipped: {e}")
         return 0
     t0 = time.perf_counter()
-    model = load_model(args.model)
+    model = load(args.model)
     proto = B.lafan1([folder], ["*_normal_*"], fold=True, facing_axis="+Y")
     methods = {"zero-velocity": B.zero_velocity, "interpolation": B.interpolation, "cubic": B.cubic,
                "transformer": model.benchmark_method()}

@@ -54,12 +54,20 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError
-from keyfill.kinematics import fk
 from keyfill.learn.benchmark import interpolation
-from keyfill.learn.facing import axis_vector, facing_rotation, horizontal_axes
+from keyfill.learn.facing import axis_vector
+from keyfill.learn.transformer_features import (  # noqa: F401 - the layouts and features are part of the model's interface
+    IGNORED,
+    KEY,
+    UNKNOWN,
+    Features,
+    anchor_frame,
+    apply_transform,
+    canonical_transform,
+    frame_kinds,
+)
 from keyfill.motion import Skeleton
 
-KEY, UNKNOWN, IGNORED = 0, 1, 2
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
 KIND = "transformer"
 
@@ -98,133 +106,6 @@ class ModelConfig:
         if self.d_model % self.heads:
             raise ModelError(f"d_model {self.d_model} is not a multiple of heads {self.heads}")
         axis_vector(self.facing_axis)
-
-
-# --- key layouts ----------------------------------------------------------------
-
-
-def frame_kinds(num_frames: int, keys) -> np.ndarray:
-    """``(T,)`` int: KEY at key frames, UNKNOWN between the first and last key, IGNORED outside."""
-    keys = np.asarray(keys, dtype=np.int64)
-    kinds = np.full(num_frames, IGNORED, dtype=np.int64)
-    if len(keys):
-        kinds[keys[0] : keys[-1] + 1] = UNKNOWN
-        kinds[keys] = KEY
-    return kinds
-
-
-def anchor_frame(keys) -> int:
-    """The key whose facing defines the canonical frame: the last key before the first unknown frame."""
-    keys = np.asarray(keys)
-    gaps = np.flatnonzero(np.diff(keys) > 1)
-    return int(keys[gaps[0]] if len(gaps) else keys[0])
-
-
-def canonical_transform(quats: np.ndarray, root: np.ndarray, keys, facing_axis: str, up_axis: str = "Y"):
-    """``(turn (B, 4), shift (B, 3))`` that put windows in the model's canonical frame.
-
-    ``shift`` is the mean ground position of the root over the key frames,
-    ``turn`` rotates about the up axis so that the root faces +X on the anchor
-    key. Canonical root = ``turn * (root - shift)``, root rotation = ``turn * q``.
-    """
-    keys = np.asarray(keys)
-    shift = np.zeros(root.shape[:1] + (3,))
-    h = list(horizontal_axes(up_axis))
-    shift[:, h] = root[:, keys][..., h].mean(axis=1)
-    turn = R.quat_conjugate(facing_rotation(quats[:, anchor_frame(keys), 0], axis_vector(facing_axis), up_axis))
-    return turn, shift
-
-
-def apply_transform(quats: np.ndarray, root: np.ndarray, turn: np.ndarray, shift: np.ndarray, inverse=False):
-    """Apply (or undo) a :func:`canonical_transform` to ``quats (B, T, J, 4)``, ``root (B, T, 3)``."""
-    q = np.array(quats, dtype=np.float64)
-    t = turn[:, None]
-    if inverse:
-        t = R.quat_conjugate(t)
-        q[:, :, 0] = R.quat_mul(t, q[:, :, 0])
-        return q, R.quat_rotate(t, root) + shift[:, None]
-    q[:, :, 0] = R.quat_mul(t, q[:, :, 0])
-    return q, R.quat_rotate(t, root - shift[:, None])
-
-
-# --- features ------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class Features:
-    """Frames <-> feature vectors for one skeleton and coordinate system (numpy or torch).
-
-    Attributes:
-        coordinates: ``"global"``: ``J * 3`` normalised global positions, then
-            ``J * 4`` global quaternions; ``"local"``: 3 normalised root
-            coordinates, then ``J * 4`` local quaternions.
-        parents: ``(J,)`` parent indices.
-        offsets: ``(J, 3)`` constant bone offsets (file units).
-        pos_mean, pos_std: ``(J * 3,)`` statistics of global joint positions
-            in the canonical frame (the local features use the first three).
-    """
-
-    coordinates: str
-    parents: np.ndarray
-    offsets: np.ndarray
-    pos_mean: np.ndarray
-    pos_std: np.ndarray
-
-    @property
-    def num_joints(self) -> int:
-        return len(self.parents)
-
-    @property
-    def size(self) -> int:
-        J = self.num_joints
-        return J * 7 if self.coordinates == "global" else 3 + J * 4
-
-    def _like(self, a, like):
-        if R._xp(like) is np:
-            return np.asarray(a, dtype=like.dtype)
-        import torch
-
-        return torch.as_tensor(a, dtype=like.dtype, device=like.device)
-
-    def _stats(self, like):
-        n = 3 if self.coordinates == "local" else len(self.pos_mean)
-        return self._like(self.pos_mean[:n], like), self._like(self.pos_std[:n], like)
-
-    def global_pose(self, quats, root):
-        """Global ``(quats, positions)`` from local quats ``(..., J, 4)`` and root ``(..., 3)``."""
-        xp = R._xp(quats)
-        off = self._like(self.offsets[1:], root)
-        rest = xp.broadcast_to(off, root.shape[:-1] + off.shape) if xp is np else off.expand(root.shape[:-1] + off.shape)
-        pos = xp.concat([root[..., None, :], rest], axis=-2)
-        return fk(quats, pos, self.parents)
-
-    def encode(self, quats, root):
-        """``(B, T, size)`` features of local quats ``(B, T, J, 4)`` and root ``(B, T, 3)``."""
-        xp = R._xp(quats)
-        B, T = root.shape[:2]
-        mean, std = self._stats(root)
-        if self.coordinates == "global":
-            gq, gp = self.global_pose(quats, root)
-            return xp.concat([(gp.reshape(B, T, -1) - mean) / std, gq.reshape(B, T, -1)], axis=-1)
-        return xp.concat([(root - mean) / std, quats.reshape(B, T, -1)], axis=-1)
-
-    def split(self, x):
-        """Features -> ``(positions or root (B, T, J*3 or 3), quats (B, T, J, 4) normalised)``."""
-        J = self.num_joints
-        n = J * 3 if self.coordinates == "global" else 3
-        mean, std = self._stats(x)
-        pos = x[..., :n] * std + mean
-        q = x[..., n:].reshape(x.shape[:-1] + (J, 4))
-        return pos, R.quat_normalize(q)
-
-    def decode(self, x):
-        """Features -> local ``(quats (B, T, J, 4), root (B, T, 3))`` (global: simplest IK)."""
-        pos, q = self.split(x)
-        if self.coordinates == "local":
-            return q, pos
-        par = np.asarray(self.parents)
-        local = R.quat_mul(R.quat_conjugate(q[..., par[1:], :]), q[..., 1:, :])
-        return R._xp(q).concat([q[..., :1, :], local], axis=-2), pos[..., :3]
 
 
 # --- the network -------------------------------------------------------------------------
@@ -340,7 +221,8 @@ class CompletionModel:
         config: the architecture.
         skeleton: the skeleton it serves (names, parents, constant offsets).
         features: the feature encoding (with normalisation statistics).
-        network: the torch module.
+        network: the torch module, or an exported graph runner that takes numpy arrays (``numpy_io``;
+            :class:`keyfill.learn.transformer_onnx.GraphNetwork`).
         folded: whether its corpus folded a static top joint into the hips.
         info: training summary (epochs, data, final validation scores).
     """
@@ -353,7 +235,7 @@ class CompletionModel:
     info: dict = field(default_factory=dict)
 
     def to(self, device: str) -> CompletionModel:
-        if not isinstance(self.network, GraphNetwork):
+        if not getattr(self.network, "numpy_io", False):
             self.network.to(device)
         return self
 
@@ -383,7 +265,7 @@ class CompletionModel:
         q, r = apply_transform(q, r, turn, shift)
         q, r = interpolation(None, q, r, keys)
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
-        if isinstance(self.network, GraphNetwork):
+        if getattr(self.network, "numpy_io", False):
             y = self.network(x, np.broadcast_to(kinds, (len(q), T)))
         else:
             import torch
@@ -433,7 +315,7 @@ class CompletionModel:
         save_model(path, KIND, self.network.state_dict(), self.model_config())
 
 
-def _features(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std) -> Features:
+def features_for(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std) -> Features:
     std = np.where(np.asarray(pos_std) > 1e-6, pos_std, 1.0)
     return Features(cfg.coordinates, skeleton.parents.copy(), skeleton.offsets.copy(),
                     np.asarray(pos_mean, dtype=np.float64), np.asarray(std, dtype=np.float64))
@@ -441,11 +323,11 @@ def _features(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std) -> Featur
 
 def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: bool, info=None) -> CompletionModel:
     """A freshly initialised :class:`CompletionModel` (weights from torch's current generator)."""
-    feat = _features(skeleton, cfg, pos_mean, pos_std)
+    feat = features_for(skeleton, cfg, pos_mean, pos_std)
     return CompletionModel(cfg, skeleton, feat, build_network(feat.size, cfg), folded, dict(info or {}))
 
 
-def _config_parts(config: dict):
+def config_parts(config: dict):
     """``(ModelConfig, Skeleton, statistics, folded, training)`` of a model's ``config.json`` content."""
     cfg = ModelConfig(**config["architecture"])
     s = config["skeleton"]
@@ -477,7 +359,7 @@ def load(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
     dev = torch_device(device)
     tensors, config = modelfile.load_model(path, kind=KIND)
     try:
-        cfg, skel, st, folded, training = _config_parts(config)
+        cfg, skel, st, folded, training = config_parts(config)
         model = modelfile.build_for_loading(lambda: new_model(skel, cfg, st["pos_mean"], st["pos_std"],
                                                               folded, training))
     except (KeyError, TypeError, ValueError, KeyfillError) as e:
@@ -626,7 +508,7 @@ def _finish(completed, motion, keys, options):
     return Completion(filled, info)
 
 
-def _complete_many_with(model: CompletionModel, jobs, options, extra=None) -> list:
+def complete_many_with(model: CompletionModel, jobs, options, extra=None) -> list:
     out = []
     for (motion, keys), done in zip(jobs, complete_motions(model, jobs, batch=True)):
         if isinstance(done, KeyfillError):
@@ -645,7 +527,7 @@ def complete_many(jobs, options):
 
     if options.model is None:
         raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    return _complete_many_with(load_cached(options.model, options.device), jobs, options)
+    return complete_many_with(load_cached(options.model, options.device), jobs, options)
 
 
 def load_cached(path, device: str = "cpu") -> CompletionModel:
@@ -661,67 +543,3 @@ def load_cached(path, device: str = "cpu") -> CompletionModel:
 @functools.lru_cache(maxsize=4)
 def _load_cached(path: str, device: str, stamp: tuple) -> CompletionModel:
     return load(path, device)
-
-
-# --- ONNX: export (torch) and the graph runtime (no torch) ---------------------------------------------
-
-#: what a transformer graph takes and gives (written into its metadata; docs/onnx.md)
-CONTRACT = {
-    "graph": "the whole network: pre-filled, encoded frames of windows and the kind of each frame -> "
-             "completed encoded frames",
-    "inputs": {
-        "features": ["batch", "frames", "feature_size", "float32",
-                     "frames in the canonical frame, unknown frames pre-filled by LERP/SLERP, encoded by Features"],
-        "kinds": ["batch", "frames", "int64", "0 key, 1 unknown (to fill), 2 ignored (outside the keys)"],
-    },
-    "outputs": {"completed": ["batch", "frames", "feature_size", "float32", "completed encoded frames"]},
-}
-
-
-class GraphNetwork:
-    """The transformer network as an exported graph: ``(x (B, T, F) float64, kinds (B, T)) -> (B, T, F) float64``."""
-
-    def __init__(self, graph):
-        self.graph = graph
-
-    def __call__(self, x: np.ndarray, kinds: np.ndarray) -> np.ndarray:
-        y = self.graph.run({"features": np.ascontiguousarray(x, dtype=np.float32),
-                            "kinds": np.ascontiguousarray(kinds, dtype=np.int64)})[0]
-        return y.astype(np.float64)
-
-
-def model_from_graph(graph) -> CompletionModel:
-    """A :class:`CompletionModel` whose network is an exported graph (:class:`keyfill.learn.onnx.Graph`)."""
-    model = getattr(graph, "_transformer_model", None)
-    if model is None:
-        try:
-            cfg, skel, st, folded, training = _config_parts(graph.config)
-            model = CompletionModel(cfg, skel, _features(skel, cfg, st["pos_mean"], st["pos_std"]),
-                                    GraphNetwork(graph), folded, dict(training or {}))
-        except (KeyError, TypeError, ValueError, KeyfillError) as e:
-            raise ModelError(f"{graph.path}: damaged transformer model metadata ({e})") from None
-        graph._transformer_model = model
-    return model
-
-
-def complete_graph(jobs, options, graph):
-    """``keyfill complete --method transformer`` through an exported graph: a Completion or the error, per job."""
-    return _complete_many_with(model_from_graph(graph), jobs, options, {"runtime": "onnx"})
-
-
-def export_onnx(model: CompletionModel, folder, path) -> None:
-    """Write ``model``'s network (loaded from the model folder ``folder``) as a graph to ``path`` (atomically).
-
-    Batch and frame counts are free (frames up to the model's window).
-    """
-    import torch
-
-    from keyfill.learn.modelfile import read_config
-    from keyfill.learn.onnx import export_module, metadata
-
-    T = min(30, model.config.max_frames)
-    args = (torch.zeros(2, T, model.features.size), torch.zeros(2, T, dtype=torch.int64))
-    batch, frames = torch.export.Dim("batch"), torch.export.Dim("frames", min=2, max=model.config.max_frames)
-    contract = {**CONTRACT, "feature_size": model.features.size, "max_frames": model.config.max_frames}
-    export_module(model.network.cpu(), args, path, list(CONTRACT["inputs"]), list(CONTRACT["outputs"]),
-                  ({0: batch, 1: frames}, {0: batch, 1: frames}), metadata(KIND, folder, read_config(folder), contract))

@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill.errors import DataError, FormatError
+from keyfill import limits, progress
+from keyfill.errors import DataError, FormatError, KeyfillError
 from keyfill.kinematics import fk
 from keyfill.motion import POSITION_CHANNELS, Keys, Motion, Skeleton
 
@@ -100,6 +101,7 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
     """
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     sk = motion.skeleton
+    limits.check_values(motion)
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if sk.up_axis == "Y" else UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, float(sk.meters_per_unit))
@@ -144,9 +146,12 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
         frames = motion.keys.to_list()
     rot = _quat_to_xyzw(motion.rotations)
     pos = np.ascontiguousarray(motion.positions, dtype=np.float32)
-    for f in frames:
-        t_attr.Set(Vt.Vec3fArray.FromNumpy(pos[f]), Usd.TimeCode(f))
-        r_attr.Set(Vt.QuatfArray.FromNumpy(rot[f]), Usd.TimeCode(f))
+    with progress.task("writing USD", len(frames), " frames") as update:
+        for f in frames:
+            t_attr.Set(Vt.Vec3fArray.FromNumpy(pos[f]), Usd.TimeCode(f))
+            r_attr.Set(Vt.QuatfArray.FromNumpy(rot[f]), Usd.TimeCode(f))
+            update(1)
+    del pos, rot
     stage.GetRootLayer().Export(str(path))
 
 
@@ -235,7 +240,11 @@ def open_stage(path: str | Path, label=None):
     try:
         stage = Usd.Stage.Open(str(path))
     except Exception as e:  # pxr raises Tf.ErrorException with a multi-line text
-        first = str(e).strip().splitlines()
+        try:
+            text = str(e)
+        except Exception:  # a message that cannot be decoded (a file that is not UTF-8)
+            text = "not UTF-8 text"
+        first = text.strip().splitlines()
         raise FormatError(f"not a readable USD file ({first[-1].strip() if first else 'parse error'})", label) from None
     if stage is None:
         raise FormatError("not a readable USD file", label)
@@ -266,69 +275,135 @@ def read_stage(stage, label) -> Motion:
     if len(set(to_skel.tolist())) != len(to_skel):
         raise FormatError("the animation lists a joint twice", label)
 
+    if len(joints) > limits.max_joints():
+        raise FormatError(f"{len(joints)} joints is more than keyfill reads ({limits.max_joints()}; set KEYFILL_MAX_JOINTS)", label)
     rest_rot, rest_pos = _rest_local(skel, joints, label)
     t_attr, r_attr, s_attr = anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr()
     times = _sample_times([t_attr, r_attr])
     start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
     if not stage.HasAuthoredMetadata("startTimeCode") and times:
         start, end = times[0], times[-1]
+    for what, t in (("startTimeCode", start), ("endTimeCode", end)) + tuple(("a time sample", t) for t in times[:1] + times[-1:]):
+        if not abs(t) <= limits.MAX_TIME_CODE:
+            raise FormatError(f"{what} {t:g} is not a time code keyfill reads (finite, at most {limits.MAX_TIME_CODE:g})", label)
     if times and (times[0] < start or times[-1] > end):
         start, end = min(start, times[0]), max(end, times[-1])
+    if end < start:
+        raise FormatError(f"endTimeCode {end:g} comes before startTimeCode {start:g}", label)
     num_frames = int(round(end - start)) + 1 if times or stage.HasAuthoredMetadata("endTimeCode") else 1
+    problem = limits.check_size(num_frames, len(joints), _file_size(stage.GetRootLayer().realPath))
+    if problem:
+        raise FormatError(f"time codes {start:g} to {end:g}: {problem}", label)
     fps = stage.GetTimeCodesPerSecond()
+    problem = limits.check_fps(fps)
+    if problem:
+        raise FormatError(f"timeCodesPerSecond: {problem}", label)
 
     rot = np.broadcast_to(rest_rot, (num_frames, len(joints), 4)).copy()
     pos = np.broadcast_to(rest_pos, (num_frames, len(joints), 3)).copy()
     n = len(anim_joints)
-    for f in range(num_frames):
-        tc = Usd.TimeCode(start + f)
-        for attr, out, width in ((t_attr, pos, 3), (r_attr, rot, 4)):
-            v = attr.Get(tc)
-            if v is None:
-                continue
-            a = np.asarray(v, dtype=np.float64)
-            if a.shape != (n, width):
-                raise FormatError(
-                    f"{attr.GetName()} at time {start + f:g} holds {len(a)} values for {n} animated joints", label
-                )
-            out[f, to_skel] = a[:, [3, 0, 1, 2]] if width == 4 else a
-        s = s_attr.Get(tc)
-        if s is not None and len(s) and np.abs(np.asarray(s, dtype=np.float64) - 1).max() > 1e-3:
-            raise DataError(f"{label}: joints are scaled at time {start + f:g}; keyfill motions have no scale")
+    limit = limits.max_abs()
+    with progress.task("reading USD", num_frames, " frames") as update:
+        for f in range(num_frames):
+            tc = Usd.TimeCode(start + f)
+            for attr, out, width in ((t_attr, pos, 3), (r_attr, rot, 4)):
+                v = attr.Get(tc)
+                if v is None:
+                    continue
+                try:
+                    a = np.asarray(v, dtype=np.float64)
+                except (TypeError, ValueError):
+                    a = np.zeros(0)
+                if a.shape != (n, width):
+                    raise FormatError(
+                        f"{attr.GetName()} at time {start + f:g} holds {len(a)} values for {n} animated joints"
+                        if a.ndim == 2 and a.shape[1:] == (width,)
+                        else f"{attr.GetName()} at time {start + f:g} is not an array of {width}-vectors",
+                        label,
+                    )
+                if not (np.abs(a) <= limit).all():
+                    raise FormatError(
+                        f"{attr.GetName()} at time {start + f:g} holds a value that is not finite or beyond {limit:g}", label
+                    )
+                out[f, to_skel] = a[:, [3, 0, 1, 2]] if width == 4 else a
+            s = s_attr.Get(tc)
+            if s is not None:
+                try:
+                    scaled = len(s) and np.abs(np.asarray(s, dtype=np.float64) - 1).max() > 1e-3
+                except (TypeError, ValueError):
+                    raise FormatError(f"scales at time {start + f:g} is not an array of 3-vectors", label) from None
+                if scaled:
+                    raise DataError(f"{label}: joints are scaled at time {start + f:g}; keyfill motions have no scale")
+            update(1)
     norms = np.linalg.norm(rot, axis=-1, keepdims=True)
     if np.any(norms < 1e-6):
         raise FormatError("a rotation is zero (not a quaternion)", label)
     rot /= norms
 
     custom = skel.GetPrim().GetCustomDataByKey(CUSTOM_KEY) or {}
+    if not isinstance(custom, dict):
+        raise FormatError(f"the Skeleton's customData {CUSTOM_KEY!r} is not a dictionary", label)
     skeleton = _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label)
-    keys = None
-    if "keys" in custom:
-        keys = Keys(np.array(list(custom["keys"]), dtype=np.int64))
-    elif times and len(times) < num_frames:
-        frames = np.array([t - start for t in times])
-        if np.any(np.abs(frames - np.round(frames)) > 1e-6):
-            raise DataError(f"{label}: animation samples at fractional time codes cannot be keys")
-        keys = Keys(np.round(frames).astype(np.int64))
-    return Motion(skeleton, fps, rot, pos, keys=keys)
+    try:
+        keys = None
+        if "keys" in custom:
+            keys = Keys(_int_list(custom["keys"], "keys", label))
+        elif times and len(times) < num_frames:
+            frames = np.array([t - start for t in times])
+            if np.any(np.abs(frames - np.round(frames)) > 1e-6):
+                raise DataError(f"{label}: animation samples at fractional time codes cannot be keys")
+            keys = Keys(np.round(frames).astype(np.int64))
+        return Motion(skeleton, fps, rot, pos, keys=keys)
+    except FormatError:
+        raise
+    except KeyfillError as e:  # keys or arrays that do not fit: bad data in this file, not bad usage
+        raise FormatError(str(e).removeprefix(f"{label}: "), label) from None
+
+
+def _file_size(path) -> int:
+    try:
+        return Path(path).stat().st_size
+    except OSError:
+        return 0
+
+
+def _int_list(value, what: str, label) -> np.ndarray:
+    """``value`` (a customData array) as whole numbers, or a :class:`FormatError`."""
+    try:
+        items = list(value)
+    except TypeError:
+        raise FormatError(f"customData {CUSTOM_KEY}.{what} is not a list", label) from None
+    if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and abs(v) < 2**62 for v in items):
+        raise FormatError(f"customData {CUSTOM_KEY}.{what} must hold whole numbers", label)
+    return np.array(items, dtype=np.int64)
 
 
 def _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label) -> Skeleton:
     J = len(joints)
-    names = list(custom.get("names", []))
+    names = _str_list(custom.get("names", []), "names", label)
     if len(names) != J:
         names = [p.rsplit("/", 1)[-1] for p in joints]
-    channels_text = list(custom.get("channels", []))
+    channels_text = _str_list(custom.get("channels", []), "channels", label)
     if len(channels_text) == J:
         channels = [tuple(c.split()) for c in channels_text]
     else:
         # No layout recorded: roots and joints whose translation moves get
         # position channels, every joint gets three rotation channels.
-        moving = np.abs(pos - rest_pos).max(axis=0).max(axis=-1) > 1e-6 * max(1.0, np.abs(rest_pos).max())
+        moving = np.abs(pos - rest_pos).max(axis=0, initial=0.0).max(axis=-1) > 1e-6 * max(1.0, np.abs(rest_pos).max())
         channels = [
             _DEFAULT_ROOT_CHANNELS if parents[j] < 0 or moving[j] else _DEFAULT_CHANNELS for j in range(J)
         ]
-    ends = list(zip(custom.get("endSiteJoints", []), custom.get("endSiteOffsets", [])))
+    end_joints = _int_list(custom.get("endSiteJoints", []), "endSiteJoints", label)
+    try:
+        end_offsets = np.array([list(o) for o in custom.get("endSiteOffsets", [])], dtype=np.float64).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise FormatError(f"customData {CUSTOM_KEY}.endSiteOffsets is not a list of 3-vectors", label) from None
+    if len(end_joints) != len(end_offsets) or np.any((end_joints < 0) | (end_joints >= J)):
+        raise FormatError(f"customData {CUSTOM_KEY}: the End Sites do not match the joints", label)
+    if not (np.abs(end_offsets) <= limits.max_abs()).all():
+        raise FormatError(f"customData {CUSTOM_KEY}: an End Site offset is not finite or beyond {limits.max_abs():g}", label)
+    if not (np.abs(rest_pos) <= limits.max_abs()).all():
+        raise FormatError(f"a rest translation is not finite or beyond {limits.max_abs():g}", label)
     up = str(UsdGeom.GetStageUpAxis(stage)).upper()
     mpu = UsdGeom.GetStageMetersPerUnit(stage)
     try:
@@ -337,9 +412,22 @@ def _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, 
             parents=parents,
             offsets=rest_pos,
             channels=tuple(channels),
-            end_sites=tuple((int(j), np.array(list(o))) for j, o in ends),
-            meters_per_unit=float(mpu),
+            end_sites=tuple((int(j), o) for j, o in zip(end_joints, end_offsets)),
+            meters_per_unit=float(mpu) if 0 < mpu < float("inf") else 0.01,
             up_axis=up if up in ("Y", "Z") else "Y",
         )
-    except DataError as e:
-        raise FormatError(str(e), label) from None
+    except (DataError, ValueError) as e:  # ValueError: an unknown channel name
+        raise FormatError(f"the Skeleton's keyfill layout: {e}" if isinstance(e, ValueError) else str(e), label) from None
+
+
+def _str_list(value, what: str, label) -> list[str]:
+    """``value`` (a customData array) as strings, or a :class:`FormatError`."""
+    if isinstance(value, str):
+        raise FormatError(f"customData {CUSTOM_KEY}.{what} is not a list of strings", label)
+    try:
+        items = list(value)
+    except TypeError:
+        raise FormatError(f"customData {CUSTOM_KEY}.{what} is not a list", label) from None
+    if not all(isinstance(v, str) for v in items):
+        raise FormatError(f"customData {CUSTOM_KEY}.{what} must hold strings", label)
+    return items

@@ -465,8 +465,8 @@ def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
     return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, values[0].tolist())), varying
 
 
-def dumps(motion: Motion) -> str:
-    """BVH text of ``motion`` in its skeleton's channel layout."""
+def _pieces(motion: Motion, rows: int = 4096):
+    """BVH text of ``motion`` in pieces: the header, then about ``rows`` motion lines at a time."""
     sk = motion.skeleton
     limits.check_values(motion)
     values = pose_to_channels(motion)
@@ -484,14 +484,32 @@ def dumps(motion: Motion) -> str:
     out.append("MOTION")
     out.append(f"Frames: {motion.num_frames}")
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
+    yield "\n".join(out) + "\n"
     if values.shape[1]:
         line, varying = _line_template(values)
-        out.extend(line % tuple(row) for row in values[:, varying].tolist())
+        line += "\n"
+        columns = values[:, varying]
+        del values
+        with progress.task("writing BVH", len(columns), " frames") as update:
+            for start in range(0, len(columns), rows):
+                block = columns[start : start + rows].tolist()
+                yield "".join(line % tuple(row) for row in block)
+                update(len(block))
     else:
-        out.extend("" for _ in range(motion.num_frames))
-    return "\n".join(out) + "\n"
+        yield "\n" * motion.num_frames
+
+
+def dumps(motion: Motion) -> str:
+    """BVH text of ``motion`` in its skeleton's channel layout."""
+    return "".join(_pieces(motion))
 
 
 def write(motion: Motion, path: str | Path) -> None:
-    """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`)."""
-    Path(path).write_text(dumps(motion), encoding="utf-8", newline="\n")
+    """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`).
+
+    The motion lines are formatted and written a block at a time, so writing
+    needs little memory beyond the motion's channel values.
+    """
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        for piece in _pieces(motion):
+            f.write(piece)

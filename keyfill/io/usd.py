@@ -196,10 +196,10 @@ def _find_animation(stage, skel, UsdSkel, label):
 
 def _rest_local(skel, joints: list[str], label) -> tuple[np.ndarray, np.ndarray]:
     """Rest ``(rotations (J,4), translations (J,3))`` from restTransforms (or bindTransforms)."""
-    rest = skel.GetRestTransformsAttr().Get()
+    rest = _matrices_of(skel.GetRestTransformsAttr(), label)
     J = len(joints)
     if rest is None or len(rest) != J:
-        bind = skel.GetBindTransformsAttr().Get()
+        bind = _matrices_of(skel.GetBindTransformsAttr(), label)
         if bind is None or len(bind) != J:
             raise FormatError("the Skeleton has neither restTransforms nor bindTransforms for its joints", label)
         # Local from world bind transforms.
@@ -217,6 +217,26 @@ def _rest_local(skel, joints: list[str], label) -> tuple[np.ndarray, np.ndarray]
         rot[i] = [q.GetReal(), *q.GetImaginary()]
         pos[i] = list(m.ExtractTranslation())
     return rot, pos
+
+
+def _tokens(attr, label) -> list[str]:
+    """The joint paths an attribute holds (``[]`` when it has no value), or a :class:`FormatError`."""
+    value = attr.Get()
+    if value is None:
+        return []
+    if type(value).__name__ != "TokenArray":
+        raise FormatError(f"{attr.GetPath()} holds a {type(value).__name__}, not a token[] of joint paths", label)
+    return [str(t) for t in value]
+
+
+def _matrices_of(attr, label):
+    """The matrix4d[] an attribute holds (None when it has no value), or a :class:`FormatError`."""
+    value = attr.Get()
+    if value is None:
+        return None
+    if type(value).__name__ != "Matrix4dArray":
+        raise FormatError(f"{attr.GetPath()} holds a {type(value).__name__}, not a matrix4d[]", label)
+    return value
 
 
 def _sample_times(attrs) -> list[float]:
@@ -259,7 +279,7 @@ def read_stage(stage, label) -> Motion:
     """The UsdSkel animation of an open stage as a :class:`Motion` (see the module docstring)."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     skel = _find_skeleton(stage, UsdSkel, label)
-    joints = [str(t) for t in (skel.GetJointsAttr().Get() or [])]
+    joints = _tokens(skel.GetJointsAttr(), label)
     if not joints:
         raise FormatError(f"the Skeleton {skel.GetPath()} has no joints", label)
     topo = UsdSkel.Topology(Vt.TokenArray(joints))
@@ -270,7 +290,7 @@ def read_stage(stage, label) -> Motion:
     if np.any(parents >= np.arange(len(joints))):
         raise FormatError("the Skeleton lists a joint before its parent", label)
     anim = _find_animation(stage, skel, UsdSkel, label)
-    anim_joints = [str(t) for t in (anim.GetJointsAttr().Get() or [])]
+    anim_joints = _tokens(anim.GetJointsAttr(), label)
     index = {p: i for i, p in enumerate(joints)}
     unknown = [p for p in anim_joints if p not in index]
     if unknown:

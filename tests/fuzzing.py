@@ -87,7 +87,7 @@ joint = "head"
 """
 
 
-#: Seeds whose mutants crash code this branch may not change: keyfill/edit/curvefile.py asks a pxr Ts
+#: Seeds whose mutants crash code this branch may not change: keyfill/io/usd_curves.py asks a pxr Ts
 #: knot for a missing customData key with GetCustomDataByKey, which segfaults in usd-core 26.11
 #: (tests/test_hardening.py::test_curves_knot_without_broken_flag, xfail). Left out of the runs unless
 #: KEYFILL_FUZZ_KNOWN=1 (``--with-known``): each crash costs a worker restart and would drown the rest.
@@ -231,9 +231,9 @@ _CACHE: dict = {}
 
 def _lamp_curves():
     if "curves" not in _CACHE:
-        from keyfill.edit import curvefile
+        from keyfill.io import usd_curves
 
-        _CACHE["curves"] = curvefile.read(LAMP_CURVES)
+        _CACHE["curves"] = usd_curves.read(LAMP_CURVES)
     return _CACHE["curves"]
 
 

@@ -208,7 +208,7 @@ def test_edit_files_with_numbers_at_the_edges(capsys, tmp_path, name):
 # --- crashes in code this branch does not own (reported; see tests/data/README.md) -------------------
 
 KNOWN_CRASHES = {
-    "curves_knot_without_broken.usda": "keyfill/edit/curvefile.py asks a Ts knot for customData 'broken' with "
+    "curves_knot_without_broken.usda": "keyfill/io/usd_curves.py asks a Ts knot for customData 'broken' with "
     "GetCustomDataByKey, which segfaults in usd-core 26.11 when the key is missing",
 }
 

@@ -339,6 +339,7 @@ def parse(raw: bytes | str, path=None) -> Motion:
 
     num_channels = sum(len(c) for c in h.channels)
     values = _values(raw, data_start, num_frames, num_channels, label, first_data_line, frames_line_no)
+    del raw, m  # the text is no longer needed: free it before the pose arrays are made (read() holds no copy)
 
     try:
         skeleton = Skeleton(
@@ -355,32 +356,39 @@ def parse(raw: bytes | str, path=None) -> Motion:
         raise FormatError(str(e), label) from None
 
 
-def channels_to_pose(values: np.ndarray, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    """BVH channel values ``(F, C)`` (degrees, file units) -> ``(rotations (F,J,4), positions (F,J,3))``."""
+def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384) -> tuple[np.ndarray, np.ndarray]:
+    """BVH channel values ``(F, C)`` (degrees, file units) -> ``(rotations (F,J,4), positions (F,J,3))``.
+
+    Frames are converted ``block`` at a time, so the temporaries stay small
+    next to the result.
+    """
     F, J = values.shape[0], skeleton.num_joints
-    pos = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
-    angles = np.zeros((F, J, 3))
-    orders = skeleton.euler_orders
-    col = 0
-    for j, chans in enumerate(skeleton.channels):
-        for c in chans:
-            axis = "XYZ".index(c[0])
-            if c in POSITION_CHANNELS:
-                pos[:, j, axis] = values[:, col]
-            else:
-                angles[:, j, orders[j].index(c[0])] = np.deg2rad(values[:, col])
-            col += 1
+    pos = np.empty((F, J, 3))
     rot = np.empty((F, J, 4))
-    for order in set(orders):
-        js = [j for j in range(J) if orders[j] == order]
-        rot[:, js] = R.euler_to_quat(angles[:, js], order)
+    orders = skeleton.euler_orders
+    groups = [(order, [j for j in range(J) if orders[j] == order]) for order in sorted(set(orders))]
+    for a in range(0, max(F, 1), block):
+        b = min(F, a + block)
+        pos[a:b] = skeleton.offsets
+        angles = np.zeros((b - a, J, 3))
+        col = 0
+        for j, chans in enumerate(skeleton.channels):
+            for c in chans:
+                axis = "XYZ".index(c[0])
+                if c in POSITION_CHANNELS:
+                    pos[a:b, j, axis] = values[a:b, col]
+                else:
+                    angles[:, j, orders[j].index(c[0])] = np.deg2rad(values[a:b, col])
+                col += 1
+        for order, js in groups:
+            rot[a:b, js] = R.euler_to_quat(angles[:, js], order)
     return rot, pos
 
 
 def read(path: str | Path, label=None) -> Motion:
     """Read a BVH file; ``label`` (default: the path) names it in error messages."""
     path = Path(path)
-    return parse(path.read_bytes(), label if label is not None else path)
+    return parse(path.read_bytes(), label if label is not None else path)  # parse holds the only reference
 
 
 # --- writing -----------------------------------------------------------------

@@ -292,7 +292,7 @@ def _toml_case(path: Path, rnd_mode: int) -> Outcome:
     from keyfill.edit import edits
     from keyfill.errors import KeyfillError
 
-    mode, frame = [("tangents", None), ("pose", None), ("pose", 10.0)][rnd_mode % 3]
+    mode, frame = [("tangents", None), ("tangents", None), ("pose", None), ("pose", 10.0)][rnd_mode % 4]
     try:
         edits.load(path, _lamp_curves(), mode=mode, frame=frame)
     except KeyfillError as e:
@@ -301,16 +301,14 @@ def _toml_case(path: Path, rnd_mode: int) -> Outcome:
 
 
 def _model_case(folder: Path) -> Outcome:
+    """Complete the lamp's keys with the model in ``folder`` (through the registry, as ``keyfill complete`` does)."""
     from keyfill.errors import KeyfillError
-    from keyfill.learn import methods
+    from keyfill.learn import registry
 
     try:
-        from keyfill.learn.modelfile import read_config
-
-        kind = read_config(folder).get("kind")
-        method = kind if kind in methods.METHODS and kind not in methods.SPLINES else "arnn"
+        kind = registry.method_for_model(folder).name
         motion = _lamp_keys()
-        methods.complete(motion, motion.keys, method, methods.CompleteOptions(model=str(folder)))
+        registry.complete(motion, motion.keys, kind, registry.CompleteOptions(model=str(folder)))
     except KeyfillError as e:
         return Outcome("clean", str(e))
     return Outcome("ok")
@@ -364,6 +362,7 @@ def _worker(seed: int, indices, mem_mb: int, conn) -> None:
     torch.set_num_threads(1)
     import keyfill.io.usd  # noqa: F401
     import keyfill.learn.arnn  # noqa: F401
+    import keyfill.learn.registry  # noqa: F401
     from pxr import Usd  # noqa: F401
 
     _lamp_curves()

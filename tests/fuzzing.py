@@ -156,7 +156,24 @@ def _spans(pattern, data: bytes, rnd: random.Random, limit: int = 200_000):
 
 
 def mutate(data: bytes, rnd: random.Random, kind: str) -> bytes:
-    """``data`` changed by one to four random mutations."""
+    """``data`` changed by one to three random mutations.
+
+    A model folder's config gets most of them; its weights file gets the rest,
+    mostly in the safetensors header (the JSON that gives names, shapes and offsets).
+    """
+    if kind == "model":
+        config, weights = _model_files(data)
+        if rnd.random() < 0.8:
+            config = mutate(config, rnd, "json")
+        else:
+            head = 8 + int.from_bytes(weights[:8], "little") if len(weights) >= 8 else 0
+            if 8 < head <= len(weights) and rnd.random() < 0.7:
+                header = mutate(weights[8:head], rnd, "json")
+                length = len(header) if rnd.random() < 0.9 else head - 8  # a length that no longer fits, sometimes
+                weights = length.to_bytes(8, "little") + header + weights[head:]
+            else:
+                weights = mutate(weights, rnd, "bytes")
+        return config + b"\n@@WEIGHTS@@\n" + weights
     for _ in range(rnd.choice((1, 1, 1, 2, 3))):
         data = _mutate_once(data, rnd, kind)
     return data

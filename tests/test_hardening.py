@@ -56,6 +56,7 @@ EXPECTED = {
     "negative_key.usda": "key -1 is negative",
     "not_utf8.usda": "not a readable USD file",
     "joints_unregistered_type.usda": "holds a UnregisteredValue, not a token[] of joint paths",
+    "animation_source_not_a_relationship.usda": "USD cannot read this file",
 }
 
 

@@ -279,6 +279,19 @@ def open_stage(path: str | Path, label=None):
 
 def read_stage(stage, label) -> Motion:
     """The UsdSkel animation of an open stage as a :class:`Motion` (see the module docstring)."""
+    from pxr import Tf
+
+    try:
+        return _read_stage(stage, label)
+    except Tf.ErrorException as e:  # USD refusing what the file composes to (e.g. a relationship that is not one)
+        try:
+            text = " ".join(str(e).split())
+        except Exception:  # a message that is not UTF-8
+            text = "an error in the file's content"
+        raise FormatError(f"USD cannot read this file: {text[-300:]}", label) from None
+
+
+def _read_stage(stage, label) -> Motion:
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     skel = _find_skeleton(stage, UsdSkel, label)
     joints = _tokens(skel.GetJointsAttr(), label)

@@ -77,6 +77,7 @@ def test_regression_files(capsys, tmp_path, name):
 
 def test_every_regression_file_is_listed():
     on_disk = {p.name for p in REGRESS.iterdir() if p.suffix in (".bvh", ".usda", ".toml")}
+    assert (REGRESS / "model_config_integer_too_large.json").is_file()
     assert on_disk <= set(EXPECTED) | set(TOML_EXPECTED) | set(KNOWN_CRASHES)
 
 
@@ -204,6 +205,37 @@ def test_edit_files_with_numbers_at_the_edges(capsys, tmp_path, name):
     code, _, err = run(capsys, "edit-tangents", curves, "--edit", REGRESS / name, "-o", tmp_path / "out.usda")
     line = one_error_line(err)
     assert code == 1 and name in line and TOML_EXPECTED[name] in line
+
+
+# --- model folders ---------------------------------------------------------------------------------
+
+MODEL = Path(__file__).parent.parent / "keyfill" / "learn" / "models" / "lamp-arnn"
+LAMP_KEYS = Path(__file__).parent.parent / "examples" / "lamp" / "keys.usda"
+
+
+def _model_with(tmp_path, config_text: str) -> Path:
+    folder = tmp_path / "model"
+    shutil.copytree(MODEL, folder)
+    (folder / "config.json").write_text(config_text)
+    return folder
+
+
+@pytest.mark.parametrize("change,fragment", [
+    (lambda c: c.replace('"sizes": {}', '"sizes": {"hidden_size": 30000}'), "describes a network of"),
+    (lambda c: c.replace('"parents": [\n      -1,', '"parents": [\n      5,'), "skeleton parents are not"),
+    (lambda c: c.replace('"offsets": [\n      [\n        0.0,', '"offsets": [\n      [\n        "x",'), "skeleton offsets"),
+    (lambda c: c.replace("0.2657059614611094", "NaN"), "NaN is not a number JSON allows"),
+    (lambda c: c.replace("0.2657059614611094", "1e999"), "is not a finite number"),
+    (lambda c: (REGRESS / "model_config_integer_too_large.json").read_text(), "does not fit in 64 bits"),
+    (lambda c: c.replace('"sizes": {}', '"sizes": ' + "[" * 5000 + "]" * 5000), "nested too deeply"),
+])
+def test_tampered_model_configs_are_one_clean_error(capsys, tmp_path, change, fragment):
+    folder = _model_with(tmp_path, change((MODEL / "config.json").read_text()))
+    start = time.perf_counter()
+    code, _, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "o.usda", "--method", "arnn", "--model", folder)
+    line = one_error_line(err)
+    assert code == 1 and fragment in line and str(folder) in line, line
+    assert time.perf_counter() - start < 20
 
 
 # --- crashes in code this branch does not own (reported; see tests/data/README.md) -------------------

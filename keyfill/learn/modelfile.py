@@ -45,6 +45,20 @@ def _no_constant(name: str):
     raise ValueError(f"{name} is not a number JSON allows")
 
 
+def _int64(text: str) -> int:
+    """A JSON integer of the config: it must fit in 64 bits (a seed does; 1e400 written out does not)."""
+    if len(text) > 20 or not -(2**63) <= int(text) < 2**63:
+        raise ValueError(f"the integer {text[:12]}{'...' if len(text) > 12 else ''} does not fit in 64 bits")
+    return int(text)
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text[:20]} is not a finite number")
+    return value
+
+
 def _check_skeleton_json(want, folder) -> None:
     """Raise :class:`ModelError` unless ``want`` is a skeleton as :func:`skeleton_to_json` writes it."""
     from keyfill.limits import max_abs, max_joints
@@ -149,8 +163,9 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
         size = (folder / CONFIG).stat().st_size
         if size > MAX_CONFIG_BYTES:
             raise ModelError(f"{folder}: its {CONFIG} is {size} bytes; a model config is at most {MAX_CONFIG_BYTES}")
-        # NaN and Infinity are not JSON; integers of thousands of digits raise ValueError; deep nesting RecursionError
-        config = json.loads((folder / CONFIG).read_text(encoding="utf-8"), parse_constant=_no_constant)
+        # NaN, Infinity, 1e999 and integers beyond 64 bits are refused; deep nesting raises RecursionError
+        config = json.loads((folder / CONFIG).read_text(encoding="utf-8"), parse_constant=_no_constant,
+                            parse_int=_int64, parse_float=_finite)
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise ModelError(f"{folder}: damaged model config ({' '.join(str(e).split())[:200]})") from None
     except RecursionError:
@@ -191,6 +206,30 @@ def load_model(path: str | os.PathLike, kind: str | None = None) -> tuple[dict, 
     return tensors, config
 
 
+#: initialisers whose work is thrown away on the meta device (on it, torch decomposes some of them
+#: in Python, importing torch._refs: 10 s the first time on a busy 2-core machine)
+_INITS = frozenset({"normal_", "uniform_", "trunc_normal_", "orthogonal_", "xavier_normal_", "xavier_uniform_",
+                    "kaiming_normal_", "kaiming_uniform_", "sparse_", "constant_", "zeros_", "ones_", "eye_",
+                    "dirac_", "bernoulli_", "exponential_", "geometric_", "log_normal_", "cauchy_", "random_"})
+
+
+def _skip_init():
+    """A torch function mode in which initialisers of meta tensors do nothing (their values never exist)."""
+    import torch
+    from torch.overrides import TorchFunctionMode
+
+    class SkipInit(TorchFunctionMode):
+        def __torch_function__(self, func, types, args=(), kwargs=None):
+            kwargs = kwargs or {}
+            if getattr(func, "__name__", "") in _INITS:
+                target = args[0] if args else kwargs.get("tensor")
+                if isinstance(target, torch.Tensor) and target.is_meta:
+                    return target
+            return func(*args, **kwargs)
+
+    return SkipInit()
+
+
 def build_for_loading(factory):
     """``factory()``, a network whose weights are about to be loaded, built without
     drawing from torch's global generator (its initial weights are thrown away, so
@@ -204,7 +243,7 @@ def build_for_loading(factory):
         # the weights file holds (hidden_size 30000: tens of GB) is refused before it is allocated.
         folder, numel = loaded
         try:
-            with torch.device("meta"), torch.random.fork_rng(devices=[]):
+            with torch.device("meta"), torch.random.fork_rng(devices=[]), _skip_init():
                 shape = factory()
             modules = [shape] if isinstance(shape, torch.nn.Module) else [
                 m for m in vars(shape).values() if isinstance(m, torch.nn.Module)]  # a wrapper holding its network

@@ -10,9 +10,10 @@ limit                  default         meaning (environment variable to override
 =====================  ==============  ======================================================
 ``max_frames``         10,000,000      frames in one motion (``KEYFILL_MAX_FRAMES``)
 ``max_joints``         10,000          joints in one skeleton (``KEYFILL_MAX_JOINTS``)
-``free_joint_frames``  4,000,000       frames x joints a file may declare beyond one per byte
-                                       of the file (``KEYFILL_FREE_JOINT_FRAMES``); a motion
-                                       takes 56 bytes per joint and frame in memory
+``free_joint_frames``  2,000,000       frames x (joints + 8) a file may declare beyond one per
+                                       byte of the file (``KEYFILL_FREE_JOINT_FRAMES``); a motion
+                                       takes 56 bytes per joint and frame in memory, and USD
+                                       costs about as much per frame as per 8 joints
 ``max_abs``            1e12            largest magnitude of a coordinate or angle (file units,
                                        degrees); USD stores 32-bit floats (``KEYFILL_MAX_ABS``)
 fps                    1e-6 .. 1e6     frames per second (BVH ``Frame Time``, USD
@@ -35,6 +36,8 @@ import numpy as np
 
 from keyfill.errors import DataError
 
+#: what one frame costs beside its joints, in joint-frames (a USD time sample's own overhead)
+FRAME_COST = 8
 MIN_FPS = 1e-6
 MAX_FPS = 1e6
 MAX_TIME_CODE = 1e12
@@ -81,7 +84,7 @@ def max_joints() -> int:
 
 
 def free_joint_frames() -> int:
-    return _env_int("KEYFILL_FREE_JOINT_FRAMES", 4_000_000)
+    return _env_int("KEYFILL_FREE_JOINT_FRAMES", 2_000_000)
 
 
 def max_abs() -> float:
@@ -108,10 +111,10 @@ def check_size(frames: int, joints: int, file_bytes: int) -> str | None:
     if frames > max_frames():
         return f"{frames} frames is more than keyfill reads ({max_frames()}; set KEYFILL_MAX_FRAMES to raise it)"
     allowed = file_bytes + free_joint_frames()
-    if frames * joints > allowed:
+    if frames * (joints + FRAME_COST) > allowed:
         return (
             f"{frames} frames x {joints} joints is more than a {file_bytes}-byte file can describe "
-            f"(at most {allowed} joint-frames; set KEYFILL_FREE_JOINT_FRAMES to raise it)"
+            f"(frames x (joints + {FRAME_COST}) at most {allowed}; set KEYFILL_FREE_JOINT_FRAMES to raise it)"
         )
     return None
 

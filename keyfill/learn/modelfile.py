@@ -174,6 +174,8 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
         raise ModelError(f"{folder}: not a keyfill model (its {CONFIG} has no format '{FORMAT}')")
     if config.get("version") != VERSION:
         raise ModelError(f"{folder}: model format version {config.get('version')!r}; this keyfill reads {VERSION}")
+    if not isinstance(config.get("kind"), str):
+        raise ModelError(f"{folder}: the model config names no kind (the method that made it)")
     if kind is not None and config.get("kind") != kind:
         raise ModelError(f"{folder}: a {config.get('kind')!r} model, not a {kind!r} model")
     if "skeleton" not in config:

@@ -36,8 +36,9 @@ def write_big_bvh(path: Path, megabytes: float, seed: int = 0) -> int:
     header = text.split("MOTION")[0]
     channels = len(text.split("MOTION")[1].strip().split("\n")[2].split())
     rng = np.random.default_rng(seed)
-    line_bytes = channels * 11
-    frames = int(megabytes * 1e6 / line_bytes)
+    sample = (rng.uniform(-180, 180, size=(1000, channels)))
+    line_bytes = len("\n".join(" ".join(f"{v:.6f}" for v in row) for row in sample)) / 1000 + 1
+    frames = int(megabytes * 2**20 / line_bytes)
     with open(path, "w") as f:
         f.write(header + f"MOTION\nFrames: {frames}\nFrame Time: 0.0083333\n")
         state = np.zeros(channels)
@@ -50,10 +51,11 @@ def write_big_bvh(path: Path, megabytes: float, seed: int = 0) -> int:
     return frames
 
 
-def run_child(cmd: list[str], env: dict) -> tuple[float, float, int]:
-    """(peak RSS in MB, wall seconds, exit code) of one child process."""
+def run_child(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, int]:
+    """(peak RSS in MB, wall seconds, exit code) of one child process (run in ``cwd``, so that
+    ``python -m keyfill`` finds the checkout on PYTHONPATH, not one in the current folder)."""
     start = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=cwd)
     _, status, usage = os.wait4(proc.pid, 0)
     seconds = time.perf_counter() - start
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -71,7 +73,7 @@ def main() -> None:
     ap.add_argument("--to", default="usda,bvh", help="output formats to time (usda, bvh)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    env = {**os.environ, "PYTHONPATH": str(args.keyfill), "OPENBLAS_NUM_THREADS": "1"}
+    env = {**os.environ, "PYTHONPATH": str(args.keyfill.resolve()), "OPENBLAS_NUM_THREADS": "1"}
     with tempfile.TemporaryDirectory(prefix="keyfill-bench-") as tmp:
         tmp = Path(tmp)
         big = tmp / "big.bvh"
@@ -79,16 +81,17 @@ def main() -> None:
         size_mb = big.stat().st_size / 2**20
         small = tmp / "small.bvh"
         small.write_text(CMU.read_text())
-        results = {"file_mb": round(size_mb, 1), "frames": frames, "machine": f"{platform.machine()}, "
+        results = {"file_mb": round(size_mb, 1), "load_before": os.getloadavg()[0], "frames": frames, "machine": f"{platform.machine()}, "
                    f"{os.cpu_count()} cores, Python {platform.python_version()}", "keyfill": str(args.keyfill)}
-        base = [run_child([sys.executable, "-m", "keyfill", "convert", str(small), str(tmp / "s.usda")], env)[0]
+        base = [run_child([sys.executable, "-m", "keyfill", "convert", str(small), str(tmp / "s.usda")], env, tmp)[0]
                 for _ in range(args.repeat)]
         results["overhead_mb"] = round(statistics.median(base), 1)
         for fmt in args.to.split(","):
             out = tmp / f"out.{fmt}"
-            runs = [run_child([sys.executable, "-m", "keyfill", "convert", str(big), str(out)], env)
+            runs = [run_child([sys.executable, "-m", "keyfill", "convert", str(big), str(out)], env, tmp)
                     for _ in range(args.repeat)]
             peak = statistics.median(r[0] for r in runs)
+            results["load_after"] = os.getloadavg()[0]
             results[fmt] = {
                 "peak_mb": round(peak, 1),
                 "peak_over_file": round(peak / size_mb, 2),

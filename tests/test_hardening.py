@@ -280,3 +280,34 @@ def test_data_errors_name_the_file(capsys, tmp_path):
     code, _, err = run(capsys, "convert", src, tmp_path / "o.bvh")
     line = one_error_line(err)
     assert code == 1 and "inf.usda" in line
+
+
+# --- progress ----------------------------------------------------------------------------------------
+
+def test_long_reads_and_writes_report_progress(tmp_path):
+    from keyfill import progress
+
+    seen = []
+
+    class Bar:
+        def __init__(self, description, total, unit):
+            self.description, self.total, self.done = description, total, 0
+            seen.append(self)
+
+        def update(self, n):
+            self.done += n
+
+        def close(self):
+            pass
+
+    m = bvh.read(MIXAMO)
+    progress.listen(Bar)
+    try:
+        io.save(m, tmp_path / "a.usda")
+        io.save(m, tmp_path / "a.bvh")
+        io.load(tmp_path / "a.bvh")
+        io.load(tmp_path / "a.usda")
+    finally:
+        progress.listen(None)
+    assert [b.description for b in seen] == ["writing USD", "writing BVH", "reading BVH", "reading USD"]
+    assert all(b.done == b.total for b in seen), [(b.description, b.done, b.total) for b in seen]

@@ -343,7 +343,8 @@ def _read_stage(stage, label) -> Motion:
     n = len(anim_joints)
     held = stage.GetInterpolationType() == Usd.InterpolationTypeHeld
     frame_times = start + np.arange(num_frames, dtype=np.float64)
-    with progress.task("reading USD", 3 * num_frames, " samples") as update:
+    samples = sum(max(1, attr.GetNumTimeSamples()) for attr in (t_attr, r_attr, s_attr))
+    with progress.task("reading USD", samples, " samples") as update:
         for attr, out, width in ((t_attr, pos, 3), (r_attr, rot, 4)):
             values = _resolved(attr, frame_times, n, width, held, Usd, label, update)
             if values is not None:

@@ -10,7 +10,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop clean
+.PHONY: demo test test-slow test-interop fuzz clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +31,14 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
+
+# Mutation fuzzing (tests/fuzzing.py): FUZZ_CASES inputs over 2 worker processes, each allowed
+# FUZZ_MEM_MB of address space beyond its start-up size and FUZZ_TIMEOUT seconds per input.
+FUZZ_CASES ?= 100000
+FUZZ_MEM_MB ?= 2048
+FUZZ_TIMEOUT ?= 20
+fuzz: $(STAMP)
+	$(BIN)/python tests/fuzzing.py --cases $(FUZZ_CASES) --jobs 2 --mem-mb $(FUZZ_MEM_MB) --timeout $(FUZZ_TIMEOUT)
 
 $(BLENDER_STAMP):
 	$(PYTHON) -m venv $(BLENDER_VENV)

@@ -10,7 +10,9 @@ straight to file descriptor 2, where Python's ``sys.stderr`` cannot catch it.
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -19,12 +21,74 @@ from typing import Iterator
 from keyfill.errors import UsageError
 
 
+#: temporary files are ``.<stem>.k<pid>.<random>.part<suffix>``; a USD export adds its own
+#: ``.<stem>.k<pid>.<random>.part.XXXXXX`` beside it. The pid tells a live writer from a dead one.
+_PART = re.compile(r"\.(?P<stem>.*)\.k(?P<pid>[0-9]+)\.[A-Za-z0-9_]+\.part(?:\..*)?")
+#: names of keyfill before the pid was part of them: ``.<stem>.<8 random>.part<suffix>``
+_LEGACY_PART = re.compile(r"\.(?P<stem>.*)\.[a-z0-9_]{8}\.part(?:\..*)?")
+#: a temporary file of the old naming is taken as abandoned after this many seconds
+LEGACY_STALE_S = 3600.0
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True
+    return True
+
+
+def remove_stale(folder: str | os.PathLike, stem: str | None = None) -> list[Path]:
+    """Remove temporary files that killed keyfill runs left in ``folder`` (of output ``stem``, or all).
+
+    A temporary file is stale when the process that made it no longer exists
+    (its pid is in the name), or, for names without a pid, when it is older
+    than :data:`LEGACY_STALE_S`. Returns the files removed.
+    """
+    import time
+
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    now = time.time()
+    for entry in entries:
+        name = entry.name
+        if not name.startswith(".") or ".part" not in name:
+            continue
+        m = _PART.fullmatch(name)
+        if m is not None:
+            stale = not _alive(int(m.group("pid")))
+        else:
+            m = _LEGACY_PART.fullmatch(name)
+            try:
+                stale = m is not None and now - entry.stat(follow_symlinks=False).st_mtime > LEGACY_STALE_S
+            except OSError:
+                stale = False
+        if not stale or (stem is not None and m.group("stem") != stem):
+            continue
+        try:
+            if entry.is_file(follow_symlinks=False):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+        except OSError:
+            pass
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds.
 
     The temporary file keeps ``path``'s suffix (writers such as USD pick their
-    format from it). On any error it is removed, so no partial output remains.
+    format from it). On any error it is removed, so no partial output remains;
+    temporary files of ``path`` left by a killed run are removed first (see
+    :func:`remove_stale`).
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
@@ -32,7 +96,8 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         raise UsageError(f"{path}: the output folder {str(folder)!r} does not exist")
     if path.is_dir():
         raise UsageError(f"{path}: is a folder, not a file")
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
+    remove_stale(folder, path.stem)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.k{os.getpid()}.", suffix=f".part{path.suffix}", dir=folder)
     os.close(fd)
     tmp = Path(name)
     try:
@@ -43,6 +108,8 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
+        for extra in folder.glob(glob.escape(tmp.name.removesuffix(path.suffix)) + ".*"):
+            extra.unlink(missing_ok=True)  # a USD export's own temporary file
         raise
 
 

@@ -23,6 +23,8 @@ from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
 from keyfill.kinematics import fk
 
+#: deepest joint hierarchy keyfill reads (joint paths in USD grow with the depth)
+MAX_DEPTH = 1000
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 _CANONICAL = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
@@ -90,6 +92,14 @@ class Skeleton:
         bad = [j for j in range(J) if not (-1 <= parents[j] < j)]
         if bad:
             raise DataError(f"joint {names[bad[0]]!r}: its parent must come before it")
+        depth = np.zeros(J, dtype=np.int64)
+        for j in range(J):
+            if parents[j] >= 0:
+                depth[j] = depth[parents[j]] + 1
+                if depth[j] > MAX_DEPTH:
+                    raise DataError(
+                        f"joint {names[j]!r} is {depth[j]} joints deep; keyfill reads hierarchies up to {MAX_DEPTH} deep"
+                    )
         if len(self.channels) != J:
             raise DataError(f"{len(self.channels)} channel lists for {J} joints")
         channels = tuple(check_channels(c) for c in self.channels)

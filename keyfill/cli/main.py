@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import os
+import signal
 import sys
+import threading
 
 # Set before numpy is first imported. The commands do single-threaded numpy
 # work on small matrices (torch keeps its own threads); an OpenBLAS thread pool
@@ -90,21 +93,75 @@ def _error(message: str) -> None:
     click.echo(f"keyfill: error: {' '.join(str(message).split())}", err=True)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (or SIGHUP), raised like Ctrl-C so that every cleanup runs (temporary files, workers)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _terminate(signum, frame):
+    raise Terminated(signum)
+
+
+@contextlib.contextmanager
+def _signals_as_interrupts():
+    """SIGTERM and SIGHUP end a command the way SIGINT does (only in the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {sig: signal.signal(sig, _terminate) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def _progress_bar(description: str, total: int, unit: str):
+    """The CLI's progress listener: a tqdm bar on a terminal, shown once a task has taken 2 s."""
+    from keyfill.cli.common import progress
+
+    return progress(total=total, desc=description, unit=unit.strip() or "it", delay=2.0,
+                    unit_scale=unit.strip() == "B", leave=False)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (also used by ``python -m keyfill``)."""
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
+    from keyfill import progress
+
+    progress.listen(_progress_bar)
+    try:
+        with _signals_as_interrupts():
+            return _main(args, debug)
+    finally:
+        progress.listen(None)
+
+
+def _main(args: list[str], debug: bool) -> int:
     try:
         cli.main(args=args, prog_name="keyfill", standalone_mode=False)
         return 0
     except click.exceptions.Exit as e:
         return e.exit_code
-    except click.exceptions.Abort:
+    except (Terminated, click.exceptions.Abort) as e:
+        # click turns Ctrl-C (and our SIGTERM) into Abort; the signal is its cause
+        cause = e if isinstance(e, Terminated) else e.__cause__
+        if isinstance(cause, Terminated):
+            _error("terminated")
+            return 128 + cause.signum
         _error("interrupted")
         return 130
     except click.UsageError as e:
         if debug:
             raise
+        if type(e).__name__ == "NoArgsIsHelpError" and e.ctx is not None:
+            # bare `keyfill` (or a group without a command): the help, as it is written, not one squashed line
+            click.echo(e.ctx.get_help())
+            return 2
         cmd = e.ctx.command_path if e.ctx is not None else "keyfill"
         _error(f"{e.format_message()} (see '{cmd} --help')")
         return 2

@@ -54,6 +54,7 @@ import numpy as np
 
 from keyfill.curves import Curves
 from keyfill.edit.rig import Point
+from keyfill import limits
 from keyfill.errors import FormatError, KeyfillError
 
 
@@ -137,6 +138,13 @@ _POINT = {"joint", "offset", "orientation"}
 _CONTACT = {"joint", "offset", "frames"}
 
 
+def _short(value: int) -> str:
+    """A huge integer as a short text (its digits could run to thousands)."""
+    if abs(value) < 10**30:
+        return str(value)
+    return f"{'-' if value < 0 else ''}about 1e{int(abs(value).bit_length() * 0.30103)}"
+
+
 class _Where:
     """Line numbers of tables and keys in the TOML text, for messages."""
 
@@ -183,10 +191,16 @@ class _Parser:
             raise self.fail(f"unknown field {unknown[0]!r} in {what} (expected: {', '.join(sorted(allowed))})")
 
     def number(self, value, what: str) -> float:
+        """A finite number of at most :func:`keyfill.limits.max_abs` in magnitude (TOML integers of any size too)."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(f"{what} must be a number, got {value!r}")
+        limit = limits.max_abs()
+        if isinstance(value, int) and not -limit <= value <= limit:  # compared as integers: no overflow
+            raise self.fail(f"{what} is {_short(value)}, beyond {limit:g}")
         if not math.isfinite(value):
             raise self.fail(f"{what} is {value}, not a finite number")
+        if not abs(value) <= limit:
+            raise self.fail(f"{what} is {value:g}, beyond {limit:g}")
         return float(value)
 
     def vector(self, value, n: int, what: str) -> np.ndarray:
@@ -207,8 +221,10 @@ class _Parser:
             if "frame" not in table and "time" not in table:
                 return self.inside(self.frame, "--frame")
             given = table.get("frame", table.get("time"))
-            if isinstance(given, (int, float)) and not isinstance(given, bool) and given != self.frame:
-                raise self.fail(f"is at frame {given:g} but --frame is {self.frame:g}")
+            if isinstance(given, (int, float)) and not isinstance(given, bool):
+                given = self.number(given, "frame" if "frame" in table else "time")
+                if given != self.frame:
+                    raise self.fail(f"is at frame {given:g} but --frame is {self.frame:g}")
         if ("frame" in table) == ("time" in table):
             raise self.fail(f"{what} needs one of 'frame' or 'time'")
         if "frame" in table:
@@ -443,4 +459,8 @@ def load(path: str | Path, curves: Curves, mode: str = "tangents", frame: float 
         raise FormatError(
             f"not valid TOML: {str(e).split(' (at line')[0]}", path, int(m.group(1)) if m else None
         ) from None
+    except ValueError as e:  # tomllib's int() of an integer of thousands of digits
+        raise FormatError(f"not a usable edit file: {str(e).split(':')[0]}", path) from None
+    except RecursionError:  # tomllib nests arrays and inline tables by recursion
+        raise FormatError("not a usable edit file: arrays or tables nested too deeply", path) from None
     return _Parser(str(path), text, curves, mode, frame).parse(data)

@@ -28,15 +28,20 @@ FORMATS = {"bvh": ("keyfill.io.bvh:read", "keyfill.io.bvh:write"), "usda": _USD,
 STDIO = "-"
 
 
-def format_of(path: str | os.PathLike, format: str | None = None) -> str:
-    """The format name for ``path``: ``format`` when given, else from the suffix."""
+def format_of(path: str | os.PathLike, format: str | None = None, option: str = "--format") -> str:
+    """The format name for ``path``: ``format`` when given, else from the suffix.
+
+    ``option`` is the command-line option that gives the format, named in the
+    error for ``-`` (``--in-format`` for inputs).
+    """
     if format is not None:
         fmt = format.lower().lstrip(".")
         if fmt not in FORMATS:
             raise UsageError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}")
         return fmt
     if str(path) == STDIO:
-        raise UsageError("reading or writing '-' needs --format (bvh, usda or usdc)")
+        reading = option == "--in-format"
+        raise UsageError(f"{'reading' if reading else 'writing'} '-' needs {option} (bvh, usda or usdc)")
     suffix = Path(path).suffix.lower().lstrip(".")
     if suffix not in FORMATS:
         raise UsageError(f"{path}: unknown file type {Path(path).suffix or '(no suffix)'!r}; expected .bvh, .usda, .usdc or .usd")
@@ -50,7 +55,7 @@ def _function(target: str):
 
 def load(path: str | os.PathLike, format: str | None = None) -> Motion:
     """Read a motion file (``"-"``: standard input, with ``format``)."""
-    fmt = format_of(path, format)
+    fmt = format_of(path, format, option="--in-format")
     read = _function(FORMATS[fmt][0])
     if str(path) == STDIO:
         with tempfile.TemporaryDirectory() as tmp:

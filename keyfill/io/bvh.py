@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from keyfill import limits
+from keyfill import progress
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError
 from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton, check_channels
@@ -75,12 +77,15 @@ class _TokenStream:
         vals = []
         for _ in range(count):
             tok, line = self.next(what)
-            try:
-                v = float(tok)
-            except ValueError:
-                raise FormatError(f"expected a number in {what}, found {tok!r}", self.path, line) from None
-            if not np.isfinite(v):
-                raise FormatError(f"{what} holds {tok!r}, which is not a finite number", self.path, line)
+            if not limits.is_number(tok):
+                raise FormatError(f"expected a number in {what}, found {tok!r}", self.path, line)
+            v = float(tok)
+            if not abs(v) <= limits.max_abs():
+                raise FormatError(
+                    f"{what} holds {tok!r}, which is not a finite number of at most {limits.max_abs():g}",
+                    self.path,
+                    line,
+                )
             vals.append(v)
         return np.array(vals)
 
@@ -92,9 +97,12 @@ class _Hierarchy:
         self.offsets: list[np.ndarray] = []
         self.channels: list[tuple[str, ...]] = []
         self.end_sites: list[tuple[int, np.ndarray]] = []
+        self.index: dict[str, int] = {}
+        self.lines: list[int] = []
 
 
-def _parse_joint(ts: _TokenStream, h: _Hierarchy, parent: int, keyword_line: int) -> None:
+def _open_joint(ts: _TokenStream, h: _Hierarchy, parent: int, keyword_line: int) -> int:
+    """Read a joint's name and opening brace; register it and return its index."""
     parts = ts.rest_of_line(keyword_line)
     opened = bool(parts) and parts[-1] == "{"
     if opened:
@@ -102,25 +110,38 @@ def _parse_joint(ts: _TokenStream, h: _Hierarchy, parent: int, keyword_line: int
     if not parts:
         raise ts.error("a joint needs a name", keyword_line)
     name = " ".join(parts)
-    if name in h.names:
+    if name in h.index:
         raise ts.error(f"joint name {name!r} appears twice", keyword_line)
+    if len(h.names) >= limits.max_joints():
+        raise ts.error(
+            f"more than {limits.max_joints()} joints (set KEYFILL_MAX_JOINTS to read more)", keyword_line
+        )
     if not opened:
         ts.expect("{")
     j = len(h.names)
+    h.index[name] = j
     h.names.append(name)
     h.parents.append(parent)
     h.offsets.append(None)
     h.channels.append(())
-    while True:
+    h.lines.append(keyword_line)
+    return j
+
+
+def _parse_joint(ts: _TokenStream, h: _Hierarchy, keyword_line: int) -> None:
+    """Parse a ROOT and everything under it, with an explicit stack (any depth, no recursion)."""
+    stack = [_open_joint(ts, h, -1, keyword_line)]
+    while stack:
+        j = stack[-1]
+        name = h.names[j]
         tok, line = ts.next(f"'}}' closing joint {name!r}")
         if tok == "OFFSET":
             h.offsets[j] = ts.numbers(3, f"the OFFSET of {name!r}")
         elif tok == "CHANNELS":
             ctok, cline = ts.next("a channel count")
-            try:
-                n = int(ctok)
-            except ValueError:
-                raise ts.error(f"CHANNELS of {name!r} needs a count, found {ctok!r}", cline) from None
+            n = int(ctok) if ctok.isascii() and ctok.isdigit() and len(ctok) < 4 else -1
+            if n < 0:
+                raise ts.error(f"CHANNELS of {name!r} needs a count, found {ctok!r}", cline)
             if n in (4, 5) or not 0 <= n <= 6:
                 raise ts.error(f"joint {name!r} has {n} channels; a BVH joint has 0, 1, 2, 3 or 6", cline)
             names = [ts.next(f"{n} channel names for {name!r}")[0] for _ in range(n)]
@@ -131,7 +152,7 @@ def _parse_joint(ts: _TokenStream, h: _Hierarchy, parent: int, keyword_line: int
         elif tok in ("JOINT", "ROOT"):
             if tok == "ROOT":
                 raise ts.error(f"ROOT inside joint {name!r}; a ROOT starts a new hierarchy", line)
-            _parse_joint(ts, h, j, line)
+            stack.append(_open_joint(ts, h, j, line))
         elif tok == "End":
             ts.expect("Site")
             ts.expect("{")
@@ -139,11 +160,11 @@ def _parse_joint(ts: _TokenStream, h: _Hierarchy, parent: int, keyword_line: int
             h.end_sites.append((j, ts.numbers(3, f"the End Site OFFSET of {name!r}")))
             ts.expect("}")
         elif tok == "}":
-            break
+            if h.offsets[j] is None:
+                raise ts.error(f"joint {name!r} has no OFFSET", h.lines[j])
+            stack.pop()
         else:
             raise ts.error(f"unexpected {tok!r} in joint {name!r}", line)
-    if h.offsets[j] is None:
-        raise ts.error(f"joint {name!r} has no OFFSET", keyword_line)
 
 
 def _header_value(lines: list[str], start: int, label: str, path) -> tuple[str, int]:
@@ -167,28 +188,6 @@ def _decode(raw: bytes) -> str:
         return raw.decode("latin-1")
 
 
-def _count_values_per_line(data: bytes) -> np.ndarray:
-    """Number of whitespace-separated tokens on each line of ``data`` (vectorised)."""
-    buf = np.frombuffer(data, dtype=np.uint8)
-    if buf.size == 0:
-        return np.zeros(0, dtype=np.int64)
-    space = buf <= 32  # space, tab, CR, LF, other controls
-    starts = np.flatnonzero(~space & np.concatenate(([True], space[:-1])))
-    newlines = np.flatnonzero(buf == 10)
-    num_lines = len(newlines) + (0 if buf[-1] == 10 else 1)
-    return np.bincount(np.searchsorted(newlines, starts), minlength=num_lines)
-
-
-def _first_bad_token(lines: list[bytes]) -> tuple[int, str]:
-    for i, line in enumerate(lines):
-        for tok in line.split():
-            try:
-                float(tok)
-            except ValueError:
-                return i, tok.decode("utf-8", "replace")
-    return 0, ""
-
-
 def _snap_fps(frame_time: float) -> float:
     """``1 / frame_time``, snapped to a whole rate when the file rounded ``1/n`` (e.g. .0333333)."""
     fps = 1.0 / frame_time
@@ -198,50 +197,85 @@ def _snap_fps(frame_time: float) -> float:
     return fps
 
 
-def _values_fast(data: bytes, num_frames: int, num_channels: int) -> np.ndarray | None:
-    """The ``(F, C)`` channel values in one C-level pass, or None when anything is off.
+#: bytes per chunk of the motion block parsed at once (bounds the parser's working memory)
+CHUNK_BYTES = 1 << 22
+_ALLOWED = np.zeros(256, dtype=bool)
+_ALLOWED[list(limits.NUMBER_BYTES)] = True
 
-    Well-formed files take only this path; :func:`_values_checked` runs when it
-    returns None and finds the line to blame.
+
+def _diagnose(chunk: bytes, num_channels: int, label, first_line: int) -> None:
+    """Raise the :class:`FormatError` for the first bad line of ``chunk`` (the slow path)."""
+    limit = limits.max_abs()
+    for i, line in enumerate(chunk.split(b"\n")):
+        toks = line.split()
+        if not toks:
+            continue
+        if len(toks) != num_channels:
+            raise FormatError(
+                f"{len(toks)} values on this line, expected {num_channels} (one per channel)", label, first_line + i
+            )
+        for tok in toks:
+            text = tok.decode("utf-8", "replace")
+            if text.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+                raise FormatError(f"a value is NaN or infinite ({text!r})", label, first_line + i)
+            if not limits.is_number(text):
+                raise FormatError(f"{text!r} is not a number", label, first_line + i)
+            if not abs(float(text)) <= limit:
+                raise FormatError(
+                    f"{text!r} is beyond {limit:g} (set KEYFILL_MAX_ABS to read larger values)", label, first_line + i
+                )
+    raise FormatError("the motion data cannot be read", label, first_line)  # pragma: no cover - a parser disagreement
+
+
+def _nonempty_lines(data: bytes) -> int:
+    return sum(1 for line in data.split(b"\n") if line.strip())
+
+
+def _values(raw: bytes, begin: int, num_frames: int, num_channels: int, label, first_data_line: int, frames_line_no: int):
+    """The ``(F, C)`` channel values of the motion block ``raw[begin:]`` (never copied whole).
+
+    The block is read in chunks of about :data:`CHUNK_BYTES` (one C-level pass
+    each); a bad chunk is read again line by line to name the line to blame.
     """
-    if not (num_frames and num_channels):
-        return None
-    try:
-        values = np.loadtxt(data.split(b"\n"), dtype=np.float64, comments=None, ndmin=2)
-    except ValueError:
-        return None
-    if values.shape != (num_frames, num_channels) or not np.all(np.isfinite(values)):
-        return None
-    return values
-
-
-def _values_checked(data: bytes, num_frames: int, num_channels: int, label, first_data_line: int, frames_line_no: int):
-    """The channel values, with a :class:`FormatError` naming the first bad line (the slow path)."""
-    counts = _count_values_per_line(data)
-    nonempty = np.flatnonzero(counts > 0)
-    wrong = nonempty[:num_frames][counts[nonempty[:num_frames]] != num_channels]
-    if len(wrong):
-        i = int(wrong[0])
+    if num_channels == 0:
+        return np.zeros((num_frames, 0))
+    if raw.count(b"\n", begin) + 1 < num_frames:  # too few lines: refuse before allocating
         raise FormatError(
-            f"{int(counts[i])} values on this line, expected {num_channels} (one per channel)", label, first_data_line + i
+            f"'Frames: {num_frames}' but {_nonempty_lines(raw[begin:])} lines of motion data follow", label, frames_line_no
         )
-    if num_channels and len(nonempty) != num_frames:
-        where = first_data_line + int(nonempty[num_frames]) if len(nonempty) > num_frames else frames_line_no
-        raise FormatError(
-            f"'Frames: {num_frames}' but {len(nonempty)} lines of motion data follow", label, where
-        )
-    if num_channels == 0 or num_frames == 0:
-        values = np.zeros((num_frames, num_channels))
-    else:
-        lines = data.split(b"\n")
-        try:
-            values = np.loadtxt(lines, dtype=np.float64, comments=None, ndmin=2)
-        except ValueError:
-            i, tok = _first_bad_token(lines)
-            raise FormatError(f"{tok!r} is not a number", label, first_data_line + i) from None
-        if not np.all(np.isfinite(values)):
-            row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
-            raise FormatError("a value is NaN or infinite", label, first_data_line + int(nonempty[row]))
+    values = np.empty((num_frames, num_channels))
+    limit = limits.max_abs()
+    row, pos, line_no = 0, begin, first_data_line
+    with progress.task("reading BVH", len(raw) - begin, "B") as update:
+        while pos < len(raw):
+            end = raw.find(b"\n", min(pos + CHUNK_BYTES, len(raw)))
+            end = len(raw) if end < 0 else end + 1
+            chunk = raw[pos:end]
+            arr = None
+            if _ALLOWED[np.frombuffer(chunk, dtype=np.uint8)].all():
+                try:
+                    arr = np.loadtxt(chunk.split(b"\n"), dtype=np.float64, comments=None, ndmin=2)
+                except ValueError:
+                    arr = None
+            if arr is not None and arr.size == 0:
+                arr = arr.reshape(0, num_channels)
+            if arr is None or arr.shape[1] != num_channels or not (np.abs(arr) <= limit).all():
+                _diagnose(chunk, num_channels, label, line_no)
+            if row + len(arr) > num_frames:
+                rest = raw[pos:]
+                extra = [i for i, line in enumerate(rest.split(b"\n")) if line.strip()][num_frames - row]
+                raise FormatError(
+                    f"'Frames: {num_frames}' but {row + _nonempty_lines(rest)} lines of motion data follow",
+                    label,
+                    line_no + extra,
+                )
+            values[row : row + len(arr)] = arr
+            row += len(arr)
+            line_no += chunk.count(b"\n")
+            pos = end
+            update(len(chunk))
+    if row != num_frames:
+        raise FormatError(f"'Frames: {num_frames}' but {row} lines of motion data follow", label, frames_line_no)
     return values
 
 
@@ -269,81 +303,92 @@ def parse(raw: bytes | str, path=None) -> Motion:
         tok, line = ts.next("ROOT")
         if tok != "ROOT":
             raise ts.error(f"expected ROOT, found {tok!r}", line)
-        _parse_joint(ts, h, -1, line)
+        _parse_joint(ts, h, line)
     if not h.names:
         raise FormatError("the hierarchy has no joints", label, len(header_lines))
 
     motion_line = len(header_lines)  # 0-based index of the MOTION line
-    after = raw[m.end() :]
     # Locate 'Frames:' and 'Frame Time:' allowing blank lines between them.
-    lines_text = _decode(after[: min(len(after), 4096)]).split("\n")
+    lines_text = _decode(raw[m.end() : m.end() + 4096]).split("\n")
     frames_val, i_frames = _header_value(lines_text, 1, "Frames:", label)
     ft_val, i_ft = _header_value(lines_text, i_frames + 1, "Frame Time:", label)
     frames_line_no = motion_line + i_frames + 1
     ft_line_no = motion_line + i_ft + 1
-    try:
-        num_frames = int(frames_val)
-        if num_frames < 0:
-            raise ValueError
-    except ValueError:
-        raise FormatError(f"'Frames:' needs a non-negative whole number, found {frames_val!r}", label, frames_line_no) from None
-    try:
-        frame_time = float(ft_val)
-    except ValueError:
-        raise FormatError(f"'Frame Time:' needs a number, found {ft_val!r}", label, ft_line_no) from None
+    if not (frames_val.isascii() and frames_val.isdigit()):
+        raise FormatError(f"'Frames:' needs a non-negative whole number, found {frames_val!r}", label, frames_line_no)
+    num_frames = int(frames_val)
+    if not limits.is_number(ft_val):
+        raise FormatError(f"'Frame Time:' needs a number, found {ft_val!r}", label, ft_line_no)
+    frame_time = float(ft_val)
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise FormatError(f"'Frame Time:' must be positive, found {ft_val}", label, ft_line_no)
+    if not 1.0 / limits.MAX_FPS <= frame_time <= 1.0 / limits.MIN_FPS:
+        raise FormatError(
+            f"'Frame Time: {ft_val}' is a frame rate outside {limits.MIN_FPS:g} to {limits.MAX_FPS:g} fps", label, ft_line_no
+        )
+    problem = limits.check_size(num_frames, len(h.names), len(raw))
+    if problem:
+        raise FormatError(problem, label, frames_line_no)
 
-    # Byte offset of the first data line: skip i_ft + 1 lines of ``after``.
-    data_start = 0
+    # Byte offset of the first data line: skip i_ft + 1 lines after MOTION.
+    data_start = m.end()
     for _ in range(i_ft + 1):
-        nl = after.find(b"\n", data_start)
-        data_start = len(after) if nl < 0 else nl + 1
-    data = after[data_start:]
-    first_data_line = motion_line + i_ft + 2  # 1-based file line of data[0]
+        nl = raw.find(b"\n", data_start)
+        data_start = len(raw) if nl < 0 else nl + 1
+    first_data_line = motion_line + i_ft + 2  # 1-based file line of the first data line
 
     num_channels = sum(len(c) for c in h.channels)
-    values = _values_fast(data, num_frames, num_channels)
-    if values is None:
-        values = _values_checked(data, num_frames, num_channels, label, first_data_line, frames_line_no)
+    values = _values(raw, data_start, num_frames, num_channels, label, first_data_line, frames_line_no)
+    del raw, m  # the text is no longer needed: free it before the pose arrays are made (read() holds no copy)
 
-    skeleton = Skeleton(
-        names=tuple(h.names),
-        parents=np.array(h.parents),
-        offsets=np.array(h.offsets),
-        channels=tuple(h.channels),
-        end_sites=tuple(h.end_sites),
-    )
-    rot, pos = channels_to_pose(values, skeleton)
-    return Motion(skeleton, _snap_fps(frame_time), rot, pos)
+    try:
+        skeleton = Skeleton(
+            names=tuple(h.names),
+            parents=np.array(h.parents),
+            offsets=np.array(h.offsets),
+            channels=tuple(h.channels),
+            end_sites=tuple(h.end_sites),
+        )
+        rot, pos = channels_to_pose(values, skeleton)
+        del values
+        return Motion(skeleton, _snap_fps(frame_time), rot, pos)
+    except DataError as e:
+        raise FormatError(str(e), label) from None
 
 
-def channels_to_pose(values: np.ndarray, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    """BVH channel values ``(F, C)`` (degrees, file units) -> ``(rotations (F,J,4), positions (F,J,3))``."""
+def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384) -> tuple[np.ndarray, np.ndarray]:
+    """BVH channel values ``(F, C)`` (degrees, file units) -> ``(rotations (F,J,4), positions (F,J,3))``.
+
+    Frames are converted ``block`` at a time, so the temporaries stay small
+    next to the result.
+    """
     F, J = values.shape[0], skeleton.num_joints
-    pos = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
-    angles = np.zeros((F, J, 3))
-    orders = skeleton.euler_orders
-    col = 0
-    for j, chans in enumerate(skeleton.channels):
-        for c in chans:
-            axis = "XYZ".index(c[0])
-            if c in POSITION_CHANNELS:
-                pos[:, j, axis] = values[:, col]
-            else:
-                angles[:, j, orders[j].index(c[0])] = np.deg2rad(values[:, col])
-            col += 1
+    pos = np.empty((F, J, 3))
     rot = np.empty((F, J, 4))
-    for order in set(orders):
-        js = [j for j in range(J) if orders[j] == order]
-        rot[:, js] = R.euler_to_quat(angles[:, js], order)
+    orders = skeleton.euler_orders
+    groups = [(order, [j for j in range(J) if orders[j] == order]) for order in sorted(set(orders))]
+    for a in range(0, max(F, 1), block):
+        b = min(F, a + block)
+        pos[a:b] = skeleton.offsets
+        angles = np.zeros((b - a, J, 3))
+        col = 0
+        for j, chans in enumerate(skeleton.channels):
+            for c in chans:
+                axis = "XYZ".index(c[0])
+                if c in POSITION_CHANNELS:
+                    pos[a:b, j, axis] = values[a:b, col]
+                else:
+                    angles[:, j, orders[j].index(c[0])] = np.deg2rad(values[a:b, col])
+                col += 1
+        for order, js in groups:
+            rot[a:b, js] = R.euler_to_quat(angles[:, js], order)
     return rot, pos
 
 
 def read(path: str | Path, label=None) -> Motion:
     """Read a BVH file; ``label`` (default: the path) names it in error messages."""
     path = Path(path)
-    return parse(path.read_bytes(), label if label is not None else path)
+    return parse(path.read_bytes(), label if label is not None else path)  # parse holds the only reference
 
 
 # --- writing -----------------------------------------------------------------
@@ -388,21 +433,27 @@ def _fmt(values) -> str:
     return " ".join(NUMBER_FORMAT % v for v in values)
 
 
-def _write_joint(sk: Skeleton, j: int, depth: int, out: list[str], children: list[list[int]], ends) -> None:
-    ind = "\t" * depth
-    out.append(f"{ind}{'ROOT' if sk.parents[j] < 0 else 'JOINT'} {sk.names[j]}")
-    out.append(f"{ind}{{")
-    out.append(f"{ind}\tOFFSET {_fmt(sk.offsets[j])}")
-    chans = sk.channels[j]
-    out.append(f"{ind}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}")
-    for k in children[j]:
-        _write_joint(sk, k, depth + 1, out, children, ends)
-    for offset in ends.get(j, []):
-        out.append(f"{ind}\tEnd Site")
-        out.append(f"{ind}\t{{")
-        out.append(f"{ind}\t\tOFFSET {_fmt(offset)}")
-        out.append(f"{ind}\t}}")
-    out.append(f"{ind}}}")
+def _write_joint(sk: Skeleton, root: int, out: list[str], children: list[list[int]], ends) -> None:
+    """The hierarchy text of ``root`` and its descendants (an explicit stack: any depth)."""
+    stack: list[tuple[int, int, bool]] = [(root, 0, False)]
+    while stack:
+        j, depth, closing = stack.pop()
+        ind = "\t" * depth
+        if closing:
+            for offset in ends.get(j, []):
+                out.append(f"{ind}\tEnd Site")
+                out.append(f"{ind}\t{{")
+                out.append(f"{ind}\t\tOFFSET {_fmt(offset)}")
+                out.append(f"{ind}\t}}")
+            out.append(f"{ind}}}")
+            continue
+        out.append(f"{ind}{'ROOT' if sk.parents[j] < 0 else 'JOINT'} {sk.names[j]}")
+        out.append(f"{ind}{{")
+        out.append(f"{ind}\tOFFSET {_fmt(sk.offsets[j])}")
+        chans = sk.channels[j]
+        out.append(f"{ind}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}")
+        stack.append((j, depth, True))
+        stack.extend((k, depth + 1, False) for k in reversed(children[j]))
 
 
 def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
@@ -422,9 +473,10 @@ def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
     return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, values[0].tolist())), varying
 
 
-def dumps(motion: Motion) -> str:
-    """BVH text of ``motion`` in its skeleton's channel layout."""
+def _pieces(motion: Motion, rows: int = 4096):
+    """BVH text of ``motion`` in pieces: the header, then about ``rows`` motion lines at a time."""
     sk = motion.skeleton
+    limits.check_values(motion)
     values = pose_to_channels(motion)
     children: list[list[int]] = [[] for _ in range(sk.num_joints)]
     for j, p in enumerate(sk.parents):
@@ -436,18 +488,36 @@ def dumps(motion: Motion) -> str:
     out = ["HIERARCHY"]
     for j in range(sk.num_joints):
         if sk.parents[j] < 0:
-            _write_joint(sk, j, 0, out, children, ends)
+            _write_joint(sk, j, out, children, ends)
     out.append("MOTION")
     out.append(f"Frames: {motion.num_frames}")
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
+    yield "\n".join(out) + "\n"
     if values.shape[1]:
         line, varying = _line_template(values)
-        out.extend(line % tuple(row) for row in values[:, varying].tolist())
+        line += "\n"
+        columns = values[:, varying]
+        del values
+        with progress.task("writing BVH", len(columns), " frames") as update:
+            for start in range(0, len(columns), rows):
+                block = columns[start : start + rows].tolist()
+                yield "".join(line % tuple(row) for row in block)
+                update(len(block))
     else:
-        out.extend("" for _ in range(motion.num_frames))
-    return "\n".join(out) + "\n"
+        yield "\n" * motion.num_frames
+
+
+def dumps(motion: Motion) -> str:
+    """BVH text of ``motion`` in its skeleton's channel layout."""
+    return "".join(_pieces(motion))
 
 
 def write(motion: Motion, path: str | Path) -> None:
-    """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`)."""
-    Path(path).write_text(dumps(motion), encoding="utf-8", newline="\n")
+    """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`).
+
+    The motion lines are formatted and written a block at a time, so writing
+    needs little memory beyond the motion's channel values.
+    """
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        for piece in _pieces(motion):
+            f.write(piece)

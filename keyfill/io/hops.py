@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill.errors import DataError, FormatError
+from keyfill.errors import DataError, FormatError, KeyfillError
 from keyfill.motion import Keys, Motion
 
 CONFIG_FILE = "simulate.json"
@@ -123,7 +123,11 @@ def read_dataset(folder: str | os.PathLike) -> list[Sequence]:
         if not path.is_file():
             raise DataError(f"{path}: listed in {MANIFEST_FILE} but missing")
         motion = io.load(path)
-        keys = Keys(np.array(rec["keys"], dtype=np.int64))
+        try:
+            keys = Keys(np.array(rec["keys"], dtype=np.int64))
+        except (KeyfillError, TypeError, ValueError, OverflowError) as e:
+            why = str(e) if isinstance(e, KeyfillError) else "they must be whole frame numbers"
+            raise DataError(f"{folder / MANIFEST_FILE}: the keys of {rec['id']!r} are wrong: {why}") from None
         if len(keys) and keys.frames[-1] >= motion.num_frames:
             raise DataError(f"{path}: key {int(keys.frames[-1])} of {MANIFEST_FILE} is beyond its {motion.num_frames} frames")
         out.append(Sequence(id=rec["id"], motion=motion.replace(keys=keys), record=rec, path=path))

@@ -211,7 +211,7 @@ def from_stage(stage, motion: Motion, label) -> Curves:
                 post[0] = seg[k] / 3 if k < K - 1 else seg[-1] / 3
             in_tan[k, i] = pre[0], pre[0] * pre[1]
             out_tan[k, i] = post[0], post[0] * post[1]
-            flag = knot.GetCustomDataByKey("broken")
+            flag = knot.GetCustomData().get("broken")  # GetCustomDataByKey segfaults on a missing key (usd-core 26.11)
             broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9, atol=1e-12)
         for k, knot in enumerate(knots[:-1]):
             interp = knot.GetNextInterpolation()

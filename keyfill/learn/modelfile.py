@@ -17,7 +17,9 @@ clear line for anything that is not an intact keyfill model.
 
 from __future__ import annotations
 
+import contextvars
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -32,6 +34,49 @@ FORMAT = "keyfill-model"
 VERSION = 1
 CONFIG = "config.json"
 WEIGHTS = "weights.safetensors"
+#: a config.json larger than this is not read (the shipped ones are a few kB)
+MAX_CONFIG_BYTES = 16 * 2**20
+#: numbers of the weights file :func:`load_model` read last (in this context), which the network that
+#: :func:`build_for_loading` builds must match before it is given memory
+_LOADED_NUMEL: contextvars.ContextVar = contextvars.ContextVar("keyfill_loaded_numel", default=None)
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def _int64(text: str) -> int:
+    """A JSON integer of the config: it must fit in 64 bits (a seed does; 1e400 written out does not)."""
+    if len(text) > 20 or not -(2**63) <= int(text) < 2**63:
+        raise ValueError(f"the integer {text[:12]}{'...' if len(text) > 12 else ''} does not fit in 64 bits")
+    return int(text)
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text[:20]} is not a finite number")
+    return value
+
+
+def _check_skeleton_json(want, folder) -> None:
+    """Raise :class:`ModelError` unless ``want`` is a skeleton as :func:`skeleton_to_json` writes it."""
+    from keyfill.limits import max_abs, max_joints
+
+    if not isinstance(want, dict):
+        raise ModelError(f"{folder}: the model config's skeleton is not a JSON object")
+    names, parents, offsets = want.get("names"), want.get("parents"), want.get("offsets")
+    if not (isinstance(names, list) and names and len(names) <= max_joints() and all(isinstance(n, str) for n in names)):
+        raise ModelError(f"{folder}: the model config's skeleton names are not a list of joint names")
+    J = len(names)
+    if not (isinstance(parents, list) and len(parents) == J
+            and all(type(p) is int and -1 <= p < j for j, p in enumerate(parents))):
+        raise ModelError(f"{folder}: the model config's skeleton parents are not {J} indices of earlier joints")
+    if not (isinstance(offsets, list) and len(offsets) == J and all(
+            isinstance(o, list) and len(o) == 3
+            and all(type(v) in (int, float) and math.isfinite(v) and abs(v) <= max_abs() for v in o)
+            for o in offsets)):
+        raise ModelError(f"{folder}: the model config's skeleton offsets are not {J} finite 3-vectors")
 
 
 def skeleton_to_json(skeleton: Skeleton) -> dict:
@@ -115,17 +160,27 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
     """The validated ``config.json`` of the model at ``path``."""
     folder = model_folder(path)
     try:
-        config = json.loads((folder / CONFIG).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ModelError(f"{folder}: damaged model config ({e})") from None
+        size = (folder / CONFIG).stat().st_size
+        if size > MAX_CONFIG_BYTES:
+            raise ModelError(f"{folder}: its {CONFIG} is {size} bytes; a model config is at most {MAX_CONFIG_BYTES}")
+        # NaN, Infinity, 1e999 and integers beyond 64 bits are refused; deep nesting raises RecursionError
+        config = json.loads((folder / CONFIG).read_text(encoding="utf-8"), parse_constant=_no_constant,
+                            parse_int=_int64, parse_float=_finite)
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise ModelError(f"{folder}: damaged model config ({' '.join(str(e).split())[:200]})") from None
+    except RecursionError:
+        raise ModelError(f"{folder}: damaged model config (nested too deeply)") from None
     if not isinstance(config, dict) or config.get("format") != FORMAT:
         raise ModelError(f"{folder}: not a keyfill model (its {CONFIG} has no format '{FORMAT}')")
     if config.get("version") != VERSION:
         raise ModelError(f"{folder}: model format version {config.get('version')!r}; this keyfill reads {VERSION}")
+    if not isinstance(config.get("kind"), str):
+        raise ModelError(f"{folder}: the model config names no kind (the method that made it)")
     if kind is not None and config.get("kind") != kind:
         raise ModelError(f"{folder}: a {config.get('kind')!r} model, not a {kind!r} model")
     if "skeleton" not in config:
         raise ModelError(f"{folder}: the model config names no skeleton")
+    _check_skeleton_json(config["skeleton"], folder)
     return config
 
 
@@ -144,9 +199,37 @@ def load_model(path: str | os.PathLike, kind: str | None = None) -> tuple[dict, 
         raise ModelError(f"{weights.parent}: the model has no {WEIGHTS}")
     try:
         tensors = load_file(str(weights))
-    except (SafetensorError, OSError, ValueError) as e:
-        raise ModelError(f"{weights}: damaged or truncated weights ({' '.join(str(e).split())})") from None
+    except (SafetensorError, OSError, ValueError, RuntimeError) as e:
+        raise ModelError(f"{weights}: damaged or truncated weights ({' '.join(str(e).split())[:300]})") from None
+    bad = next((k for k, t in tensors.items() if t.is_floating_point() and not bool(t.isfinite().all())), None)
+    if bad is not None:
+        raise ModelError(f"{weights}: the weights {bad!r} hold values that are not finite")
+    _LOADED_NUMEL.set((str(weights.parent), sum(t.numel() for t in tensors.values())))
     return tensors, config
+
+
+#: initialisers whose work is thrown away on the meta device (on it, torch decomposes some of them
+#: in Python, importing torch._refs: 10 s the first time on a busy 2-core machine)
+_INITS = frozenset({"normal_", "uniform_", "trunc_normal_", "orthogonal_", "xavier_normal_", "xavier_uniform_",
+                    "kaiming_normal_", "kaiming_uniform_", "sparse_", "constant_", "zeros_", "ones_", "eye_",
+                    "dirac_", "bernoulli_", "exponential_", "geometric_", "log_normal_", "cauchy_", "random_"})
+
+
+def _skip_init():
+    """A torch function mode in which initialisers of meta tensors do nothing (their values never exist)."""
+    import torch
+    from torch.overrides import TorchFunctionMode
+
+    class SkipInit(TorchFunctionMode):
+        def __torch_function__(self, func, types, args=(), kwargs=None):
+            kwargs = kwargs or {}
+            if getattr(func, "__name__", "") in _INITS:
+                target = args[0] if args else kwargs.get("tensor")
+                if isinstance(target, torch.Tensor) and target.is_meta:
+                    return target
+            return func(*args, **kwargs)
+
+    return SkipInit()
 
 
 def build_for_loading(factory):
@@ -155,6 +238,26 @@ def build_for_loading(factory):
     loading a model leaves the caller's random stream as it was)."""
     import torch
 
+    loaded = _LOADED_NUMEL.get()
+    _LOADED_NUMEL.set(None)
+    if loaded is not None:
+        # Build it first on the meta device (no memory): a config whose sizes ask for more numbers than
+        # the weights file holds (hidden_size 30000: tens of GB) is refused before it is allocated.
+        folder, numel = loaded
+        try:
+            with torch.device("meta"), torch.random.fork_rng(devices=[]), _skip_init():
+                shape = factory()
+            modules = [shape] if isinstance(shape, torch.nn.Module) else [
+                m for m in vars(shape).values() if isinstance(m, torch.nn.Module)]  # a wrapper holding its network
+            wanted = sum(t.numel() for m in modules for t in m.state_dict().values()) if modules else None
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError, RuntimeError, NotImplementedError,
+                OverflowError):
+            wanted = None  # not buildable on meta: the real build below reports what is wrong
+        if wanted is not None and wanted != numel:
+            raise ModelError(
+                f"{folder}: the weights do not fit the model's configuration "
+                f"(it describes a network of {wanted} numbers, the weights hold {numel})"
+            )
     with torch.random.fork_rng(devices=[]):
         return factory()
 
@@ -163,6 +266,6 @@ def load_state(module, tensors: dict, path: str | os.PathLike) -> None:
     """``module.load_state_dict(tensors)``, with a :class:`ModelError` when the tensors do not fit."""
     try:
         module.load_state_dict(tensors, strict=True)
-    except RuntimeError as e:
+    except (RuntimeError, ValueError, TypeError) as e:
         first = str(e).strip().splitlines()[0]
         raise ModelError(f"{path}: the weights do not fit the model's configuration ({first})") from None

@@ -205,6 +205,18 @@ def _rewrite(folder: Path, lines: dict[int, dict], records: dict[int, dict]) -> 
             tmp.write_text("".join(json.dumps(items[r], sort_keys=True) + "\n" for r in sorted(items)), encoding="utf-8")
 
 
+def _drop_unlisted(folder: Path, records: dict[int, dict]) -> None:
+    """Remove sequence files no manifest record lists (a killed build wrote them, then lost its record).
+
+    A run that is needed again writes the same bytes, so the folder ends as an
+    uninterrupted build leaves it.
+    """
+    listed = {rec["file"] for rec in records.values()}
+    for p in folder.iterdir():
+        if p.name not in listed and p.name.startswith("seq_") and p.is_file() and _ours(p.name):
+            p.unlink(missing_ok=True)
+
+
 # --- the build ------------------------------------------------------------------------------------
 
 
@@ -291,8 +303,12 @@ def simulate(
 def _build(folder, job, fmt, count, max_runs, executor, window, on_run) -> Summary:
     from keyfill import io
 
+    from keyfill.files import remove_stale
+
     start = time.perf_counter()
+    remove_stale(folder)  # temporary files of a killed build
     lines, records = _finished_runs(folder)
+    _drop_unlisted(folder, records)
     _rewrite(folder, lines, records)
     summary = Summary(folder=str(folder), count=count)
     accepted = sum(1 for line in lines.values() if line.get("accepted"))
@@ -332,6 +348,7 @@ def _build(folder, job, fmt, count, max_runs, executor, window, on_run) -> Summa
     for run in [r for r in records if r > last]:
         (folder / records.pop(run)["file"]).unlink(missing_ok=True)
     lines = {r: line for r, line in lines.items() if r <= last}
+    _drop_unlisted(folder, records)
     _rewrite(folder, lines, records)
     summary.sequences, summary.runs = len(records), len(lines)
     summary.seconds = time.perf_counter() - start

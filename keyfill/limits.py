@@ -1,0 +1,148 @@
+"""Limits on what keyfill reads, and the one number grammar of its text formats.
+
+Readers check a file's declared sizes against these limits and against the
+data the file holds *before* they allocate, so a few bytes can never ask for
+gigabytes. The defaults are far above any real motion file; the environment
+variables below raise them for a file that really needs more.
+
+=====================  ==============  ======================================================
+limit                  default         meaning (environment variable to override)
+=====================  ==============  ======================================================
+``max_frames``         10,000,000      frames in one motion (``KEYFILL_MAX_FRAMES``)
+``max_joints``         10,000          joints in one skeleton (``KEYFILL_MAX_JOINTS``)
+``free_joint_frames``  2,000,000       frames x (joints + 8) a file may declare beyond one per
+                                       byte of the file (``KEYFILL_FREE_JOINT_FRAMES``); a motion
+                                       takes 56 bytes per joint and frame in memory, and USD
+                                       costs about as much per frame as per 8 joints
+``max_abs``            1e12            largest magnitude of a coordinate or angle (file units,
+                                       degrees); USD stores 32-bit floats (``KEYFILL_MAX_ABS``)
+fps                    1e-6 .. 1e6     frames per second (BVH ``Frame Time``, USD
+                                       ``timeCodesPerSecond``)
+time codes             |t| <= 1e12     USD start, end and sample times
+model sizes            see             :mod:`keyfill.learn.modelfile`
+=====================  ==============  ======================================================
+
+Numbers in BVH text follow one grammar, ``[+-]?(digits[.digits]|.digits)([eE][+-]?digits)?``,
+in the hierarchy and in the motion block alike: no ``inf``, ``nan``, ``1_0`` or hexadecimal.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+
+import numpy as np
+
+from keyfill.errors import DataError
+
+#: what one frame costs beside its joints, in joint-frames (a USD time sample's own overhead)
+FRAME_COST = 8
+MIN_FPS = 1e-6
+MAX_FPS = 1e6
+MAX_TIME_CODE = 1e12
+
+#: one number in keyfill's text formats (bytes or str via :func:`is_number`)
+NUMBER = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+_NUMBER_STR = re.compile(NUMBER, re.ASCII)
+#: every byte a motion block may hold: digits, signs, point, exponent and whitespace
+NUMBER_BYTES = frozenset(b"0123456789+-.eE \t\r\n\f\v")
+
+
+def _env_int(name: str, default: int) -> int:
+    text = os.environ.get(name)
+    if text is None:
+        return default
+    try:
+        value = int(text)
+    except ValueError:
+        raise DataError(f"{name}={text!r}: must be a whole number") from None
+    if value < 1:
+        raise DataError(f"{name}={text!r}: must be positive")
+    return value
+
+
+def _env_float(name: str, default: float) -> float:
+    text = os.environ.get(name)
+    if text is None:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise DataError(f"{name}={text!r}: must be a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise DataError(f"{name}={text!r}: must be a positive finite number")
+    return value
+
+
+def max_frames() -> int:
+    return _env_int("KEYFILL_MAX_FRAMES", 10_000_000)
+
+
+def max_joints() -> int:
+    return _env_int("KEYFILL_MAX_JOINTS", 10_000)
+
+
+def free_joint_frames() -> int:
+    return _env_int("KEYFILL_FREE_JOINT_FRAMES", 2_000_000)
+
+
+def max_abs() -> float:
+    return _env_float("KEYFILL_MAX_ABS", 1e12)
+
+
+def is_number(text: str) -> bool:
+    """``text`` follows the number grammar (it may still overflow to infinity)."""
+    return _NUMBER_STR.fullmatch(text) is not None
+
+
+def parse_number(text: str) -> float | None:
+    """The finite value of ``text``, or None when it is not a number of the grammar or overflows."""
+    if not is_number(text):
+        return None
+    value = float(text)
+    return value if math.isfinite(value) else None
+
+
+def check_size(frames: int, joints: int, file_bytes: int) -> str | None:
+    """Why a motion of ``frames`` x ``joints`` cannot come from ``file_bytes`` bytes, or None."""
+    if joints > max_joints():
+        return f"{joints} joints is more than keyfill reads ({max_joints()}; set KEYFILL_MAX_JOINTS to raise it)"
+    if frames > max_frames():
+        return f"{frames} frames is more than keyfill reads ({max_frames()}; set KEYFILL_MAX_FRAMES to raise it)"
+    allowed = file_bytes + free_joint_frames()
+    if frames * (joints + FRAME_COST) > allowed:
+        return (
+            f"{frames} frames x {joints} joints is more than a {file_bytes}-byte file can describe "
+            f"(frames x (joints + {FRAME_COST}) at most {allowed}; set KEYFILL_FREE_JOINT_FRAMES to raise it)"
+        )
+    return None
+
+
+def check_fps(fps: float) -> str | None:
+    """Why ``fps`` is not a usable frame rate, or None."""
+    if not (math.isfinite(fps) and MIN_FPS <= fps <= MAX_FPS):
+        return f"the frame rate {fps:g} fps is outside {MIN_FPS:g} to {MAX_FPS:g}"
+    return None
+
+
+def check_values(motion, what: str = "the motion") -> None:
+    """Raise :class:`DataError` unless every number of ``motion`` can be written to a file.
+
+    Writers call this: a file never gets a value that is not finite, that
+    overflows a 32-bit float in USD, or that keyfill would refuse to read back.
+    """
+    problem = check_fps(motion.fps)
+    if problem:
+        raise DataError(f"{what}: {problem}; refusing to write it")
+    limit = max_abs()
+    sk = motion.skeleton
+    for name, arr in (("rest offset", sk.offsets), ("position", motion.positions)):
+        big = ~(np.abs(arr) <= limit)  # NaN counts as too big
+        if big.any():
+            idx = np.argwhere(big)[0]
+            where = f"joint {sk.names[idx[-2]]!r}" + (f" at frame {idx[0]}" if arr.ndim == 3 else "")
+            raise DataError(f"{what}: a {name} of {where} is beyond {limit:g} (or not finite); refusing to write it")
+    for j, off in sk.end_sites:
+        if not np.all(np.abs(off) <= limit):
+            raise DataError(f"{what}: an End Site offset of joint {sk.names[j]!r} is beyond {limit:g}; refusing to write it")

@@ -379,12 +379,9 @@ def _read_stage(stage, label) -> Motion:
             frames = _int_list(custom["keys"], "keys", label)
             mask = None
             if "keyMask" in custom:
-                try:
-                    flags = list(custom["keyMask"])
-                except TypeError:
-                    raise FormatError(f"customData {CUSTOM_KEY}.keyMask is not a list", label) from None
-                if not all(isinstance(v, (bool, np.bool_)) for v in flags):
-                    raise FormatError(f"customData {CUSTOM_KEY}.keyMask must hold true/false values", label)
+                flags = _int_list(custom["keyMask"], "keyMask", label)
+                if not np.isin(flags, (0, 1)).all():
+                    raise FormatError(f"customData {CUSTOM_KEY}.keyMask must hold 0 and 1 only", label)
                 J = skeleton.num_joints
                 if len(flags) != len(frames) * J:
                     raise DataError(f"{label}: keyMask holds {len(flags)} values for {len(frames)} keys of {J} joints")

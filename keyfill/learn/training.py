@@ -23,8 +23,9 @@ model folder. :func:`train` owns everything else, once for all methods:
   in the environment), each process builds the same networks, draws the same
   *global* batches and trains on its :meth:`TrainingTask.shard` of each;
   gradients are averaged with one ``all_reduce`` per update, weighted by the
-  rows of each shard, so N processes take the step one process would take
-  on the whole batch. Rank 0 alone validates and writes the log, checkpoints
+  rows of each shard, so for a loss that is a mean over rows and a step that
+  draws nothing random, N processes take the step one process would take on
+  the whole batch (docs/learned_methods.md says which tasks differ). Rank 0 alone validates and writes the log, checkpoints
   and the model. gloo on CPU, nccl on CUDA.
 
 Gradients are averaged explicitly rather than through

@@ -32,7 +32,6 @@ the scheduled-sampling curriculum (:mod:`keyfill.learn.train_arnn`).
 
 from __future__ import annotations
 
-import functools
 import math
 from pathlib import Path
 
@@ -356,21 +355,6 @@ def load(path: str | Path, device: str = "cpu") -> LampModel:
     return LampModel(net, normalizer, config, str(path))
 
 
-@functools.lru_cache(maxsize=4)
-def _load_cached(path: str, stamp: tuple) -> LampModel:
-    return load(path)
-
-
-def load_cached(path: str | Path) -> LampModel:
-    """:func:`load`, remembering the last few models while their files stay unchanged (size and mtime)."""
-    from keyfill.learn.modelfile import CONFIG, WEIGHTS, model_folder
-
-    folder = model_folder(path)
-    stamp = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None
-                  for f in (folder / CONFIG, folder / WEIGHTS))
-    return _load_cached(str(path), stamp)
-
-
 def complete(motion, keys, options):
     """``keyfill complete --method arnn``: fill a lamp motion's frames between ``keys`` with a trained model.
 
@@ -393,9 +377,10 @@ def complete_many(jobs, options):
     depends on the jobs batched with it only in float32 rounding (about 1e-7).
     """
     from keyfill.learn.lamp_features import complete_lamp_many
+    from keyfill.learn.modelfile import load_cached
 
     path = DEFAULT_MODEL if options.model is None else Path(options.model)
-    return complete_lamp_many(jobs, options, lambda: load_cached(path), DEFAULT_MODEL.name)
+    return complete_lamp_many(jobs, options, lambda: load_cached(load, path), DEFAULT_MODEL.name)
 
 
 # --- ONNX export ------------------------------------------------------------------------------------

@@ -18,6 +18,7 @@ clear line for anything that is not an intact keyfill model.
 from __future__ import annotations
 
 import contextvars
+import functools
 import json
 import math
 import os
@@ -269,3 +270,18 @@ def load_state(module, tensors: dict, path: str | os.PathLike) -> None:
     except (RuntimeError, ValueError, TypeError) as e:
         first = str(e).strip().splitlines()[0]
         raise ModelError(f"{path}: the weights do not fit the model's configuration ({first})") from None
+
+
+def load_cached(loader, path: str | os.PathLike, device: str = "cpu"):
+    """``loader(path, device)``, remembering the last few models while their two files stay unchanged
+    (modification time and size), so a batch or a repeated call loads a model folder once."""
+    folder = model_folder(path)
+    stamp = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None
+                  for f in (folder / CONFIG, folder / WEIGHTS))
+    return _load_cached(loader, str(path), device, stamp)
+
+
+@functools.lru_cache(maxsize=8)
+def _load_cached(loader, path: str, device: str, stamp: tuple):
+    return loader(path, device)
+

@@ -45,7 +45,6 @@ refuses anything else without executing code from it.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import os
 from dataclasses import dataclass, field
@@ -485,10 +484,11 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
 def complete(motion, keys, options):
     """``keyfill complete --method transformer``: see :func:`complete_motion`."""
     from keyfill.errors import UsageError
+    from keyfill.learn.modelfile import load_cached
 
     if options.model is None:
         raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    return _complete_with(load_cached(options.model, options.device), motion, keys, options)
+    return _complete_with(load_cached(load, options.model, options.device), motion, keys, options)
 
 
 def _complete_with(model: CompletionModel, motion, keys, options):
@@ -524,22 +524,10 @@ def complete_many(jobs, options):
     """:func:`complete` for many ``(motion, keys)``: the model loaded once, windows of the same length and
     key layout batched (:func:`complete_motions`); a Completion or the error, per job."""
     from keyfill.errors import UsageError
+    from keyfill.learn.modelfile import load_cached
 
     if options.model is None:
         raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    return complete_many_with(load_cached(options.model, options.device), jobs, options)
+    return complete_many_with(load_cached(load, options.model, options.device), jobs, options)
 
 
-def load_cached(path, device: str = "cpu") -> CompletionModel:
-    """:func:`load`, remembering the last few models while their files stay unchanged (a batch loads once)."""
-    from keyfill.learn.modelfile import CONFIG, WEIGHTS, model_folder
-
-    folder = model_folder(path)
-    stamp = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None
-                  for f in (folder / CONFIG, folder / WEIGHTS))
-    return _load_cached(str(path), device, stamp)
-
-
-@functools.lru_cache(maxsize=4)
-def _load_cached(path: str, device: str, stamp: tuple) -> CompletionModel:
-    return load(path, device)

@@ -73,8 +73,9 @@ def cli(ctx, quiet, verbose, debug):
     """keyfill fills in the frames between keyframes of character animation.
 
     It reads and writes BVH and USD files and offers spline baselines, learned
-    in-betweening (ARNN, transformer), a physics-based hopping-lamp dataset and
-    tangent-space editing of Bezier curves, all on one Motion data type.
+    in-betweening (ARNN, transformer, generative-tweening GAN; many files at
+    once, ONNX export), a physics-based hopping-lamp dataset and tangent-space
+    editing of Bezier curves, all on one Motion data type.
 
     \b
     Examples:

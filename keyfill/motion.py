@@ -156,7 +156,11 @@ class Skeleton:
     def difference(self, other: "Skeleton", atol: float = 1e-6) -> str | None:
         """A one-line description of the first difference from ``other``, or None."""
         if self.num_joints != other.num_joints:
-            return f"{self.num_joints} joints vs {other.num_joints}"
+            n = min(self.num_joints, other.num_joints)
+            j = next((j for j in range(n) if self.names[j] != other.names[j]), n)
+            a = repr(self.names[j]) if j < self.num_joints else "none"
+            b = repr(other.names[j]) if j < other.num_joints else "none"
+            return f"{self.num_joints} joints vs {other.num_joints}; the first that differs is joint {j}, {a} vs {b}"
         for j in range(self.num_joints):
             if self.names[j] != other.names[j]:
                 return f"joint {j} is {self.names[j]!r} vs {other.names[j]!r}"

@@ -99,7 +99,7 @@ def test_model_for_another_skeleton_is_refused(model, capsys, tmp_path):
     code, _, err = run(capsys, "complete", DATA / "cmu_02_03_cgspeed_first4frames.bvh", "-o", tmp_path / "x.bvh",
                        "--keys", "0,3", "--method", "arnn", "--model", model)
     assert code == 1
-    assert err.strip().startswith("keyfill: error:") and "made for another skeleton (4 joints vs 31)" in err
+    assert err.strip().startswith("keyfill: error:") and "made for another skeleton (4 joints vs 31; the first that differs is joint 0" in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.bvh").exists()
     code, _, err = run(capsys, "complete", DATA / "cmu_02_03_cgspeed_first4frames.bvh", "-o", tmp_path / "x.bvh",
                        "--keys", "0,3", "--method", "arnn")

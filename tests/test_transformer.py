@@ -257,7 +257,10 @@ def test_model_for_another_skeleton_is_refused(trained, tmp_path, capsys):
     code = main(["complete", str(src), "-o", str(tmp_path / "o.bvh"), "--method", "transformer",
                  "--model", str(out), "--keys", "0,20,39"])
     assert code == 1
-    assert "keyfill: error: the model serves another skeleton: joint 'Foot_L'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "keyfill: error: the motion has another skeleton than the model (" in err
+    assert ": joint 'Foot_L' has a different rest offset; train a transformer on your own clips with " \
+           "'keyfill train transformer CLIPS -o MODEL'" in err
     assert not (tmp_path / "o.bvh").exists()
 
 

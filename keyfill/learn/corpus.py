@@ -48,7 +48,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from keyfill import rotations as R
-from keyfill.errors import DataError
+from keyfill.errors import DataError, ModelError
 from keyfill.motion import Motion, Skeleton
 
 CACHE_VERSION = 1
@@ -370,6 +370,34 @@ def bone_difference(a: Skeleton, b: Skeleton) -> str | None:
     aa = a.replace(offsets=np.vstack([np.zeros(3), a.offsets[1:]]))
     bb = b.replace(offsets=np.vstack([np.zeros(3), b.offsets[1:]]))
     return aa.difference(bb, atol=1e-2 * scale)
+
+
+def model_hierarchy(model_skeleton: Skeleton, folded: bool, skeleton: Skeleton, quats: np.ndarray,
+                    positions: np.ndarray, frame: int = 0, what: str = "the motion",
+                    hint: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """A motion's ``(quats (F, J, 4), positions (F, J, 3))`` in the hierarchy of a model's corpus, checked.
+
+    When the model's corpus folded a static top joint into the hips (``folded``),
+    the motion's top joint is folded too (:func:`fold_root`). The motion's bone
+    offsets at ``frame`` must then match ``model_skeleton`` (:func:`bone_difference`).
+
+    Raises:
+        ModelError: ``"{what} has another skeleton than the model: {first difference}{hint}"``;
+        ``hint`` (e.g. the command that trains a model for the user's clips) ends the line.
+    """
+    def mismatch(diff):
+        return ModelError(f"{what} has another skeleton than the model ({model_skeleton.num_joints} joints, "
+                          f"top joint {model_skeleton.names[0]!r}): {diff}{hint}")
+
+    if folded:
+        if len(skeleton.children(0)) != 1:
+            raise mismatch(bone_difference(model_skeleton, skeleton)
+                           or f"{skeleton.names[0]!r} has {len(skeleton.children(0))} children, the model's one")
+        quats, positions = fold_root(quats, positions, skeleton.parents)
+    diff = bone_difference(model_skeleton, skeleton.replace(offsets=np.vstack([np.zeros(3), positions[frame, 1:]])))
+    if diff is not None:
+        raise mismatch(diff)
+    return quats, positions
 
 
 def _cache_key(files: list[Path], fold: bool | None) -> str:

@@ -69,6 +69,8 @@ from keyfill.motion import Skeleton
 
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
 KIND = "transformer"
+#: ends the error for a motion of another skeleton
+TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transformer CLIPS -o MODEL'"
 
 
 @dataclass(frozen=True)
@@ -423,7 +425,7 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
     completed alone, in order (what one ``keyfill complete`` does).
     """
     from keyfill.learn.baselines import linear
-    from keyfill.learn.corpus import bone_difference, fold_root
+    from keyfill.learn.corpus import model_hierarchy
     from keyfill.motion import Keys
 
     results: list = [None] * len(jobs)
@@ -432,17 +434,8 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
         try:
             k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
             lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
-            q, p = lin.rotations, lin.positions
-            skel = motion.skeleton
-            if model.folded:
-                if len(skel.children(0)) != 1:
-                    raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
-                                     f"{len(skel.children(0))} children")
-                q, p = fold_root(q, p, skel.parents)
-            here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
-            diff = bone_difference(model.skeleton, here)
-            if diff is not None:
-                raise ModelError(f"the model serves another skeleton: {diff}")
+            q, p = model_hierarchy(model.skeleton, model.folded, motion.skeleton, lin.rotations, lin.positions,
+                                   int(k[0]), hint=TRAIN_HINT)
             q = R.quat_continuous_np(q, axis=0)
             parts = spans(k, model.config.max_frames)
             prepared[j] = (k, lin, q, p, q.copy(), p[:, 0].copy(), parts)

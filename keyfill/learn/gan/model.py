@@ -56,6 +56,9 @@ from keyfill.motion import Skeleton
 STAGES = ("path", "full")
 #: no gan model ships with keyfill (train one: keyfill train gan)
 DEFAULT_MODEL = None
+#: ends the error for a motion of another skeleton
+TRAIN_HINT = ("; train a gan model on your own clips with 'keyfill train gan CLIPS -o MODEL-path --stage path' "
+              "then 'keyfill train gan CLIPS -o MODEL --stage generator --path-model MODEL-path'")
 
 
 def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> dict:
@@ -280,7 +283,7 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
         key_frames: the keys, for the default count.
         seed: the draw from the bank (``numpy.random.default_rng(seed)``).
     """
-    from keyfill.learn.corpus import bone_difference, fold_root
+    from keyfill.learn.corpus import model_hierarchy
     from keyfill.learn.representative import pick_frames, root_free_poses, rotation_change
 
     cfg = model.config
@@ -292,16 +295,8 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
         raise UsageError(f"--dna-count must be at least 1, got {count}")
     if source is None:
         return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
-    q, p = source.rotations, source.positions
-    skel = source.skeleton
-    if model.folded:
-        if len(skel.children(0)) != 1:
-            raise ModelError(f"the DNA motion does not have the model's skeleton: {skel.names[0]!r} has "
-                             f"{len(skel.children(0))} children")
-        q, p = fold_root(q, p, skel.parents)
-    diff = bone_difference(model.skeleton, skel.replace(offsets=np.vstack([np.zeros(3), p[0, 1:]])))
-    if diff is not None:
-        raise ModelError(f"the DNA motion has another skeleton than the gan model: {diff}")
+    q, _ = model_hierarchy(model.skeleton, model.folded, source.skeleton, source.rotations, source.positions,
+                           what="the DNA motion")
     if frames is None:
         frames = pick_frames(rotation_change(q), int(count))
     frames = np.asarray(frames, dtype=np.int64)
@@ -344,7 +339,7 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     key frames; ``dna`` the ``(P, J - 1, 3)`` poses of :func:`dna_poses` (a DNA model without
     them draws from its bank by ``seed``). Returns ``(motion, info)``; keys are not yet exact.
     """
-    from keyfill.learn.corpus import bone_difference, fold_root
+    from keyfill.learn.corpus import model_hierarchy
     from keyfill.learn.gan.poses import relative_positions
     from keyfill.motion import Keys
 
@@ -362,25 +357,16 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     if model.config.dna and dna is None:
         dna = dna_poses(model, key_frames=k, seed=seed)
     lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
-    q, p = lin_q, lin_p
     skel = motion.skeleton
-    if model.folded:
-        if len(skel.children(0)) != 1:
-            raise ModelError(f"the model folds a static top joint into the hips, but {skel.names[0]!r} has "
-                             f"{len(skel.children(0))} children")
-        q, p = fold_root(q, p, skel.parents)
-        if coords is not None:  # the folded top joint is the hips: it is keyed where either of them is
-            c = skel.children(0)[0]
-            coords = coords.copy()
-            coords[:, 0] |= coords[:, c]
-            coords[:, c] = coords[:, 0]
+    q, p = model_hierarchy(model.skeleton, model.folded, skel, lin_q, lin_p, int(k[0]), hint=TRAIN_HINT)
+    if model.folded and coords is not None:  # the folded top joint is the hips: keyed where either of them is
+        c = skel.children(0)[0]
+        coords = coords.copy()
+        coords[:, 0] |= coords[:, c]
+        coords[:, c] = coords[:, 0]
     if coords is not None and not coords[:, 0].any():
         raise UsageError("partial keys must give the root's position at one key at least (the path has no "
                          "anchor otherwise)")
-    here = skel.replace(offsets=np.vstack([np.zeros(3), p[k[0], 1:]]))
-    diff = bone_difference(model.skeleton, here)
-    if diff is not None:
-        raise ModelError(f"the gan model serves another skeleton: {diff}")
     m = model.skeleton.meters_per_unit
     poses = relative_positions(q[k], model.skeleton.offsets * m, model.skeleton.parents)
     poses[:, 0] = p[k, 0] * m
@@ -442,7 +428,9 @@ def complete(motion, keys, options):
 
     if options.model is None:
         raise UsageError("the gan method needs --model FOLDER (train one with 'keyfill train gan')")
-    model = load_model(options.model, options.device)
+    from keyfill.learn.modelfile import load_cached
+
+    model = load_cached(load, options.model, options.device)
     dna = None
     if options.dna is not None or options.dna_count is not None:
         source, frames = (None, None)

@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from timing import cpu_name
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS_TAR = ROOT.parent / "shared" / "data" / "corpora" / "bandai_namco_motiondataset1.tar.xz"
@@ -138,15 +139,7 @@ def median_time(fn, repeat: int) -> tuple[float, object]:
 
 
 def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{os.cpu_count()}-core {platform.machine()} ({cpu}), Python {platform.python_version()}, numpy {np.__version__}"
+    return f"{os.cpu_count()}-core {platform.machine()} ({cpu_name()}), Python {platform.python_version()}, numpy {np.__version__}"
 
 
 def load_average() -> str:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import platform
 import statistics
 import time
+from pathlib import Path
 
 
 def timed_ms(fn, repeat: int, warmup: int = 5) -> dict:
@@ -16,3 +18,14 @@ def timed_ms(fn, repeat: int, warmup: int = 5) -> dict:
         fn()
         times.append(time.perf_counter() - t)
     return {"median": 1e3 * statistics.median(times), "best": 1e3 * min(times)}
+
+
+def cpu_name() -> str:
+    """The processor's model name (from ``/proc/cpuinfo`` where there is one), e.g. ``AMD EPYC 7B13``."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()

@@ -189,3 +189,34 @@ def test_presets_build_and_count():
     small = Generator(22, _tiny_rcfk(22), cpu.widths["encoder"], cpu.widths["decoder"], cpu.noise_dim)
     assert 0 < count_weights(small) < 5_000_000
     assert GanConfig.from_json(cpu.to_json()) == cpu
+
+
+def test_path_errors_are_table_2_displacement_errors():
+    """``path_errors`` on a hand-made pool: a predictor of zero velocity errs by the true displacement,
+    a predictor of the true velocities by nothing."""
+    from keyfill.learn.gan.poses import ClipPool
+    from keyfill.learn.gan.quality import path_errors
+
+    class Fixed(torch.nn.Module):
+        """Returns the velocities it was given, whatever the joints (B, 3, T)."""
+
+        def __init__(self, velocities):
+            super().__init__()
+            self.anchor = torch.nn.Parameter(torch.zeros(1))
+            self.v = velocities
+
+        def forward(self, x):
+            return torch.as_tensor(self.v[None], dtype=x.dtype)
+
+    t = np.arange(5, dtype=np.float64)
+    root = np.stack([0.01 * t**2, np.zeros(5), 0.02 * t], axis=1)  # metres: a curve, steps growing in x
+    pool = ClipPool((np.zeros((5, 3, 3), np.float32),), (root,), 30.0, "Y")
+    zero = type("M", (), {"path": Fixed(np.zeros((3, 5)))})()
+    got = path_errors(zero, pool, horizons=(1, 2, 4, 5))
+    hand_1 = np.mean([np.hypot(0.01 * (2 * i + 1), 0.02) for i in range(4)])  # |root[t+1] - root[t]|
+    hand_2 = np.mean([np.hypot(0.01 * (4 * i + 4), 0.04) for i in range(3)])
+    hand_4 = np.hypot(0.16, 0.08)
+    assert got[1] == pytest.approx(100 * hand_1) and got[2] == pytest.approx(100 * hand_2)
+    assert got[4] == pytest.approx(100 * hand_4) and got[5] is None  # no pair 5 frames apart in 5 frames
+    exact = np.concatenate([np.diff(root, axis=0), np.zeros((1, 3))]).T  # entry t = root[t + 1] - root[t]
+    assert path_errors(type("M", (), {"path": Fixed(exact)})(), pool, horizons=(1, 4))[4] == pytest.approx(0, abs=1e-5)

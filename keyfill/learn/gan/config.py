@@ -92,8 +92,8 @@ class GanConfig:
             (Appendix A: 10 to 80 every 1000).
         grad_clip: gradient norm clipping per optimiser (0: none, as in the paper).
         path_epochs, generator_epochs: default epochs of ``steps_per_epoch`` steps per stage
-            (10 and 40: 2,000 and 8,000 steps, about 10 minutes and 2-3 hours of the
-            ``"cpu"`` widths on one core of this project's 2-core machine).
+            (40 and 40: 8,000 steps each; with the ``"cpu"`` widths on this project's 2-core
+            machine, about 8 minutes on two threads and 1-1.5 hours on one; see docs/gan.md).
         val_fraction: share of the clips held out for validation (by a seeded draw).
         val_sequences: held-out sequences scored after each generator epoch.
         seed: the seed of the clip split and of every batch (epoch ``e`` draws from
@@ -131,7 +131,7 @@ class GanConfig:
     root_weight_end: float = 80.0
     root_weight_every: int = 1000
     grad_clip: float = 0.0
-    path_epochs: int = 10
+    path_epochs: int = 40
     generator_epochs: int = 40
     val_fraction: float = 0.05
     val_sequences: int = 8

@@ -1,0 +1,173 @@
+"""Quality of a trained gan model on held-out Bandai-Namco dataset-2 clips (issue 12: docs/benchmarks.md, docs/gan.md).
+
+The model of the tables, with the ``normal`` style held out (both stages,
+``make gan-model`` runs them)::
+
+    .venv/bin/python benchmarks/bench_gan_quality.py data/models/bandai2-gan --json
+
+Three parts, all on the ``normal`` clips the model never saw:
+
+1. **Global path predictor** (Table 2): the mean 3-D error of the predicted
+   root displacement over 1, 64 and 128 frames
+   (:func:`keyfill.learn.gan.quality.path_errors`). The paper's figures are
+   at 60 fps; 64 frames here last as long as its 128.
+2. **Keyframe alignment before post-processing** (Table 4) on ``--sequences``
+   key layouts of ``--frames`` frames sampled as in training (Appendix C: keys
+   up to the model's ``max_gap`` apart, long gaps jump between clips): the mean
+   joint and root error at the keys, in cm, of the networks' output
+   (:func:`keyfill.learn.gan.quality.quality_report`, which also gives the
+   Motion DNA errors and the variety).
+3. **Realism** of what ``keyfill complete`` writes, per method, on every held-out
+   clip long enough for two gaps: keys every ``G`` frames (``--gaps``) and on
+   the last frame, filled by linear, cubic, the gan (seed 0) and, with
+   ``--transformer MODEL``, the transformer (gaps up to 63 frames), beside the
+   real clip: foot skating (cm/s, :mod:`keyfill.learn.realism`, the real
+   clip's lowest foot heights as the floor), jitter (m/s^3), the share of driven
+   joint rotations outside the model's RC-FK ranges (%), and the largest
+   bone-length error (cm: every method writes rotations over constant offsets,
+   so this checks that nothing else moved).
+
+Without the corpus the script says ``skipped`` and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from keyfill import io
+from keyfill.errors import DataError
+from keyfill.learn.completion import CompleteOptions
+from keyfill.learn.corpus import bvh_files, load_corpus, locate
+from keyfill.learn.gan.model import load_model
+from keyfill.learn.gan.poses import clip_pool
+from keyfill.learn.gan.quality import path_errors, quality_report
+from keyfill.learn.gan.ranges import inside
+from keyfill.learn.realism import foot_joints, foot_skating, jitter
+from keyfill.learn.registry import complete
+from keyfill.learn.train_transformer import select_clips
+from keyfill.motion import Keys
+
+
+def bone_error_cm(motion, reference) -> float:
+    """Largest difference (cm) between the bone lengths of ``motion`` on any frame and of ``reference``'s frame 0."""
+    par = motion.skeleton.parents
+    child = np.arange(1, motion.num_joints)
+
+    def lengths(world):
+        return np.linalg.norm(world[:, child] - world[:, par[child]], axis=-1)
+
+    ref = lengths(reference.world_positions()[:1])
+    return float(np.abs(lengths(motion.world_positions()) - ref).max() * motion.skeleton.meters_per_unit * 100)
+
+
+def realism_table(model, model_path: str, files: list[Path], gaps, transformer: str | None) -> dict:
+    """``{gap: {method: {...}}}`` of part 3 (see the module docstring); ``model`` is loaded from ``model_path``."""
+    methods = {"linear": CompleteOptions(), "cubic": CompleteOptions(),
+               "gan": CompleteOptions(model=model_path, seed=0)}
+    if transformer:
+        methods["transformer"] = CompleteOptions(model=transformer)
+    clips = [io.load(f) for f in files]
+    out = {}
+    for gap in gaps:
+        rows: dict = {m: {"world": [], "rot": [], "bone": []} for m in ["real", *methods]}
+        for motion in clips:
+            T = motion.num_frames
+            if T < 2 * gap + 1:
+                continue
+            frames = np.unique(np.r_[np.arange(0, T, gap), T - 1])
+            keys = Keys(frames)
+            rows["real"]["world"].append(motion.world_positions())
+            rows["real"]["rot"].append(motion.rotations)
+            rows["real"]["bone"].append(0.0)
+            for name, options in methods.items():
+                if name == "transformer" and gap > 63:
+                    continue
+                filled = complete(motion, keys, name, options).motion
+                rows[name]["world"].append(filled.world_positions())
+                rows[name]["rot"].append(filled.rotations)
+                rows[name]["bone"].append(bone_error_cm(filled, motion))
+        sk = clips[0].skeleton
+        feet = foot_joints(sk)
+        fps = clips[0].fps
+        real = rows["real"]["world"]
+        table = {}
+        for name, r in rows.items():
+            if not r["world"]:
+                continue
+            skating = [foot_skating(w[None], feet, sk.up_axis, fps, sk.meters_per_unit, reference=g[None])
+                       for w, g in zip(r["world"], real)]
+            rot = np.concatenate(r["rot"])
+            if model.folded:  # the model's ranges are of the folded hierarchy: the hips carry joint 0's turn
+                from keyfill.learn.corpus import fold_root
+
+                rot, _ = fold_root(rot, np.zeros(rot.shape[:-1] + (3,)), sk.parents)
+            table[name] = {
+                "clips": len(r["world"]),
+                "foot_skating_cm_s": float(np.nanmean(skating)),
+                "jitter_m_s3": float(np.mean([jitter(w[None], fps, sk.meters_per_unit) for w in r["world"]])),
+                "range_violations_pct": float(100.0 * (~inside(model.ranges, rot)).mean()),
+                "bone_error_cm": float(max(r["bone"])),
+            }
+        out[gap] = table
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", help="a full gan model folder")
+    ap.add_argument("--data", default=None, help="BVH folder (default: Bandai-Namco dataset-2)")
+    ap.add_argument("--test-pattern", default="*_normal_*", help="held-out clips (file-name pattern)")
+    ap.add_argument("--sequences", type=int, default=50, help="key layouts of part 2")
+    ap.add_argument("--frames", type=int, default=2048, help="frames per key layout of part 2")
+    ap.add_argument("--gaps", default="30,60", help="key spacings of part 3, frames")
+    ap.add_argument("--clips", type=int, default=None, help="score only the first N held-out clips in part 3")
+    ap.add_argument("--transformer", default=None, help="a transformer model folder for part 3")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        data = args.data or str(locate("bandai2"))
+    except DataError as e:
+        print(f"skipped: {e}")
+        return 0
+    print(f"load average before: {os.getloadavg()[0]:.2f}", file=sys.stderr)
+    started = time.perf_counter()
+    model = load_model(args.model)
+    corpus = select_clips(load_corpus([data], fold=model.folded), include=(args.test_pattern,))
+    report = {"path_cm": path_errors(model, clip_pool(corpus))}
+    report["sampled"] = quality_report(model, corpus, range(len(corpus)), args.sequences, args.frames, args.seed)
+    files = bvh_files([data], args.test_pattern)[: args.clips]
+    report["realism"] = realism_table(model, args.model, files, [int(g) for g in args.gaps.split(",")], args.transformer)
+    report["seconds"] = round(time.perf_counter() - started, 1)
+    print(f"load average after: {os.getloadavg()[0]:.2f}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+
+    def cm(v):
+        return "-" if v is None else f"{v:.2f}"
+
+    p = report["path_cm"]
+    print(f"path predictor error (cm): per frame {cm(p[1])} (paper 0.7 at 60 fps), after 64 frames {cm(p[64])}, "
+          f"after 128 frames {cm(p[128])} (paper 5.5 at 60 fps)")
+    s = report["sampled"]
+    full = s["key_errors"]["full"]
+    print(f"{s['sequences']} sequences of {s['frames']} frames: key errors before post-processing "
+          f"joints {cm(full['joints_cm'])} cm (paper 3.5), root {cm(full['root_cm'])} cm (paper 10.0)")
+    for gap, table in report["realism"].items():
+        print(f"keys every {gap} frames:  clips  skating cm/s  jitter m/s^3  out of range %  bone error cm")
+        for name, r in table.items():
+            print(f"  {name:<12} {r['clips']:>5} {r['foot_skating_cm_s']:>13.2f} {r['jitter_m_s3']:>13.2f} "
+                  f"{r['range_violations_pct']:>15.3f} {r['bone_error_cm']:>14.2e}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -3,12 +3,8 @@
 The table of docs/benchmarks.md (gan: Motion DNA and partial keys), from a model
 trained with ``--dna --partial-keys`` and the ``normal`` style held out::
 
-    .venv/bin/keyfill train gan data/bandai2/bandai_namco_motiondataset2/data --exclude '*_normal_*' \\
-        -o data/models/bandai2-gan-path --stage path --seed 0
-    .venv/bin/keyfill train gan data/bandai2/bandai_namco_motiondataset2/data --exclude '*_normal_*' \\
-        -o data/models/bandai2-gan-dna --stage generator --path-model data/models/bandai2-gan-path \\
-        --dna --partial-keys --seed 0
-    .venv/bin/python benchmarks/bench_gan_dna.py data/models/bandai2-gan-dna --sequences 50
+    make -j2 gan-models            # data/models/bandai2-gan-partial among them (see the Makefile)
+    .venv/bin/python benchmarks/bench_gan_dna.py data/models/bandai2-gan-partial --sequences 50
 
 On the ``normal`` clips (:func:`keyfill.learn.gan.quality.quality_report`):
 the DNA errors of Eqs. 11-12 in cm (the paper: 8.4 and 6.5 cm), keyframe

@@ -61,7 +61,7 @@ def main(argv=None) -> int:
             motion = source.frames(np.arange(n) % source.num_frames)
             keys = Keys(np.unique(np.r_[np.arange(0, n, args.gap), n - 1]))
 
-            def run():
+            def run(model=model, motion=motion, keys=keys):
                 filled, _ = complete_motion(model, motion, keys, seed=0)
                 snap_to_keys(filled, motion, keys)
 

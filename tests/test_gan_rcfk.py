@@ -16,8 +16,10 @@ from keyfill.learn.gan.ranges import (
     driven_joints,
     estimate_ranges,
     inside,
+    range_angles,
+    snap_in_range,
 )
-from keyfill.learn.gan.rcfk import RCFK, range_map, rotation_6d_to_matrix
+from keyfill.learn.gan.rcfk import RCFK, binomial_lowpass, range_map, rotation_6d_to_matrix
 from keyfill.motion import Skeleton
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -144,3 +146,43 @@ def test_estimated_ranges_hold_the_corpus_poses():
     assert inside(ranges, q).mean() > 0.99
     again = JointRanges.from_json(ranges.to_json())
     assert again.orders == ranges.orders and np.array_equal(again.lo, ranges.lo)
+
+
+def test_binomial_lowpass_removes_period_two_and_keeps_constants():
+    t = torch.arange(40, dtype=torch.float64)
+    x = torch.stack([torch.full_like(t, 3.0), (-1.0) ** t, t]).reshape(1, 3, 40)
+    y = binomial_lowpass(x, 4, dim=2)[0]
+    assert torch.allclose(y[0], torch.full_like(t, 3.0))
+    assert y[1, 2:-2].abs().max() < 1e-12  # [1, 4, 6, 4, 1] / 16 has zero gain at period 2
+    assert torch.allclose(y[2, 2:-2], t[2:-2])  # symmetric weights keep a straight line
+    assert binomial_lowpass(x, 0, dim=2) is x
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_smoothed_outputs_stay_in_their_ranges(seed):
+    sk = arm_skeleton()
+    ranges = random_ranges(sk, np.random.default_rng(seed))
+    layer = RCFK(sk.parents, sk.offsets, ranges)
+    v = torch.randn(2, layer.channels, 60, generator=torch.Generator().manual_seed(seed)) * 10
+    q, _ = layer(v, smoothing=4)
+    assert inside(ranges, q.double().numpy()).all()
+    raw = layer.angles(v)
+    smooth = range_angles(ranges, q.double().numpy())
+    assert np.abs(np.diff(smooth, 2, axis=1)).mean() < np.abs(np.diff(raw.double().numpy(), 2, axis=1)).mean()
+
+
+def test_snap_in_range_hits_keys_and_keeps_the_ranges_between_them():
+    rng = np.random.default_rng(5)
+    sk = arm_skeleton()
+    ranges = random_ranges(sk, rng)
+    layer = RCFK(sk.parents, sk.offsets, ranges)
+    v = torch.randn(1, layer.channels, 61, generator=torch.Generator().manual_seed(5)) * 3
+    gen = layer(v)[0][0].double().numpy()
+    keys = np.array([0, 20, 60])
+    key_q, _ = layer(torch.randn(1, layer.channels, 3, generator=torch.Generator().manual_seed(6)) * 3)
+    key_q = key_q[0].double().numpy()
+    out = snap_in_range(ranges, gen, keys, key_q)
+    d = ranges.driven
+    assert np.allclose(np.abs((out[keys][:, d] * key_q[:, d]).sum(-1)), 1, atol=1e-9)  # the keys' rotations
+    assert inside(ranges, out).all()
+    assert np.array_equal(out[:, 0], gen[:, 0])  # the root (6D, no range) is left to the shared correction

@@ -79,6 +79,12 @@ class GanConfig:
         jump_speed: for a gap that jumps to another clip, the root moves at most this
             fast (m/s) between the two keys; distance grows with the gap.
         max_frames: the longest key range ``complete`` fills.
+        output_smoothing: inference only: the order of the binomial low-pass applied to the
+            generator's range-mapped joint angles and root 6D values along time before forward
+            kinematics (:func:`keyfill.learn.gan.rcfk.binomial_lowpass`; 0: none). The
+            transposed convolutions of an undertrained generator leave period-2 and period-4
+            ripples (docs/gan.md, Quality); order 4 removes the first and damps the second,
+            and the angles stay inside their ranges. Training never smooths.
         batch_size: generator sequences per step (the paper: 4).
         real_frames: frames of each sequence the discriminator judges (a multiple of 64);
             real ones are crops of corpus clips, fake ones crops of generated sequences.
@@ -116,6 +122,7 @@ class GanConfig:
     short_gap_seconds: float = 3.0
     jump_speed: float = 1.5
     max_frames: int = 8192
+    output_smoothing: int = 4
     batch_size: int = 4
     real_frames: int = 128
     crops_per_sequence: int = 4
@@ -144,6 +151,8 @@ class GanConfig:
                 raise UsageError(f"GAN widths[{name!r}] must be {n} positive integers, got {w!r}")
         if set(self.widths) != set(_LAYERS):
             raise UsageError(f"GAN widths name {sorted(self.widths)}; expected {sorted(_LAYERS)}")
+        if self.output_smoothing < 0 or self.output_smoothing % 2:
+            raise UsageError(f"output_smoothing must be 0 or a positive even order, got {self.output_smoothing}")
         if self.sequence_frames % 64 or self.real_frames % 64 or self.real_frames < 64:
             raise UsageError("sequence_frames and real_frames must be positive multiples of 64")
         if not 1 <= self.min_gap <= self.max_gap:

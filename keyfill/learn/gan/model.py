@@ -50,7 +50,7 @@ from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
-from keyfill.learn.gan.ranges import JointRanges
+from keyfill.learn.gan.ranges import JointRanges, snap_in_range
 from keyfill.motion import Skeleton
 
 STAGES = ("path", "full")
@@ -257,7 +257,7 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         d = (d[None] if d.ndim == 3 else d).expand(B, -1, -1, -1)
     with torch.inference_mode():
         v = model.generator(x, noise, w, dna=d)
-        quats, rel = model.generator.rcfk(v)
+        quats, rel = model.generator.rcfk(v, cfg.output_smoothing)
         root = root_path(model.path(joint_channels(rel)))[:, :T].double().cpu().numpy()
     q = quats[:, :T].double().cpu().numpy()
     kr = poses[:, :, 0]
@@ -373,6 +373,8 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     poses, shift = centre_keys(poses, model.skeleton.up_axis, coords)
     k0 = int(k[0])
     gq, groot = generate(model, k - k0, poses, seed, dna=dna, coords=coords)
+    if coords is None:  # whole keys: exact in the ranges' angles, so the ranges hold between keys
+        gq = snap_in_range(model.ranges, gq, k - k0, q[k])
     span = slice(k0, int(k[-1]) + 1)
     out_q = q.copy()
     driven = np.concatenate([[0], model.ranges.driven])
@@ -425,11 +427,10 @@ def complete(motion, keys, options):
     from keyfill import io
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
+    from keyfill.learn.modelfile import load_cached
 
     if options.model is None:
         raise UsageError("the gan method needs --model FOLDER (train one with 'keyfill train gan')")
-    from keyfill.learn.modelfile import load_cached
-
     model = load_cached(load, options.model, options.device)
     dna = None
     if options.dna is not None or options.dna_count is not None:
@@ -487,7 +488,7 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
                             np.nan_to_num(np.asarray(root[b], dtype=np.float64)))
         rot, pos = _interpolated(src, k, undriven)
         driven = np.concatenate([[0], model.ranges.driven])
-        rot[k0 : end + 1, driven] = gq[b][:, driven]
+        rot[k0 : end + 1, driven] = snap_in_range(model.ranges, gq[b], k - k0, rot[k])[:, driven]
         pos[k0 : end + 1, 0] = (groot[b] + shifts[b]) / m
         rot[:k0], rot[end + 1 :] = rot[k0], rot[end]
         pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]

@@ -145,18 +145,47 @@ def estimate_ranges(skeleton: Skeleton, quats: np.ndarray) -> JointRanges:
     return JointRanges(driven, tuple(orders), np.array(lo).reshape(-1, 3), np.array(hi).reshape(-1, 3))
 
 
-def inside(ranges: JointRanges, quats: np.ndarray) -> np.ndarray:
-    """``(..., D)`` bool: whether each driven joint's rotation in ``quats (..., J, 4)`` lies in its ranges.
-
-    The Euler decomposition is taken with the middle angle in [-90, 90] degrees
-    and the outer angles wrapped to the nearest turn of the range's centre.
-    """
+def range_angles(ranges: JointRanges, quats: np.ndarray) -> np.ndarray:
+    """``(..., D, 3)`` radians: the driven joints' rotations in ``quats (..., J, 4)`` as Euler angles in their
+    orders, the middle angle in [-90, 90] degrees and the outer ones wrapped to the nearest turn of their
+    range's centre (so an angle inside its range is the value RC-FK would give)."""
     out = []
     for d, j in enumerate(ranges.driven):
         ang = R.quat_to_euler(quats[..., j, :], ranges.orders[d])
         c = 0.5 * (ranges.lo[d] + ranges.hi[d])
-        ang = np.concatenate([c[[0]] + _wrap(ang[..., :1] - c[0]), ang[..., 1:2], c[[2]] + _wrap(ang[..., 2:] - c[2])],
-                             axis=-1)
-        tol = 1e-6
-        out.append(np.all((ang >= ranges.lo[d] - tol) & (ang <= ranges.hi[d] + tol), axis=-1))
-    return np.stack(out, axis=-1)
+        out.append(np.concatenate([c[[0]] + _wrap(ang[..., :1] - c[0]), ang[..., 1:2],
+                                   c[[2]] + _wrap(ang[..., 2:] - c[2])], axis=-1))
+    return np.stack(out, axis=-2)
+
+
+def inside(ranges: JointRanges, quats: np.ndarray, tolerance: float = 1e-6) -> np.ndarray:
+    """``(..., D)`` bool: whether each driven joint's rotation in ``quats (..., J, 4)`` lies in its ranges
+    (:func:`range_angles`), to ``tolerance`` radians."""
+    ang = range_angles(ranges, quats)
+    return np.all((ang >= ranges.lo - tolerance) & (ang <= ranges.hi + tolerance), axis=-1)
+
+
+def snap_in_range(ranges: JointRanges, quats: np.ndarray, key_frames: np.ndarray, key_quats: np.ndarray) -> np.ndarray:
+    """``quats (T, J, 4)`` whose driven joints equal ``key_quats (K, J, 4)`` at ``key_frames``, inside the ranges.
+
+    The exact-key correction of :func:`keyfill.learn.exact_keys.snap_to_keys` done in the ranges' Euler
+    angles (:func:`range_angles`): each key's angle residual is spread over its neighbouring gaps with
+    smoothstep weights, the result clipped to the ranges between keys, and the key frames set to the
+    keys' angles. Generated angles inside their ranges stay inside (only a key that is itself outside
+    its range is outside, at that key). Frames outside the key range get the first or last key's residual.
+    Returns new quaternions; joints not driven are unchanged.
+    """
+    from keyfill.learn.baselines import segment_coordinates
+
+    k = np.asarray(key_frames, dtype=np.int64)
+    ang = range_angles(ranges, quats)  # (T, D, 3)
+    key_ang = range_angles(ranges, key_quats)  # (K, D, 3)
+    res = key_ang - ang[k]
+    s, u = segment_coordinates(len(quats), k)
+    w = (3 * u**2 - 2 * u**3)[:, None, None]
+    fixed = np.clip(ang + (1 - w) * res[s] + w * res[s + 1], ranges.lo, ranges.hi)
+    fixed[k] = key_ang
+    out = np.array(quats, dtype=np.float64, copy=True)
+    for d, j in enumerate(ranges.driven):
+        out[:, j] = R.euler_to_quat(fixed[:, d], ranges.orders[d])
+    return out

@@ -137,8 +137,9 @@ class GanTask(TrainingTask):
     # --- the contract ---
 
     def config(self) -> dict:
-        """Settings a ``--resume`` must match (all but the epoch counts)."""
-        gan = {k: v for k, v in self.cfg.to_json().items() if k not in ("path_epochs", "generator_epochs")}
+        """Settings a ``--resume`` must match (all but the epoch counts and the inference-only smoothing)."""
+        skip = ("path_epochs", "generator_epochs", "output_smoothing")
+        gan = {k: v for k, v in self.cfg.to_json().items() if k not in skip}
         return {"stage": self.stage, "gan": gan, "path_model": self.path_hash}
 
     def fingerprint(self) -> str:

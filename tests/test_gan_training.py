@@ -114,7 +114,7 @@ def test_batches_are_seeded_sharded_and_stateful(corpus, path_model):
     other.load_state_dict(json.loads(json.dumps(task.state_dict())))
     assert other.step_count == 2345
     assert task.cfg.root_weight(0) == 10 and task.cfg.root_weight(2345) == 12 and task.cfg.root_weight(10**6) == 80
-    assert task.steps(0) == 4 and task.epochs == 40 and GanTask(corpus, tiny_config(), "path").epochs == 10
+    assert task.steps(0) == 4 and task.epochs == 40 and GanTask(corpus, tiny_config(), "path").epochs == 40
 
 
 def test_config_and_fingerprint(corpus, path_model, tmp_path):

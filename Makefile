@@ -24,7 +24,10 @@ demo: $(STAMP)
 	$(BIN)/keyfill complete examples/lamp/keys.usda -o $(OUT)/lamp_arnn.usda --method arnn
 	$(BIN)/keyfill complete examples/lamp/keys.usda -o $(OUT)/lamp_cubic.usda --method cubic
 	$(BIN)/keyfill plot examples/lamp/truth.usda $(OUT)/lamp_cubic.usda $(OUT)/lamp_arnn.usda --labels truth,cubic,arnn -o $(OUT)/lamp_arnn.png
-	@echo "demo: completed examples/mixamo_keys.usda (cubic) and examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png)"
+	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_gan.usda --method gan --seed 1
+	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_cubic.usda --method cubic
+	$(BIN)/keyfill preview $(OUT)/human_cubic.usda $(OUT)/human_gan.usda --labels cubic,gan --view side -o $(OUT)/human.png
+	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn) and examples/human/keys.usda (the shipped human gan model, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_cubic.usda, human.png)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -154,7 +154,7 @@ def test_stage_errors(corpus, tmp_path):
 def test_registry_entry():
     m = registry.get("gan")
     assert m.learned and m.protocol == "lafan1" and m.training_spec().make_task is not None
-    assert m.default_model() is None
+    assert m.default_model().name == "bandai2-gan"  # shipped; bandai2-gan-partial serves partial keys
     assert [o.name for o in m.training_spec().options][:2] == ["stage", "path_model"]
 
 

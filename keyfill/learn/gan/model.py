@@ -41,6 +41,7 @@ from __future__ import annotations
 import itertools
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -54,8 +55,12 @@ from keyfill.learn.gan.ranges import JointRanges, snap_in_range
 from keyfill.motion import Skeleton
 
 STAGES = ("path", "full")
-#: no gan model ships with keyfill (train one: keyfill train gan)
-DEFAULT_MODEL = None
+_SHIPPED = Path(__file__).resolve().parents[1] / "models"
+#: the gan model shipped with keyfill: Bandai-Namco dataset-2's skeleton, Motion DNA, whole keys
+#: (its MODEL_CARD.md and LICENSE: CC BY-NC 4.0, as the data it learned from)
+DEFAULT_MODEL = _SHIPPED / "bandai2-gan"
+#: the shipped model ``complete`` uses for partial keys (also trained with ``--partial-keys``)
+PARTIAL_MODEL = _SHIPPED / "bandai2-gan-partial"
 #: ends the error for a motion of another skeleton
 TRAIN_HINT = ("; train a gan model on your own clips with 'keyfill train gan CLIPS -o MODEL-path --stage path' "
               "then 'keyfill train gan CLIPS -o MODEL --stage generator --path-model MODEL-path'")
@@ -429,9 +434,8 @@ def complete(motion, keys, options):
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.modelfile import load_cached
 
-    if options.model is None:
-        raise UsageError("the gan method needs --model FOLDER (train one with 'keyfill train gan')")
-    model = load_cached(load, options.model, options.device)
+    path = options.model or (PARTIAL_MODEL if keys.partial else DEFAULT_MODEL)
+    model = load_cached(load, path, options.device)
     dna = None
     if options.dna is not None or options.dna_count is not None:
         source, frames = (None, None)
@@ -440,7 +444,7 @@ def complete(motion, keys, options):
             source = io.load(path)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)
     filled, info = complete_motion(model, motion, keys, options.seed, dna)
-    info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
+    info = {"model": str(options.model or path.name), **info, "exact_keys": bool(options.exact_keys)}
     if options.dna is not None:
         info["dna"] = options.dna
     if options.exact_keys:

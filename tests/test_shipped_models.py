@@ -1,0 +1,69 @@
+"""The human models that ship inside the package: they work with no training, and they carry their licence.
+
+``keyfill complete --method gan`` without ``--model`` uses ``keyfill/learn/models/bandai2-gan``
+(``bandai2-gan-partial`` for partial keys) on the Bandai-Namco skeleton of
+``examples/human/keys.usda``; on another skeleton it says which skeleton the
+model serves, the first joint that differs and how to train a model instead.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import DATA
+
+from keyfill import io
+from keyfill.cli.main import main
+from keyfill.learn.gan.model import DEFAULT_MODEL, PARTIAL_MODEL
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "human" / "keys.usda"
+SHIPPED = (DEFAULT_MODEL, PARTIAL_MODEL)
+
+
+@pytest.mark.parametrize("folder", SHIPPED, ids=lambda p: p.name)
+def test_shipped_folder_has_weights_licence_and_card_within_25_mb(folder):
+    files = {p.name: p for p in folder.iterdir()}
+    assert {"config.json", "weights.safetensors", "LICENSE", "MODEL_CARD.md"} <= set(files)
+    assert sum(p.stat().st_size for p in files.values()) <= 25 * 1024 * 1024
+    assert "Attribution-NonCommercial 4.0 International" in files["LICENSE"].read_text()
+    card = files["MODEL_CARD.md"].read_text()
+    assert "CC BY-NC 4.0" in card and "Bandai Namco Research" in card and "keyfill train gan" in card
+
+
+@pytest.mark.parametrize("suffix", [".bvh", ".usda"])
+def test_complete_human_keys_with_no_model_option(tmp_path, capsys, suffix):
+    out = tmp_path / f"walk{suffix}"
+    assert main(["-q", "complete", str(EXAMPLE), "-o", str(out), "--method", "gan", "--seed", "3"]) == 0
+    keys, filled = io.load(EXAMPLE), io.load(out)
+    k = keys.keys.frames
+    assert filled.num_frames == keys.num_frames
+    same = np.abs((filled.rotations[k] * keys.rotations[k]).sum(-1))  # q and -q are one rotation
+    np.testing.assert_allclose(same, 1.0, atol=1e-9)
+    np.testing.assert_allclose(filled.positions[k], keys.positions[k], atol=1e-4)  # cm; USD keeps 32-bit floats
+    between = np.setdiff1d(np.arange(keys.num_frames), k)
+    assert np.abs(np.diff(filled.positions[between, 1], axis=0)).max() < 50.0  # cm per frame: no jumps
+
+
+def test_partial_keys_use_the_shipped_partial_key_model(tmp_path, capsys):
+    out = tmp_path / "path.bvh"
+    assert main(["complete", str(EXAMPLE), "-o", str(out), "--method", "gan", "--key-joints", "Hips",
+                 "--key-positions", "--json"]) == 0
+    assert PARTIAL_MODEL.name in capsys.readouterr().out
+    keys, filled = io.load(EXAMPLE), io.load(out)
+    k = keys.keys.frames
+    np.testing.assert_allclose(filled.positions[k, 1], keys.positions[k, 1], atol=1e-6)  # the keyed hips
+
+
+def test_another_skeleton_names_the_model_skeleton_and_the_training_command(tmp_path, capsys):
+    out = tmp_path / "cmu.bvh"
+    code = main(["complete", str(DATA / "cmu_02_03_cgspeed_first4frames.bvh"), "-o", str(out), "--keys", "0,3",
+                 "--method", "gan"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and not out.exists() and len(err.splitlines()) == 1
+    assert err.startswith("keyfill: error: the motion has another skeleton than the model (22 joints, top joint "
+                          "'joint_Root'): 22 joints vs 31; the first that differs is joint 0, 'joint_Root' vs ")
+    assert "keyfill train gan CLIPS -o MODEL-path --stage path" in err

@@ -10,10 +10,14 @@ The key file is sparse USD (samples at the keys only); the clips are CC BY-NC
 
 Writes to ``--out`` (docs/img):
 
-* ``gan_long_strip.png``: a filmstrip of the whole completion, seeds 1 and 2
-  overlaid (``keyfill preview --view top``: the journey seen from above);
-* ``gan_long.gif``: the same as an animation (every ``--gif-step``-th frame);
-* ``gan_dna.png`` (like the paper's Fig. 12): the same keys completed with the
+* ``gan_long_trail.png``: the whole completion from above, seeds 1 and 2
+  overlaid: the hips' path (a dot per frame) through the 14 keys;
+* ``gan_long_strip.png``: a filmstrip of ``--window`` (frames; the camera
+  frames what it shows, so a window keeps the figures large), seeds 1 and 2
+  overlaid, side view;
+* ``gan_long.gif``: the same window as an animation (every ``--gif-step``-th
+  frame, at twice the speed);
+* ``gan_dna.png`` (like the paper's Fig. 12): the window completed with the
   Motion DNA of two other held-out clips (``--dna``), overlaid.
 
     .venv/bin/python docs/gan_figures.py --model data/models/bandai2-gan
@@ -82,7 +86,8 @@ def main() -> None:
     ap.add_argument("--transition", type=int, default=90, help="frames between one clip's last key and the next's")
     ap.add_argument("--dna", default="run_normal_002,wave-both-hands_normal_001",
                     help="two held-out clips whose Motion DNA restyles the same keys")
-    ap.add_argument("--gif-step", type=int, default=6)
+    ap.add_argument("--window", default="560:900", help="frames A:B of the filmstrips and the GIF")
+    ap.add_argument("--gif-step", type=int, default=2)
     ap.add_argument("--out", type=Path, default=HERE / "img")
     args = ap.parse_args()
     folder = locate("bandai2")
@@ -99,16 +104,20 @@ def main() -> None:
             seeds.append(tmp / f"seed{seed}.usda")
             keyfill("complete", keys, "-o", seeds[-1], "--method", "gan", "--model", args.model, "--seed", seed)
         labels = "seed 1,seed 2"
-        keyfill("preview", *seeds, "--labels", labels, "--view", "top", "-o", args.out / "gan_long_strip.png")
-        keyfill("preview", *seeds, "--labels", labels, "--view", "3d", "--step", args.gif_step,
-                "--fps", motion.fps / args.gif_step * 2, "--size", "480x300", "-o", args.out / "gan_long.gif")
+        keyfill("preview", *seeds, "--labels", labels, "--view", "top", "--trail", "Hips",
+                "-o", args.out / "gan_long_trail.png")
+        keyfill("preview", *seeds, "--labels", labels, "--view", "side", "--frames", args.window,
+                "-o", args.out / "gan_long_strip.png")
+        keyfill("preview", *seeds, "--labels", labels, "--view", "3d", "--frames", args.window, "--step",
+                args.gif_step, "--fps", motion.fps / args.gif_step * 2, "--size", "480x300",
+                "-o", args.out / "gan_long.gif")
         styled = []
         for name in args.dna.split(","):
             styled.append(tmp / f"{name}.usda")
             keyfill("complete", keys, "-o", styled[-1], "--method", "gan", "--model", args.model,
                     "--dna", folder / f"dataset-2_{name}.bvh", "--seed", 1)
         keyfill("preview", *styled, "--labels", args.dna.replace("_normal", ""), "--view", "side",
-                "-o", args.out / "gan_dna.png")
+                "--frames", args.window, "-o", args.out / "gan_dna.png")
 
 
 if __name__ == "__main__":

@@ -26,8 +26,13 @@ training tool and is not saved in the model (training checkpoints keep it).
    frames outside the key range hold the generated first or last frame, so
    the exact-key correction puts them on the nearest key.
 
-Keys are not yet exact; :func:`complete` applies the shared correction
-(:func:`keyfill.learn.exact_keys.snap_to_keys`) when asked.
+With whole keys the driven joints' rotations are then made to hit the keys inside
+their ranges (:func:`keyfill.learn.gan.ranges.snap_in_range`); the rest of the
+keys (root, undriven joints) are not yet exact: :func:`complete` applies the
+shared correction (:func:`keyfill.learn.exact_keys.snap_to_keys`) when asked.
+The generator's angles are low-passed before FK (``GanConfig.output_smoothing``).
+Without ``--model``, :data:`DEFAULT_MODEL` (whole keys) or :data:`PARTIAL_MODEL`
+(partial keys) is used: they serve the Bandai-Namco skeleton.
 
 Partial keys (:attr:`keyfill.motion.Keys.partial`) need a model trained with
 ``partial_keys``; its input is the sparse format with the coordinates the keys

@@ -1,16 +1,19 @@
-"""Files that appear whole or not at all, and a quiet stderr for chatty C libraries.
+"""Files that appear whole or not at all, a quiet stderr for chatty C libraries, and JSON settings files.
 
 :func:`atomic_output` is the one way keyfill writes an output file: motion
 files, model checkpoints, pictures, dataset records. It lives here, beside the
 core types, so that every package can use it without importing another one.
 :func:`quiet_stderr` silences what C and C++ libraries (pxr, pybullet) print
 straight to file descriptor 2, where Python's ``sys.stderr`` cannot catch it.
+:func:`read_json_object` reads a user's settings file (``--config``) with
+one-line errors.
 """
 
 from __future__ import annotations
 
 import contextlib
 import glob
+import json
 import os
 import re
 import sys
@@ -130,3 +133,19 @@ def quiet_stderr() -> Iterator[None]:
         os.dup2(saved, 2)
         os.close(saved)
 
+
+
+def read_json_object(path: str | os.PathLike) -> dict:
+    """The JSON object in the settings file ``path``; a :class:`UsageError` of one line (with the line
+    number for bad JSON) when it cannot be read, is not JSON or is not an object."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as e:
+        raise UsageError(f"{path}: cannot read the config ({e.strerror})") from None
+    except json.JSONDecodeError as e:
+        raise UsageError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
+    except UnicodeDecodeError as e:
+        raise UsageError(f"{path}: not valid JSON ({e.reason})") from None
+    if not isinstance(data, dict):
+        raise UsageError(f"{path}: the config must be a JSON object")
+    return data

@@ -30,7 +30,6 @@ from __future__ import annotations
 import dataclasses
 import fnmatch
 import glob
-import json
 import math
 import os
 from collections.abc import Callable
@@ -40,11 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
+from keyfill.files import read_json_object
 from keyfill.learn import benchmark
+from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.facing import align_windows, global_pose
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs, side_files
 from keyfill.learn.training import train as run_training
-from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.transformer import (
     KIND,
     CompletionModel,
@@ -109,12 +109,7 @@ def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfi
     """``(ModelConfig, TrainConfig)`` from a JSON file ``{"model": {...}, "training": {...}}`` (or defaults)."""
     if path is None:
         return ModelConfig(), TrainConfig()
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise UsageError(f"{path}: cannot read the config ({e.strerror})") from None
-    except json.JSONDecodeError as e:
-        raise UsageError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
+    data = read_json_object(path)
     unknown = set(data) - {"model", "training"}
     if unknown:
         raise UsageError(f"{path}: unknown section {min(unknown)!r}; sections are 'model' and 'training'")

@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
+from keyfill.files import read_json_object
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import DNA_WIDTHS, SPARSE_RECEPTIVE_FIELD, GanConfig
 from keyfill.learn.gan.dna import build_bank, pad_dna
@@ -483,16 +484,7 @@ def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int =
     The file is one object of :class:`GanConfig` fields; its ``"preset"`` (without
     ``"widths"``) picks the widths of that preset instead.
     """
-    data = {}
-    if path is not None:
-        try:
-            data = json.loads(Path(path).read_text())
-        except OSError as e:
-            raise UsageError(f"{path}: cannot read the config ({e.strerror})") from None
-        except json.JSONDecodeError as e:
-            raise UsageError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
-        if not isinstance(data, dict):
-            raise UsageError(f"{path}: the config must be a JSON object of gan settings")
+    data = {} if path is None else read_json_object(path)
     preset = data.pop("preset", preset) if "widths" not in data else data.get("preset", "custom")
     try:
         return GanConfig.from_preset(preset, **data, seed=seed) if "widths" not in data else \

@@ -58,6 +58,13 @@ def test_partial_keys_use_the_shipped_partial_key_model(tmp_path, capsys):
     np.testing.assert_allclose(filled.positions[k, 1], keys.positions[k, 1], atol=1e-6)  # the keyed hips
 
 
+def test_a_dna_file_does_not_replace_the_model_name_in_the_report(tmp_path, capsys):
+    out = tmp_path / "walk.bvh"
+    assert main(["complete", str(EXAMPLE), "-o", str(out), "--method", "gan", "--dna", f"{EXAMPLE}:0",
+                 "--json"]) == 0
+    assert f'"model": "{DEFAULT_MODEL.name}"' in capsys.readouterr().out
+
+
 def test_another_skeleton_names_the_model_skeleton_and_the_training_command(tmp_path, capsys):
     out = tmp_path / "cmu.bvh"
     code = main(["complete", str(DATA / "cmu_02_03_cgspeed_first4frames.bvh"), "-o", str(out), "--keys", "0,3",

@@ -445,8 +445,8 @@ def complete(motion, keys, options):
     if options.dna is not None or options.dna_count is not None:
         source, frames = (None, None)
         if options.dna is not None:
-            path, frames = parse_dna(options.dna)
-            source = io.load(path)
+            dna_file, frames = parse_dna(options.dna)
+            source = io.load(dna_file)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)
     filled, info = complete_motion(model, motion, keys, options.seed, dna)
     info = {"model": str(options.model or path.name), **info, "exact_keys": bool(options.exact_keys)}

@@ -10,7 +10,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop fuzz gan-models clean
+.PHONY: demo test test-slow test-interop fuzz gan-models transformer-model clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,7 @@ FUZZ_TIMEOUT ?= 20
 fuzz: $(STAMP)
 	$(BIN)/python tests/fuzzing.py --cases $(FUZZ_CASES) --jobs 2 --mem-mb $(FUZZ_MEM_MB) --timeout $(FUZZ_TIMEOUT)
 
+# The human models shipped in keyfill/learn/models (MODELS: where to train them).
 # The gan models of docs/gan.md and docs/benchmarks.md, trained on Bandai-Namco dataset-2 (unpacked from
 # ../shared/data into data/bandai2 on first use) with the `normal` style held out: the global path
 # predictor, then two generators on it, one with Motion DNA (gaps up to 600 frames) and one that also
@@ -50,26 +51,34 @@ fuzz: $(STAMP)
 # stage is not retrained. Torch thread counts are part of the recipe (results are bitwise
 # reproducible for a given count).
 BANDAI2 := data/bandai2/bandai_namco_motiondataset2/data
-GAN_MODELS := data/models
+MODELS := data/models
 GAN_TRAIN = $(BIN)/keyfill train gan $(BANDAI2) --exclude '*_normal_*' --seed 0
 resume_if = $(if $(wildcard $(1).checkpoint.pt),--resume)
 
 $(BANDAI2): | $(STAMP)
 	$(BIN)/python -c "from keyfill.learn.corpus import locate; print(locate('bandai2'))"
 
-$(GAN_MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2)
-	$(GAN_TRAIN) -o $(GAN_MODELS)/bandai2-gan-path --stage path --threads 2 $(call resume_if,$(GAN_MODELS)/bandai2-gan-path)
+$(MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2)
+	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan-path --stage path --threads 2 $(call resume_if,$(MODELS)/bandai2-gan-path)
 
-$(GAN_MODELS)/bandai2-gan/weights.safetensors: $(GAN_MODELS)/bandai2-gan-path/weights.safetensors
-	$(GAN_TRAIN) -o $(GAN_MODELS)/bandai2-gan --stage generator --path-model $(GAN_MODELS)/bandai2-gan-path \
-	    --dna --threads 1 $(call resume_if,$(GAN_MODELS)/bandai2-gan)
+$(MODELS)/bandai2-gan/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors
+	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan --stage generator --path-model $(MODELS)/bandai2-gan-path \
+	    --dna --threads 1 $(call resume_if,$(MODELS)/bandai2-gan)
 
-$(GAN_MODELS)/bandai2-gan-partial/weights.safetensors: $(GAN_MODELS)/bandai2-gan-path/weights.safetensors
-	$(GAN_TRAIN) -o $(GAN_MODELS)/bandai2-gan-partial --stage generator --path-model $(GAN_MODELS)/bandai2-gan-path \
-	    --dna --partial-keys --threads 1 $(call resume_if,$(GAN_MODELS)/bandai2-gan-partial)
+$(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors
+	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan-partial --stage generator --path-model $(MODELS)/bandai2-gan-path \
+	    --dna --partial-keys --threads 1 $(call resume_if,$(MODELS)/bandai2-gan-partial)
 
 # `make -j2 gan-models` trains the two generators side by side, one core each
-gan-models: $(GAN_MODELS)/bandai2-gan/weights.safetensors $(GAN_MODELS)/bandai2-gan-partial/weights.safetensors
+gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-partial/weights.safetensors
+
+# The shipped transformer (docs/transformer.md): the benchmark's config, one thread, about 2.5 hours
+# of one core of the project's VM; interrupted, it continues from its checkpoint.
+$(MODELS)/bandai2-transformer/weights.safetensors: | $(BANDAI2)
+	$(BIN)/keyfill train transformer $(BANDAI2) --exclude '*_normal_*' --seed 0 -o $(MODELS)/bandai2-transformer \
+	    --config benchmarks/bench_transformer_bandai2.json --threads 1 $(call resume_if,$(MODELS)/bandai2-transformer)
+
+transformer-model: $(MODELS)/bandai2-transformer/weights.safetensors
 
 $(BLENDER_STAMP):
 	$(PYTHON) -m venv $(BLENDER_VENV)

@@ -205,6 +205,14 @@ def test_short_training_run_loss_falls(tmp_path, sequences):
     assert config["kind"] == "arnn" and config["arch"] == "arnn" and config["skeleton"]["names"][0] == "base"
 
 
+@pytest.mark.parametrize("key_weight", [0.0, 10.0, 100.0])
+def test_the_objective_weighs_the_key_term_by_key_weight(tmp_path, sequences, key_weight):
+    _train(tmp_path, sequences, curriculum=False, epochs=1, key_weight=key_weight)  # no curriculum: omega 1
+    row = json.loads((tmp_path / "m.log.jsonl").read_text().splitlines()[0])
+    assert row["omega"] == 1.0 and row["train_key"] > 0
+    assert row["train_objective"] == pytest.approx(key_weight * row["train_key"] + row["train_frame"], rel=1e-6)
+
+
 def test_training_is_deterministic(tmp_path, sequences):
     a = _train(tmp_path, sequences, name="a", epochs=2)
     b = _train(tmp_path, sequences, name="b", epochs=2)

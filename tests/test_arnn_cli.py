@@ -161,6 +161,8 @@ def test_training_data_folder_without_sequences(capsys, tmp_path):
 def test_bad_training_options(dataset, capsys, tmp_path):
     code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "m", "--epochs", 0)
     assert code == 2 and "--epochs must be at least 1" in err
+    code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "m", "--key-weight", -1)
+    assert code == 2 and "--key-weight must be 0 or more, got -1.0" in err
     code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "m", "--resume")
     assert code == 2 and "--resume: no checkpoint" in err
     code, _, err = run(capsys, "train", "arnn", dataset, "-o", tmp_path / "missing" / "m")

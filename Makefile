@@ -27,7 +27,10 @@ demo: $(STAMP)
 	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_gan.usda --method gan --seed 1
 	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_cubic.usda --method cubic
 	$(BIN)/keyfill preview $(OUT)/human_cubic.usda $(OUT)/human_gan.usda --labels cubic,gan --view side -o $(OUT)/human.png
-	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn) and examples/human/keys.usda (the shipped human gan model, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_cubic.usda, human.png)"
+	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_transformer.usda --method transformer
+	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_cubic.usda --method cubic
+	$(BIN)/keyfill preview $(OUT)/human15_cubic.usda $(OUT)/human15_transformer.usda --labels cubic,transformer --view side -o $(OUT)/human15.png
+	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model, CC BY-NC 4.0, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_cubic.usda, human.png, human15_transformer.usda, human15_cubic.usda, human15.png)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -1,9 +1,10 @@
 """The human models that ship inside the package: they work with no training, and they carry their licence.
 
 ``keyfill complete --method gan`` without ``--model`` uses ``keyfill/learn/models/bandai2-gan``
-(``bandai2-gan-partial`` for partial keys) on the Bandai-Namco skeleton of
-``examples/human/keys.usda``; on another skeleton it says which skeleton the
-model serves, the first joint that differs and how to train a model instead.
+(``bandai2-gan-partial`` for partial keys), ``--method transformer`` uses
+``bandai2-transformer``, on the Bandai-Namco skeleton of ``examples/human``; on
+another skeleton they say which skeleton the model serves, the first joint that
+differs and how to train a model instead.
 """
 
 from __future__ import annotations
@@ -16,12 +17,16 @@ from conftest import DATA
 
 from keyfill import io
 from keyfill.cli.main import main
+from keyfill.learn import transformer
 from keyfill.learn.gan.model import DEFAULT_MODEL, PARTIAL_MODEL
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "human" / "keys.usda"
-SHIPPED = (DEFAULT_MODEL, PARTIAL_MODEL)
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "human"
+EXAMPLE = EXAMPLES / "keys.usda"
+#: each method's example: keys 2.3 s apart for the gan, 0.5 s for the transformer (at most 63 frames)
+EXAMPLE_OF = {"gan": EXAMPLE, "transformer": EXAMPLES / "keys_15.usda"}
+SHIPPED = (DEFAULT_MODEL, PARTIAL_MODEL, transformer.DEFAULT_MODEL)
 
 
 @pytest.mark.parametrize("folder", SHIPPED, ids=lambda p: p.name)
@@ -31,14 +36,15 @@ def test_shipped_folder_has_weights_licence_and_card_within_25_mb(folder):
     assert sum(p.stat().st_size for p in files.values()) <= 25 * 1024 * 1024
     assert "Attribution-NonCommercial 4.0 International" in files["LICENSE"].read_text()
     card = files["MODEL_CARD.md"].read_text()
-    assert "CC BY-NC 4.0" in card and "Bandai Namco Research" in card and "keyfill train gan" in card
+    method = "transformer" if folder == transformer.DEFAULT_MODEL else "gan"
+    assert "CC BY-NC 4.0" in card and "Bandai Namco Research" in card and f"keyfill train {method}" in card
 
 
-@pytest.mark.parametrize("suffix", [".bvh", ".usda"])
-def test_complete_human_keys_with_no_model_option(tmp_path, capsys, suffix):
-    out = tmp_path / f"walk{suffix}"
-    assert main(["-q", "complete", str(EXAMPLE), "-o", str(out), "--method", "gan", "--seed", "3"]) == 0
-    keys, filled = io.load(EXAMPLE), io.load(out)
+@pytest.mark.parametrize("method,suffix", [("gan", ".bvh"), ("gan", ".usda"), ("transformer", ".bvh")])
+def test_complete_human_keys_with_no_model_option(tmp_path, capsys, method, suffix):
+    out, example = tmp_path / f"walk{suffix}", EXAMPLE_OF[method]
+    assert main(["-q", "complete", str(example), "-o", str(out), "--method", method, "--seed", "3"]) == 0
+    keys, filled = io.load(example), io.load(out)
     k = keys.keys.frames
     assert filled.num_frames == keys.num_frames
     same = np.abs((filled.rotations[k] * keys.rotations[k]).sum(-1))  # q and -q are one rotation
@@ -65,12 +71,14 @@ def test_a_dna_file_does_not_replace_the_model_name_in_the_report(tmp_path, caps
     assert f'"model": "{DEFAULT_MODEL.name}"' in capsys.readouterr().out
 
 
-def test_another_skeleton_names_the_model_skeleton_and_the_training_command(tmp_path, capsys):
+@pytest.mark.parametrize("method,hint", [("gan", "keyfill train gan CLIPS -o MODEL-path --stage path"),
+                                         ("transformer", "keyfill train transformer CLIPS -o MODEL")])
+def test_another_skeleton_names_the_model_skeleton_and_the_training_command(tmp_path, capsys, method, hint):
     out = tmp_path / "cmu.bvh"
     code = main(["complete", str(DATA / "cmu_02_03_cgspeed_first4frames.bvh"), "-o", str(out), "--keys", "0,3",
-                 "--method", "gan"])
+                 "--method", method])
     err = capsys.readouterr().err.strip()
     assert code == 1 and not out.exists() and len(err.splitlines()) == 1
     assert err.startswith("keyfill: error: the motion has another skeleton than the model (22 joints, top joint "
                           "'joint_Root'): 22 joints vs 31; the first that differs is joint 0, 'joint_Root' vs ")
-    assert "keyfill train gan CLIPS -o MODEL-path --stage path" in err
+    assert hint in err

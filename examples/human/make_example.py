@@ -32,7 +32,8 @@ FILES = {"keys.usda": (0, 68, 136, 204, 272), "keys_15.usda": tuple(range(0, 91,
 def main() -> None:
     motion = io.load(locate("bandai2") / CLIP)
     for name, keys in FILES.items():
-        io.save(motion.replace(keys=Keys(np.array(keys))), HERE / name, sparse=True)
+        clip = motion.frames(slice(0, keys[-1] + 1))  # the keyed frames' range, nothing after the last key
+        io.save(clip.replace(keys=Keys(np.array(keys))), HERE / name, sparse=True)
         print(f"wrote {HERE / name}: frames {', '.join(map(str, keys))} of {CLIP}")
 
 

@@ -47,6 +47,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
+from pathlib import Path
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -69,6 +70,9 @@ from keyfill.motion import Skeleton
 
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
 KIND = "transformer"
+#: the model ``keyfill complete --method transformer`` uses without --model: Bandai-Namco's skeleton
+#: (``normal`` style held out; its MODEL_CARD.md has the command, the data, the figures and the licence)
+DEFAULT_MODEL = Path(__file__).parent / "models" / "bandai2-transformer"
 #: ends the error for a motion of another skeleton
 TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transformer CLIPS -o MODEL'"
 
@@ -476,12 +480,10 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
 
 def complete(motion, keys, options):
     """``keyfill complete --method transformer``: see :func:`complete_motion`."""
-    from keyfill.errors import UsageError
     from keyfill.learn.modelfile import load_cached
 
-    if options.model is None:
-        raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    return _complete_with(load_cached(load, options.model, options.device), motion, keys, options)
+    model = load_cached(load, options.model or DEFAULT_MODEL, options.device)
+    return _complete_with(model, motion, keys, options)
 
 
 def _complete_with(model: CompletionModel, motion, keys, options):
@@ -494,7 +496,7 @@ def _finish(completed, motion, keys, options):
     from keyfill.learn.exact_keys import snap_to_keys
 
     filled, info = completed
-    info = {"model": str(options.model), **info, "exact_keys": bool(options.exact_keys)}
+    info = {"model": str(options.model or DEFAULT_MODEL.name), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
@@ -516,11 +518,8 @@ def complete_many_with(model: CompletionModel, jobs, options, extra=None) -> lis
 def complete_many(jobs, options):
     """:func:`complete` for many ``(motion, keys)``: the model loaded once, windows of the same length and
     key layout batched (:func:`complete_motions`); a Completion or the error, per job."""
-    from keyfill.errors import UsageError
     from keyfill.learn.modelfile import load_cached
 
-    if options.model is None:
-        raise UsageError("the transformer method needs --model FOLDER (train one with 'keyfill train transformer')")
-    return complete_many_with(load_cached(load, options.model, options.device), jobs, options)
+    return complete_many_with(load_cached(load, options.model or DEFAULT_MODEL, options.device), jobs, options)
 
 

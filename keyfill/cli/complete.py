@@ -92,6 +92,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
       keyfill complete keys.usda --method arnn --model lamp-arnn.onnx -o filled.usda
       keyfill complete examples/human/keys.usda --method gan --seed 3 -o walk.usda     (the shipped human model)
+      keyfill complete examples/human/keys_15.usda --method transformer -o walk.usda   (the shipped human transformer)
       keyfill complete path.bvh --keys 0,200,400 --key-joints Hips --key-positions --method gan -o out.bvh
       keyfill complete walk.bvh --keys 0,300,600 --method gan --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
     """

@@ -47,8 +47,8 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 

@@ -18,10 +18,15 @@ unknown frames, 1 target key: 41 frames in, 30 of them generated):
 The model is the paper's size (8 layers, d_model 256, FFN 512, 8 heads) with
 random weights unless ``--model`` names a trained model folder: the time does
 not depend on the weights, only on the model's size. Threads: torch's default
-(one per core) and 1.
+(one per core) and 1. ``--onnx GRAPH`` (a graph written by ``keyfill export``
+from the ``--model`` folder) adds ``complete`` through onnxruntime, as
+``keyfill complete --model GRAPH`` runs it (one thread).
 
     .venv/bin/python benchmarks/bench_transformer.py
     .venv/bin/python benchmarks/bench_transformer.py --model data/models/bandai2-transformer --repeat 200 --json
+    .venv/bin/keyfill export transformer -o /tmp/transformer.onnx
+    .venv/bin/python benchmarks/bench_transformer.py --model keyfill/learn/models/bandai2-transformer \
+        --onnx /tmp/transformer.onnx --repeat 200
 """
 
 from __future__ import annotations
@@ -57,8 +62,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--model", help="a trained model folder (default: paper-size model with random weights)")
     ap.add_argument("--repeat", type=int, default=100, help="timed calls per figure (default 100)")
+    ap.add_argument("--onnx", help="also time complete through this exported graph of --model (onnxruntime)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
+    if args.onnx and not args.model:
+        ap.error("--onnx needs the --model folder the graph was exported from")
 
     load_before = os.getloadavg()
     if args.model:
@@ -68,6 +76,11 @@ def main(argv=None) -> int:
         skel = bandai_like_skeleton()
         model = T.new_model(skel, T.ModelConfig(), np.zeros(66), np.full(66, 20.0), folded=False)
         model.network.eval()
+    if args.onnx:
+        from keyfill.learn.onnx import open_graph
+        from keyfill.learn.transformer_onnx import model_from_graph
+
+        graph_model = model_from_graph(open_graph(args.onnx))
     J = model.skeleton.num_joints
     rng = np.random.default_rng(1)
     frames = 10 + 30 + 1
@@ -93,6 +106,9 @@ def main(argv=None) -> int:
                 "network_ms": timed_ms(network, args.repeat)["median"],
                 "complete_ms": timed_ms(complete, args.repeat)["median"],
             }
+            if args.onnx and threads == 1:
+                results[(threads, batch)]["onnx_complete_ms"] = timed_ms(
+                    lambda q=q, r=r: graph_model.complete_windows(q, r, keys), args.repeat)["median"]
     torch.set_num_threads(default_threads)
     load_after = os.getloadavg()
     report = {
@@ -113,6 +129,8 @@ def main(argv=None) -> int:
     for row in report["results"]:
         print(f"{row['threads']:>7} {row['batch']:>5} {row['network_ms']:>11.2f} {row['complete_ms']:>12.2f} "
               f"{row['goal_ms']:>8.0f} {row['paper_ms']:>9.0f} {row['complete_vs_paper']:>9.2f}")
+        if "onnx_complete_ms" in row:
+            print(f"{'onnx':>7} {row['batch']:>5} {'':>11} {row['onnx_complete_ms']:>12.2f} {row['goal_ms']:>8.0f}")
     return 0
 
 

@@ -40,6 +40,13 @@ def test_shipped_folder_has_weights_licence_and_card_within_25_mb(folder):
     assert "CC BY-NC 4.0" in card and "Bandai Namco Research" in card and f"keyfill train {method}" in card
 
 
+def test_the_registry_names_each_shipped_model_for_evaluate_and_export():
+    from keyfill.learn.registry import METHODS
+
+    assert METHODS["gan"].default_model() == DEFAULT_MODEL
+    assert METHODS["transformer"].default_model() == transformer.DEFAULT_MODEL
+
+
 @pytest.mark.parametrize("method,suffix", [("gan", ".bvh"), ("gan", ".usda"), ("transformer", ".bvh")])
 def test_complete_human_keys_with_no_model_option(tmp_path, capsys, method, suffix):
     out, example = tmp_path / f"walk{suffix}", EXAMPLE_OF[method]

@@ -75,8 +75,8 @@ $(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/we
 # `make -j2 gan-models` trains the two generators side by side, one core each
 gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-partial/weights.safetensors
 
-# The shipped transformer (docs/transformer.md): the benchmark's config, one thread, about 2.5 hours
-# of one core of the project's VM; interrupted, it continues from its checkpoint.
+# The shipped transformer (docs/transformer.md): the benchmark's config, one thread, about 3 hours
+# of one core of the project's VM (2.9 h measured); interrupted, it continues from its checkpoint.
 $(MODELS)/bandai2-transformer/weights.safetensors: | $(BANDAI2)
 	$(BIN)/keyfill train transformer $(BANDAI2) --exclude '*_normal_*' --seed 0 -o $(MODELS)/bandai2-transformer \
 	    --config benchmarks/bench_transformer_bandai2.json --threads 1 $(call resume_if,$(MODELS)/bandai2-transformer)

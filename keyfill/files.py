@@ -134,7 +134,6 @@ def quiet_stderr() -> Iterator[None]:
         os.close(saved)
 
 
-
 def read_json_object(path: str | os.PathLike) -> dict:
     """The JSON object in the settings file ``path``; a :class:`UsageError` of one line (with the line
     number for bad JSON) when it cannot be read, is not JSON or is not an object."""

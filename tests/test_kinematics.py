@@ -30,6 +30,9 @@ def test_batch_shapes_and_multiple_roots():
     single = fk(rot[1, 3], pos[1, 3], parents)[1]
     np.testing.assert_allclose(wp[1, 3], single, atol=1e-12)
     np.testing.assert_allclose(wp[..., 3, :], pos[..., 3, :])  # second root is at its own translation
+    # constant offsets broadcast against the rotations; float32 in, float32 out
+    wr32, wp32 = fk(rot.astype(np.float32), np.broadcast_to(pos[0, 0].astype(np.float32), (2, 7, 5, 3)), parents)
+    assert wr32.dtype == wp32.dtype == np.float32 and wp32.shape == (2, 7, 5, 3)
 
 
 def test_numpy_and_torch_fk_agree_and_backpropagate():
@@ -40,7 +43,8 @@ def test_numpy_and_torch_fk_agree_and_backpropagate():
     wr, wp = fk(rot, pos, parents)
     rot_t = torch.from_numpy(rot).requires_grad_()
     wr_t, wp_t = fk(rot_t, torch.from_numpy(pos), parents)
-    np.testing.assert_allclose(wr_t.detach().numpy(), wr, atol=1e-12)
-    np.testing.assert_allclose(wp_t.detach().numpy(), wp, atol=1e-12)
+    # numpy goes depth by depth, torch joint by joint: the same products, so the same bits
+    np.testing.assert_array_equal(wr_t.detach().numpy(), wr)
+    np.testing.assert_array_equal(wp_t.detach().numpy(), wp)
     wp_t.sum().backward()
     assert torch.isfinite(rot_t.grad).all() and rot_t.grad.abs().sum() > 0

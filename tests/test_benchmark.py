@@ -59,6 +59,34 @@ def test_baselines_fill_only_the_transition():
     np.testing.assert_allclose(iq[:, 12], R.quat_slerp(q[:, 9], q[:, 15], 0.5), atol=1e-12)
 
 
+def test_cubic_fills_all_windows_at_once_as_the_spline_does_each():
+    from keyfill.learn.baselines import cubic
+    from keyfill.motion import Keys, Motion, Skeleton
+
+    rng = np.random.default_rng(3)
+    q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(3, 21, 4, 4)) + [4, 0, 0, 0]), axis=1)
+    r = np.cumsum(rng.normal(size=(3, 21, 3)), axis=1)
+    keys = [2, 5, 6, 13, 18]
+    hidden = np.setdiff1d(np.arange(21), keys)
+    given_q, given_r = q.copy(), r.copy()
+    given_q[:, hidden], given_r[:, hidden] = np.nan, np.nan  # only key frames may be read
+    cq, cr = B.cubic(None, given_q, given_r, keys)
+    skel = Skeleton([f"j{j}" for j in range(4)], [-1, 0, 1, 1], np.ones((4, 3)), [()] * 4)
+    for w in range(3):
+        pos = np.broadcast_to(skel.offsets, (21, 4, 3)).copy()
+        pos[:, 0] = r[w]
+        one = cubic(Motion(skel, 30.0, q[w], pos), Keys(keys))
+        np.testing.assert_array_equal(cq[w, 2:19], one.rotations[2:19])
+        np.testing.assert_array_equal(cr[w, 2:19], one.positions[2:19, 0])
+    np.testing.assert_array_equal(cq[:, keys], q[:, keys])
+    np.testing.assert_array_equal(cr[:, :2], np.repeat(r[:, 2:3], 2, axis=1))  # before the first key: hold it
+    np.testing.assert_array_equal(cq[:, 19:], np.repeat(q[:, 18:19], 2, axis=1))  # after the last key: hold it
+    # it carries the velocity of the keys before a gap into it, which interpolation does not
+    line = np.arange(21.0)[None, :, None] * [1.0, 0.0, 0.0]
+    lr = B.cubic(None, q[:1], line, keys)[1]
+    np.testing.assert_allclose(lr[0, 6:14, 0], np.arange(6.0, 14.0), atol=1e-12)
+
+
 def test_baselines_on_any_key_layout():
     rng = np.random.default_rng(2)
     q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 13, 3, 4))), axis=1)

@@ -162,6 +162,32 @@ def test_training_is_deterministic_and_resumable(corpus, tmp_path):
         train(corpus, tmp_path / "b", TINY, cfg, seed=6, resume=True)
 
 
+def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, corpus, tmp_path, capsys):
+    folder, model = trained
+    cubic = T.ModelConfig(**{**TINY.__dict__, "prefill": "cubic"})
+    cfg = TrainConfig(**{**TINY_TRAINING.__dict__, "epochs": 1, "lr": 0.0})
+    # at learning rate 0 the tuned network is the one it started from; only the pre-fill differs
+    tuned = train(corpus, tmp_path / "tuned", cubic, cfg, seed=1, init=folder)
+    for (k, a), b in zip(model.network.state_dict().items(), tuned.network.state_dict().values()):
+        assert torch.equal(a, b), k
+    np.testing.assert_array_equal(tuned.features.pos_std, model.features.pos_std)
+    assert tuned.info["init"]["model"] == folder.name and len(tuned.info["init"]["weights_sha256"]) == 64
+    q, r, _, _ = corpus.windows(41, 20)
+    keys = np.append(np.arange(10), 40)
+    cq, cr = tuned.complete_windows(q[:2], r[:2], keys)
+    iq, ir = model.complete_windows(q[:2], r[:2], keys)
+    assert np.abs(cr - ir).max() > 1e-3  # the pre-fill reaches the output
+    assert T.load(tmp_path / "tuned").config.prefill == "cubic"
+    with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic"):
+        T.ModelConfig(prefill="spline")
+    # a resumed run must start from the same model
+    other = tmp_path / "other"
+    train(corpus, other, TINY, cfg, seed=2)
+    with pytest.raises(UsageError, match="init"):
+        train(corpus, tmp_path / "tuned", cubic, TrainConfig(**{**cfg.__dict__, "epochs": 2}), seed=1, init=other,
+              resume=True)
+
+
 def test_training_logs_validation_scores(trained):
     out, model = trained
     log = [json.loads(line) for line in out.with_name("tiny.log.jsonl").read_text().splitlines()]
@@ -370,6 +396,14 @@ def test_cli_train_transformer(corpus_dir, tmp_path, capsys):
     assert [p.name for p in empty.iterdir()] == ["notes.txt"] and not (tmp_path / "empty.log.jsonl").exists()
     assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "nowhere" / "m")]) == 2
     assert "the output folder" in capsys.readouterr().err
+    # --init: a model folder to start from; anything else is one clear line
+    assert main(["-q", "train", "transformer", str(corpus_dir), "-o", str(tmp_path / "t"), "--config", str(config),
+                 "--exclude", "*_calm_*", "--init", str(out), "--json"]) == 0, capsys.readouterr().err
+    assert json.loads(capsys.readouterr().out)["init"]["model"] == "m"
+    assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "u"), "--config", str(config),
+                 "--init", str(empty)]) != 0
+    err = capsys.readouterr().err
+    assert err.startswith("keyfill: error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
 def test_cli_evaluate_a_model(trained, corpus_dir, capsys):

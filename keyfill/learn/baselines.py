@@ -89,24 +89,35 @@ def linear(motion: Motion, keys: Keys) -> Motion:
     return _keep_keys(rot, pos, motion, keys)
 
 
-def cubic(motion: Motion, keys: Keys) -> Motion:
-    """C1 cubic Hermite splines through the keys (translations and log-map rotations)."""
-    k = keys.frames
-    s, u = segment_coordinates(motion.num_frames, k)
+def cubic_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames) -> tuple[np.ndarray, np.ndarray]:
+    """C1 cubic Hermite splines through the key frames of ``rotations (F, N, 4)`` and ``positions (F, M, 3)``.
+
+    Each of the ``N`` rotation and ``M`` position tracks is a curve of its own (joints, or joints of many
+    windows side by side); only the key frames are read. Frames before the first key and after the last
+    get the end keys (the last up to the sign of the quaternion). Key frames are *not* copied: see
+    :func:`cubic`.
+    """
+    k = np.asarray(key_frames)
+    s, u = segment_coordinates(len(rotations), k)
     h = np.diff(k).astype(np.float64)  # (K-1,)
     hf = h[s][:, None, None]
     h00, h10, h01, h11 = (c[:, None, None] for c in _hermite(u))
 
-    P = motion.positions[k]  # (K, J, 3)
+    P = positions[k]  # (K, M, 3)
     m = _tangents(np.diff(P, axis=0) / h[:, None, None], h)  # per-frame tangents
     pos = h00 * P[s] + h10 * hf * m[s] + h01 * P[s + 1] + h11 * hf * m[s + 1]
 
-    Q = R.quat_continuous_np(motion.rotations[k], axis=0)
-    phi = R.quat_to_rotvec(R.quat_mul(R.quat_conjugate(Q[:-1]), Q[1:]))  # (K-1, J, 3)
-    omega = _tangents(phi / h[:, None, None], h)  # body angular velocity at keys (K, J, 3)
-    end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), omega[1:])  # (K-1, J, 3)
+    Q = R.quat_continuous_np(rotations[k], axis=0)
+    phi = R.quat_to_rotvec(R.quat_mul(R.quat_conjugate(Q[:-1]), Q[1:]))  # (K-1, N, 3)
+    omega = _tangents(phi / h[:, None, None], h)  # body angular velocity at keys (K, N, 3)
+    end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), omega[1:])  # (K-1, N, 3)
     v = h01 * phi[s] + h10 * hf * omega[s] + h11 * hf * end_tangent[s]
-    rot = R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v)))
+    return R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v))), pos
+
+
+def cubic(motion: Motion, keys: Keys) -> Motion:
+    """C1 cubic Hermite splines through the keys (translations and log-map rotations)."""
+    rot, pos = cubic_arrays(motion.rotations, motion.positions, keys.frames)
     return _keep_keys(rot, pos, motion, keys)
 
 

@@ -45,7 +45,7 @@ from keyfill.learn import metrics, realism
 from keyfill.learn.baselines import segment_coordinates
 from keyfill.learn.corpus import Corpus, load_corpus
 from keyfill.learn.facing import align_windows, global_pose
-from keyfill.motion import Keys, Motion, Skeleton
+from keyfill.motion import Motion, Skeleton
 
 N_PAST = 10  #: context frames
 N_FUTURE = 10  #: frames after the transition in the reference's windows (only the first is given)
@@ -112,6 +112,14 @@ def zero_velocity(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray
     return quats[:, src].copy(), root[:, src].copy()
 
 
+def _hold_outside(q: np.ndarray, r: np.ndarray, quats: np.ndarray, root: np.ndarray, k: np.ndarray):
+    """Copy the key frames of ``quats``, ``root`` into ``q``, ``r`` (in place) and hold the end keys outside them."""
+    src = np.clip(np.arange(quats.shape[1]), k[0], k[-1])
+    copy = np.union1d(k, np.flatnonzero(src != np.arange(quats.shape[1])))  # keys, and frames that hold one
+    q[:, copy], r[:, copy] = quats[:, src[copy]], root[:, src[copy]]
+    return q, r
+
+
 def interpolation(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
     """LERP the root and SLERP the local quaternions between the nearest keys.
 
@@ -126,23 +134,22 @@ def interpolation(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray
     r = root[:, a] + u[:, None] * (root[:, b] - root[:, a])
     q0 = quats[:, a]
     q = R.quat_slerp(q0, quats[:, b], np.broadcast_to(u[:, None], q0.shape[:-1]))
-    src = np.clip(np.arange(quats.shape[1]), k[0], k[-1])
-    copy = np.union1d(k, np.flatnonzero(src != np.arange(quats.shape[1])))  # keys, and frames that hold one
-    q[:, copy], r[:, copy] = quats[:, src[copy]], root[:, src[copy]]
-    return q, r
+    return _hold_outside(q, r, quats, root, k)
 
 
-def cubic(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys: np.ndarray):
-    """keyfill's C1 cubic spline through every given frame (:func:`keyfill.learn.baselines.cubic`)."""
-    from keyfill.learn.baselines import cubic as spline
+def cubic(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """keyfill's C1 cubic spline through every given frame (:func:`keyfill.learn.baselines.cubic_arrays`).
 
-    q, r = quats.copy(), root.copy()
-    k = Keys(keys)
-    for i in range(len(quats)):
-        m = window_motion(skeleton, np.nan_to_num(quats[i]), np.nan_to_num(root[i]))
-        out = spline(m, k)
-        q[i], r[i] = out.rotations, out.positions[:, 0]
-    return q, r
+    All windows at once; frames outside the keys hold the nearest key and key
+    frames are copied, as in :func:`interpolation`. Only key frames are read.
+    ``quats (B, T, J, 4)``, ``root (B, T, 3)``.
+    """
+    from keyfill.learn.baselines import cubic_arrays
+
+    k = np.asarray(keys, dtype=np.int64)
+    B, T, J, _ = quats.shape
+    q, r = cubic_arrays(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k)
+    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
 
 
 BASELINES: dict[str, Method] = {"zero-velocity": zero_velocity, "interpolation": interpolation, "cubic": cubic}

@@ -45,6 +45,7 @@ from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.facing import align_windows, global_pose
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs, side_files
 from keyfill.learn.training import train as run_training
+from keyfill.learn.modelfile import load_state
 from keyfill.learn.transformer import (
     KIND,
     CompletionModel,
@@ -52,6 +53,7 @@ from keyfill.learn.transformer import (
     apply_transform,
     canonical_transform,
     frame_kinds,
+    load,
     losses,
     new_model,
     torch_device,
@@ -133,6 +135,28 @@ def select_clips(corpus: Corpus, include=(), exclude=()) -> Corpus:
     return corpus.subset(keep) if len(keep) < len(names) else corpus
 
 
+def initial_model(path: str | os.PathLike, corpus: Corpus) -> CompletionModel:
+    """The transformer model folder a run starts from (``--init``); refused when it serves another skeleton
+    or its corpus was folded differently."""
+    model = load(path)
+    diff = model.skeleton.difference(corpus.skeleton, atol=1e-2 * float(np.abs(corpus.skeleton.offsets).max()))
+    if diff is not None:
+        raise UsageError(f"--init {path}: the model serves another skeleton than the training clips: {diff}")
+    if model.folded != corpus.folded:
+        raise UsageError(f"--init {path}: the model's corpus {'folded' if model.folded else 'kept'} the top joint, "
+                         f"the training clips {'fold' if corpus.folded else 'keep'} it")
+    return model
+
+
+def weights_sha256(path: str | os.PathLike) -> str:
+    """The SHA-256 of a model folder's weights file (what ``--init`` started from)."""
+    import hashlib
+
+    from keyfill.learn.modelfile import WEIGHTS, model_folder
+
+    return hashlib.sha256((model_folder(path) / WEIGHTS).read_bytes()).hexdigest()
+
+
 # --- layouts and batches ---------------------------------------------------------------
 
 
@@ -168,7 +192,7 @@ def make_batch(model: CompletionModel, quats: np.ndarray, root: np.ndarray, keys
     q, r = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
     turn, shift = canonical_transform(q, r, keys, model.config.facing_axis, model.skeleton.up_axis)
     q, r = apply_transform(q, r, turn, shift)
-    pq, pr = benchmark.interpolation(None, q, r, keys)
+    pq, pr = model.config.fill(q, r, keys)
     dev = model.device
 
     def t(a):
@@ -243,7 +267,8 @@ class TransformerTask(TrainingTask):
     kind = KIND
     checkpoint_every = 1
 
-    def __init__(self, corpus: Corpus, model_cfg: ModelConfig, cfg: TrainConfig, seed: int = 0):
+    def __init__(self, corpus: Corpus, model_cfg: ModelConfig, cfg: TrainConfig, seed: int = 0,
+                 init: str | os.PathLike | None = None):
         if model_cfg.max_frames < cfg.window:
             raise UsageError(f"the model's max_frames ({model_cfg.max_frames}) is shorter than the training window "
                              f"({cfg.window})")
@@ -257,6 +282,9 @@ class TransformerTask(TrainingTask):
                                                                   replace=False)
             self.mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
         self.info = {"seed": seed, "corpus_clips": len(corpus), **self.data.info, "mirrored": self.mirror is not None}
+        self.init = None if init is None else initial_model(init, corpus)
+        if self.init is not None:
+            self.info["init"] = {"model": Path(init).name, "weights_sha256": weights_sha256(init)}
         if self.data.validation is not None:
             self.info["validation_windows"] = self.data.validation.info["test_windows"]
         self.device = "cpu"
@@ -264,7 +292,7 @@ class TransformerTask(TrainingTask):
     def config(self) -> dict:
         model = {f"model.{k}": v for k, v in dataclasses.asdict(self.model_cfg).items()}
         training = {f"training.{k}": v for k, v in dataclasses.asdict(self.cfg).items() if k != "epochs"}
-        return {**model, **training}
+        return {**model, **training, **({"init": self.info["init"]} if self.init is not None else {})}
 
     def fingerprint(self) -> str:
         import hashlib
@@ -282,8 +310,11 @@ class TransformerTask(TrainingTask):
         aq, ar = align_windows(self.data.quats, self.data.root, self.model_cfg.facing_axis, up, benchmark.N_PAST - 1)
         _, gpos = global_pose(aq, ar, self.corpus.skeleton.offsets, self.corpus.skeleton.parents)
         flat = gpos.reshape(-1, gpos.shape[-2] * 3)
-        self.model = new_model(self.corpus.skeleton, self.model_cfg, flat.mean(0), flat.std(0), self.corpus.folded,
-                               self.info)
+        mean, std = (flat.mean(0), flat.std(0)) if self.init is None else (self.init.features.pos_mean,
+                                                                           self.init.features.pos_std)
+        self.model = new_model(self.corpus.skeleton, self.model_cfg, mean, std, self.corpus.folded, self.info)
+        if self.init is not None:
+            load_state(self.model.network, self.init.network.state_dict(), self.info["init"]["model"])
         self.model.to(self.device)
         return {"network": self.model.network}
 
@@ -356,6 +387,7 @@ def train(
     progress: Callable | None = None,
     report: Callable[[dict], None] | None = None,
     started: Callable[[dict], None] | None = None,
+    init: str | os.PathLike | None = None,
 ) -> CompletionModel:
     """Train a transformer on ``corpus`` and write it to the model folder ``output``.
 
@@ -376,11 +408,12 @@ def train(
         progress: ``progress(total=..., desc=...)`` -> a tqdm-like bar (optional).
         report: called with each epoch's log record (optional).
         started: called once with the data summary before the first step (optional).
+        init: a transformer model folder whose weights and normalisation the run starts from (fine-tuning).
     """
     torch_device(device)
     checkpoint, log = side_files(output)
     check_outputs(output, checkpoint, log)
-    task = TransformerTask(corpus, model_cfg, cfg, seed)
+    task = TransformerTask(corpus, model_cfg, cfg, seed, init=init)
     if started is not None:
         started(task.info)
     outcome = run_training(task, output, seed=seed, checkpoint=checkpoint, log=log, resume=resume, device=device,
@@ -403,7 +436,7 @@ def _make_task(common, options: dict, progress) -> TransformerTask:
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
     return TransformerTask(select_clips(corpus, options["include"], options["exclude"]), model_cfg, train_cfg,
-                           common.seed)
+                           common.seed, init=options["init"])
 
 
 def _started(task: TransformerTask) -> str:
@@ -439,10 +472,13 @@ TRAINING = TrainingSpec(
       keyfill train transformer bandai2/data --exclude '*_normal_*' -o models/bandai2-transformer
       keyfill train transformer clips/ -o models/small --config small.json --epochs 3 --seed 1
       keyfill train transformer clips/ -o models/small --config small.json --epochs 3 --seed 1 --resume
+      keyfill train transformer clips/ -o models/tuned --init models/small --config tune.json
     """,
     options=(
         Option("config", None, 'JSON file {"model": {...}, "training": {...}} overriding the defaults '
                "(see docs/transformer.md).", type="file"),
+        Option("init", None, "Start from the weights of this transformer model folder (fine-tuning): same "
+               "skeleton and network size; its normalisation statistics are kept.", metavar="MODEL"),
         Option("include", (), "Train only on files matching one of these patterns.", multiple=True, metavar="GLOB"),
         Option("exclude", (), "Leave out files matching these patterns (e.g. a test style).", multiple=True,
                metavar="GLOB"),

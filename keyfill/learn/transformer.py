@@ -3,9 +3,11 @@
 Every missing frame is predicted in one forward pass (section 3 of the paper):
 
 1. Frames are *key* (given), *unknown* (to fill) or *ignored* (padding; no
-   loss): :func:`frame_kinds`. Unknown frames are pre-filled by LERP of the root
-   and SLERP of the local rotations between the nearest keys
-   (:func:`keyfill.learn.benchmark.interpolation`).
+   loss): :func:`frame_kinds`. Unknown frames are pre-filled (``prefill``): by
+   LERP of the root and SLERP of the local rotations between the nearest keys
+   (``"interpolation"``, :func:`keyfill.learn.benchmark.interpolation`), or by
+   keyfill's C1 cubic spline through the keys, which carries the context's
+   velocity into the gap (``"cubic"``, :func:`keyfill.learn.benchmark.cubic`).
 2. Each frame becomes a feature vector (:class:`Features`): in ``global``
    coordinates (the paper's best variant) the normalised global positions and
    the global quaternions of all joints; in ``local`` coordinates the
@@ -16,7 +18,7 @@ Every missing frame is predicted in one forward pass (section 3 of the paper):
    post-norm, GELU; 8 layers, d_model 256, FFN 512, 8 heads by default)
    processes all frames; a Conv1d (kernel 3) maps back to features. With
    ``residual`` (keyfill's default) that output is added to the pre-filled input,
-   so the network learns a correction of the interpolation; ``residual=False``
+   so the network learns a correction of the pre-fill; ``residual=False``
    is the paper's plain output.
 4. Global predictions go back to local rotations by the simplest IK (each
    joint's rotation relative to its parent) and the standard bone offsets; the
@@ -54,7 +56,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError
-from keyfill.learn.benchmark import interpolation
+from keyfill.learn.benchmark import BASELINES
 from keyfill.learn.facing import axis_vector
 from keyfill.learn.transformer_features import (  # noqa: F401 - the layouts and features are part of the model's interface
     IGNORED,
@@ -77,6 +79,10 @@ DEFAULT_MODEL = Path(__file__).parent / "models" / "bandai2-transformer"
 TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transformer CLIPS -o MODEL'"
 
 
+#: the pre-fills a model can be trained with (:attr:`ModelConfig.prefill`)
+PREFILLS = ("interpolation", "cubic")
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Architecture and representation of a :class:`MotionTransformer`.
@@ -91,6 +97,8 @@ class ModelConfig:
             output (positions by forward kinematics of the predicted rotations and
             the standard offsets, the positions the benchmark scores); 0 is the paper.
         facing_axis: the root's local forward axis, for the canonical frame.
+        prefill: how unknown frames are filled before the network corrects them:
+            ``"interpolation"`` (LERP/SLERP, the paper) or ``"cubic"`` (C1 spline through the keys).
     """
 
     coordinates: str = "global"
@@ -104,6 +112,7 @@ class ModelConfig:
     kinematics_weight: float = 0.01
     fk_weight: float = 0.0
     facing_axis: str = "+Y"
+    prefill: str = "interpolation"
 
     def __post_init__(self):
         if self.coordinates not in ("global", "local"):
@@ -111,6 +120,12 @@ class ModelConfig:
         if self.d_model % self.heads:
             raise ModelError(f"d_model {self.d_model} is not a multiple of heads {self.heads}")
         axis_vector(self.facing_axis)
+        if self.prefill not in PREFILLS:
+            raise ModelError(f"prefill must be one of {', '.join(PREFILLS)}, not {self.prefill!r}")
+
+    def fill(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+        """Windows ``quats (B, T, J, 4)``, ``root (B, T, 3)`` pre-filled between ``keys`` (only keys are read)."""
+        return BASELINES[self.prefill](None, quats, root, keys)
 
 
 # --- the network -------------------------------------------------------------------------
@@ -268,7 +283,7 @@ class CompletionModel:
         up = self.skeleton.up_axis
         turn, shift = canonical_transform(q, r, keys, self.config.facing_axis, up)
         q, r = apply_transform(q, r, turn, shift)
-        q, r = interpolation(None, q, r, keys)
+        q, r = self.config.fill(q, r, keys)
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
         if getattr(self.network, "numpy_io", False):
             y = self.network(x, np.broadcast_to(kinds, (len(q), T)))

@@ -87,6 +87,35 @@ def test_cubic_fills_all_windows_at_once_as_the_spline_does_each():
     np.testing.assert_allclose(lr[0, 6:14, 0], np.arange(6.0, 14.0), atol=1e-12)
 
 
+def test_velocity_prefill_leaves_with_the_context_velocity_and_meets_the_keys():
+    rng = np.random.default_rng(4)
+    q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 60, 3, 4)) + [3, 0, 0, 0]), axis=1)
+    r = np.cumsum(rng.normal(size=(2, 60, 3)), axis=1)
+    keys = np.append(np.arange(10), 50)
+    given_q, given_r = q.copy(), r.copy()
+    given_q[:, 10:50], given_r[:, 10:50] = np.nan, np.nan
+    vq, vr = B.velocity(None, given_q, given_r, keys, frames=3.0)
+    iq, ir = B.interpolation(None, given_q, given_r, keys)
+    np.testing.assert_array_equal(vq[:, keys], q[:, keys])
+    np.testing.assert_array_equal(vr[:, keys], r[:, keys])
+    # the first frames continue the context's motion for about 3 frames' worth of its velocity; that
+    # displacement from the interpolation is blended out by the target key
+    v_in, d = r[:, 9] - r[:, 8], (r[:, 50] - r[:, 9]) / 41
+    for t in (10, 30, 49):
+        g = 3 * -np.expm1(-(t - 9) / 3) * (1 - (t - 9) / 41) ** 2
+        np.testing.assert_allclose(vr[:, t], ir[:, t] + g * (v_in - d), atol=1e-12)
+    # rotations leave frame 9 turning as frames 8 -> 9 turned
+    step = R.quat_angle(vq[:, 9], vq[:, 10])
+    assert np.all(np.abs(step - R.quat_angle(q[:, 8], q[:, 9])) < np.abs(R.quat_angle(iq[:, 9], iq[:, 10]) - step) + 1e-9)
+    # no given frame beside the gap (keys every 10): the interpolation itself
+    sparse = np.arange(0, 60, 10)
+    for a, b in zip(B.velocity(None, q, r, sparse), B.interpolation(None, q, r, sparse)):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    # a very long fade is the cubic Hermite curve with one-sided velocity tangents: a line stays a line
+    line = np.arange(60.0)[None, :, None] * [0.5, 0.0, -1.0]
+    np.testing.assert_allclose(B.velocity(None, q[:1], line, keys, frames=1e9)[1][:, :51], line[:, :51], atol=1e-9)
+
+
 def test_baselines_on_any_key_layout():
     rng = np.random.default_rng(2)
     q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 13, 3, 4))), axis=1)

@@ -174,11 +174,11 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     assert tuned.info["init"]["model"] == folder.name and len(tuned.info["init"]["weights_sha256"]) == 64
     q, r, _, _ = corpus.windows(41, 20)
     keys = np.append(np.arange(10), 40)
-    cq, cr = tuned.complete_windows(q[:2], r[:2], keys)
-    iq, ir = model.complete_windows(q[:2], r[:2], keys)
+    _, cr = tuned.complete_windows(q[:2], r[:2], keys)
+    _, ir = model.complete_windows(q[:2], r[:2], keys)
     assert np.abs(cr - ir).max() > 1e-3  # the pre-fill reaches the output
     assert T.load(tmp_path / "tuned").config.prefill == "cubic"
-    with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic"):
+    with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
         T.ModelConfig(prefill="spline")
     # a resumed run must start from the same model
     other = tmp_path / "other"

@@ -47,7 +47,8 @@ def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengt
     """Score METHOD_OR_MODEL on the BVH clips in DATA (files or folders).
 
     METHOD_OR_MODEL is zero-velocity, linear (the protocol's interpolation:
-    LERP of the root, SLERP of rotations), cubic, or a model folder written by
+    LERP of the root, SLERP of rotations), cubic, velocity (linear plus the
+    fading velocity of the given frames beside a gap), or a model folder written by
     'keyfill train' (a transformer model is scored with the lafan1 protocol,
     an ARNN model with the keys protocol). Test and training clips are chosen
     by file name; the table shows L2Q, L2P and NPSS over the transition

@@ -115,6 +115,50 @@ def cubic_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames) -> tu
     return R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v))), pos
 
 
+def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, frames: float):
+    """Interpolation that starts and ends a gap with the velocity of the given frames next to it.
+
+    ``rotations (F, N, 4)`` and ``positions (F, M, 3)`` are tracks as in :func:`cubic_arrays`; only
+    key frames are read. On the segment from key ``a`` to key ``b`` (``h = b - a`` frames, ``u`` in
+    [0, 1]) the LERP of translations (and, in the log map at ``a``, the SLERP of rotations) gets
+
+    * ``(v_a - d) * g_a``, where ``v_a`` is the velocity into ``a`` (when frame ``a - 1`` is given),
+      ``d`` the segment's mean velocity and ``g_a = frames * (1 - exp(-(t - a) / frames)) * (1 - u)^2``;
+    * ``(d - v_b) * g_b`` at the other end (when frame ``b + 1`` is given), ``g_b`` the mirror image.
+
+    So the curve leaves ``a`` (and reaches ``b``) with the given frames' velocity, which fades over
+    about ``frames`` frames instead of lasting the whole gap: it moves the curve off the interpolation by
+    at most ``frames`` frames' worth of the velocity difference, and the ``(1 - u)^2`` factor blends that
+    out by the other key, which is met exactly. As
+    ``frames`` grows it becomes the cubic Hermite curve with those end tangents (the basis terms
+    ``h * h10`` and ``-h * h11``); where no neighbouring frame is given it is the LERP/SLERP.
+    """
+    k = np.asarray(key_frames)
+    F, K = len(rotations), len(k)
+    s, u = segment_coordinates(F, k)
+    h = np.diff(k).astype(np.float64)  # (K-1,)
+    f = np.clip(np.arange(F), k[0], k[-1])
+    has_in = np.zeros(K - 1, dtype=bool)
+    has_out = np.zeros(K - 1, dtype=bool)
+    has_in[1:] = h[:-1] == 1  # the frame before the segment's first key is given
+    has_out[:-1] = h[1:] == 1  # the frame after its last key is given
+    g_in = np.where(has_in[s], frames * -np.expm1(-(f - k[s]) / frames) * (1 - u) ** 2, 0.0)[:, None, None]
+    g_out = np.where(has_out[s], frames * -np.expm1(-(k[s + 1] - f) / frames) * u**2, 0.0)[:, None, None]
+    before, after = np.maximum(s - 1, 0), np.minimum(s + 1, K - 2)  # neighbouring segments (unused when absent)
+    U = u[:, None, None]
+
+    P = positions[k]  # (K, M, 3)
+    d = np.diff(P, axis=0) / h[:, None, None]  # (K-1, M, 3) mean velocity per segment
+    pos = P[s] + U * (P[s + 1] - P[s]) + g_in * (d[before] - d[s]) + g_out * (d[s] - d[after])
+
+    Q = rotations[k]  # each segment starts at its key's own sign, as SLERP does (rotation vectors ignore it)
+    phi = R.quat_to_rotvec(R.quat_mul(R.quat_conjugate(Q[:-1]), Q[1:]))  # (K-1, N, 3)
+    w_mean = phi / h[:, None, None]
+    end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi[s]), w_mean[after])  # (F, N, 3)
+    v = U * phi[s] + g_in * (w_mean[before] - w_mean[s]) + g_out * (w_mean[s] - end_tangent)
+    return R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v))), pos
+
+
 def cubic(motion: Motion, keys: Keys) -> Motion:
     """C1 cubic Hermite splines through the keys (translations and log-map rotations)."""
     rot, pos = cubic_arrays(motion.rotations, motion.positions, keys.frames)

@@ -20,8 +20,9 @@ The protocol, as the reference code runs it:
 
 Baselines: zero-velocity (frame 9 repeated), interpolation (LERP of the root,
 shortest-path SLERP of local quaternions with weights
-``linspace(0, 1, n + 2)[1:-1]``) and keyfill's cubic spline through all the
-given frames.
+``linspace(0, 1, n + 2)[1:-1]``), keyfill's cubic spline through all the
+given frames, and ``velocity``: the interpolation plus the velocity of the given
+frames next to the gap, fading over a few frames (a transformer pre-fill).
 
 A method is a function ``(skeleton, quats (B, T, J, 4), root (B, T, 3), keys)
 -> (quats, root)`` over windows of ``T = 11 + n`` frames whose unknown frames are
@@ -152,10 +153,28 @@ def cubic(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) 
     return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
 
 
-BASELINES: dict[str, Method] = {"zero-velocity": zero_velocity, "interpolation": interpolation, "cubic": cubic}
+#: frames over which :func:`velocity` lets the given frames' velocity fade (chosen on held-out styles,
+#: docs/transformer.md)
+VELOCITY_FRAMES = 3.0
+
+
+def velocity(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys,
+             frames: float = VELOCITY_FRAMES) -> tuple[np.ndarray, np.ndarray]:
+    """Interpolation that carries the velocity of given frames next to a gap into it, fading over
+    ``frames`` frames (:func:`keyfill.learn.baselines.velocity_arrays`); otherwise as :func:`cubic`."""
+    from keyfill.learn.baselines import velocity_arrays
+
+    k = np.asarray(keys, dtype=np.int64)
+    B, T, J, _ = quats.shape
+    q, r = velocity_arrays(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k, frames)
+    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
+
+
+BASELINES: dict[str, Method] = {"zero-velocity": zero_velocity, "interpolation": interpolation, "cubic": cubic,
+                                "velocity": velocity}
 #: method names accepted by :func:`resolve_method` -> baseline
 METHOD_NAMES = {"zero-velocity": "zero-velocity", "linear": "interpolation", "interpolation": "interpolation",
-                "cubic": "cubic"}
+                "cubic": "cubic", "velocity": "velocity"}
 
 
 def resolve_method(name_or_path: str, device: str = "cpu") -> tuple[str, Method]:
@@ -403,7 +422,7 @@ def run(
 ):
     """The LaFAN1 protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.evaluation.Evaluation`.
 
-    ``method_or_model`` is a baseline (zero-velocity, linear, interpolation, cubic), a learned method's
+    ``method_or_model`` is a baseline (zero-velocity, linear, interpolation, cubic, velocity), a learned method's
     name (its shipped model) or a model folder; the baselines zero-velocity and interpolation are scored
     beside it unless ``baselines`` is False.
     """

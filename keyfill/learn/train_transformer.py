@@ -43,9 +43,9 @@ from keyfill.files import read_json_object
 from keyfill.learn import benchmark
 from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.facing import align_windows, global_pose
+from keyfill.learn.modelfile import load_state
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs, side_files
 from keyfill.learn.training import train as run_training
-from keyfill.learn.modelfile import load_state
 from keyfill.learn.transformer import (
     KIND,
     CompletionModel,

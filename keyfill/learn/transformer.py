@@ -6,8 +6,10 @@ Every missing frame is predicted in one forward pass (section 3 of the paper):
    loss): :func:`frame_kinds`. Unknown frames are pre-filled (``prefill``): by
    LERP of the root and SLERP of the local rotations between the nearest keys
    (``"interpolation"``, :func:`keyfill.learn.benchmark.interpolation`), or by
-   keyfill's C1 cubic spline through the keys, which carries the context's
-   velocity into the gap (``"cubic"``, :func:`keyfill.learn.benchmark.cubic`).
+   keyfill's C1 cubic spline through the keys (``"cubic"``,
+   :func:`keyfill.learn.benchmark.cubic`), or by the interpolation plus the
+   velocity of the given frames next to the gap, fading over a few frames
+   (``"velocity"``, :func:`keyfill.learn.benchmark.velocity`).
 2. Each frame becomes a feature vector (:class:`Features`): in ``global``
    coordinates (the paper's best variant) the normalised global positions and
    the global quaternions of all joints; in ``local`` coordinates the
@@ -80,7 +82,7 @@ TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transf
 
 
 #: the pre-fills a model can be trained with (:attr:`ModelConfig.prefill`)
-PREFILLS = ("interpolation", "cubic")
+PREFILLS = ("interpolation", "cubic", "velocity")
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,8 @@ class ModelConfig:
             the standard offsets, the positions the benchmark scores); 0 is the paper.
         facing_axis: the root's local forward axis, for the canonical frame.
         prefill: how unknown frames are filled before the network corrects them:
-            ``"interpolation"`` (LERP/SLERP, the paper) or ``"cubic"`` (C1 spline through the keys).
+            ``"interpolation"`` (LERP/SLERP, the paper), ``"cubic"`` (C1 spline through the keys) or
+            ``"velocity"`` (the interpolation plus the fading velocity of the given frames beside a gap).
     """
 
     coordinates: str = "global"

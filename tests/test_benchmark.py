@@ -208,6 +208,8 @@ def test_cli_evaluate_table_and_errors(walkers, capsys):
     assert main(["evaluate", "cubic", str(walkers), "--test-pattern", "*_calm_*", "--lengths", "5"]) == 0
     out = capsys.readouterr().out
     assert "cubic" in out and "zero-velocity" in out and "relative to interpolation" in out
+    assert main(["evaluate", "velocity", str(walkers), "--test-pattern", "*_calm_*", "--lengths", "5", "--json"]) == 0
+    assert "velocity" in json.loads(capsys.readouterr().out)["results"]
     assert main(["evaluate", "cubic", str(walkers), "--test-pattern", "*_calm_*", "--lengths", "50"]) == 2
     assert "keyfill: error: transition length 50 does not fit" in capsys.readouterr().err
     assert main(["evaluate", "nonsense", str(walkers)]) == 2

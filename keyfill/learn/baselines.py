@@ -149,13 +149,19 @@ def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, fr
 
     P = positions[k]  # (K, M, 3)
     d = np.diff(P, axis=0) / h[:, None, None]  # (K-1, M, 3) mean velocity per segment
-    pos = P[s] + U * (P[s + 1] - P[s]) + g_in * (d[before] - d[s]) + g_out * (d[s] - d[after])
-
+    pos = P[s] + U * (P[s + 1] - P[s])
     Q = rotations[k]  # each segment starts at its key's own sign, as SLERP does (rotation vectors ignore it)
     phi = R.quat_to_rotvec(R.quat_mul(R.quat_conjugate(Q[:-1]), Q[1:]))  # (K-1, N, 3)
     w_mean = phi / h[:, None, None]
-    end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi[s]), w_mean[after])  # (F, N, 3)
-    v = U * phi[s] + g_in * (w_mean[before] - w_mean[s]) + g_out * (w_mean[s] - end_tangent)
+    v = U * phi[s]
+    if has_in.any():
+        pos = pos + g_in * (d[before] - d[s])
+        v = v + g_in * (w_mean[before] - w_mean[s])
+    if has_out.any():  # the end tangent in the log map at the segment's first key, per segment
+        end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), w_mean[np.minimum(np.arange(K - 1) + 1,
+                                                                                                 K - 2)])
+        pos = pos + g_out * (d[s] - d[after])
+        v = v + g_out * (w_mean[s] - end_tangent[s])
     return R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v))), pos
 
 

@@ -188,6 +188,31 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
               resume=True)
 
 
+def test_settings_added_later_keep_older_checkpoints_resumable(corpus, tmp_path):
+    cfg = TrainConfig(**{**TINY_TRAINING.__dict__, "epochs": 1, "val_fraction": 0.0})
+    train(corpus, tmp_path / "m", TINY, cfg, seed=0)
+    saved = json.loads(torch.load(tmp_path / "m.checkpoint.pt", weights_only=True)["config"])
+    assert "model.prefill" not in saved and "model.rotation_weight" not in saved  # as checkpoints were before
+    more = TrainConfig(**{**cfg.__dict__, "epochs": 2})
+    train(corpus, tmp_path / "m", TINY, more, seed=0, resume=True)
+    velocity = T.ModelConfig(**{**TINY.__dict__, "prefill": "velocity"})
+    with pytest.raises(UsageError, match="prefill"):
+        train(corpus, tmp_path / "m", velocity, TrainConfig(**{**cfg.__dict__, "epochs": 3}), seed=0, resume=True)
+
+
+def test_rotation_weight_scales_the_quaternion_loss(corpus):
+    q, r, _, _ = corpus.windows(45, 20)
+    torch.manual_seed(0)
+    model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    x, y, gq, gr, kinds = make_batch(model, q[:4], r[:4], np.append(np.arange(10), 40), 45)
+    with torch.no_grad():
+        pred = model.network(x, kinds) + 0.01
+        one = T.losses(model.features, pred, y, gq, gr, kinds, TINY)
+        four = T.losses(model.features, pred, y, gq, gr, kinds, T.ModelConfig(**{**TINY.__dict__, "rotation_weight": 4.0}))
+    assert float(one["rotation"]) > 0
+    assert float(four["total"] - one["total"]) == pytest.approx(3 * float(one["rotation"]), rel=1e-5)
+
+
 def test_training_logs_validation_scores(trained):
     out, model = trained
     log = [json.loads(line) for line in out.with_name("tiny.log.jsonl").read_text().splitlines()]

@@ -60,6 +60,9 @@ from keyfill.learn.transformer import (
 )
 
 LAYOUTS = ("inbetween", "infill", "blend")
+#: model settings added after the first checkpoints were written, with the value that behaves as before: at
+#: that value they are left out of the settings a --resume compares, so an older checkpoint still resumes
+LATER_SETTINGS = {"prefill": "interpolation", "rotation_weight": 1.0}
 
 
 @dataclass(frozen=True)
@@ -290,7 +293,8 @@ class TransformerTask(TrainingTask):
         self.device = "cpu"
 
     def config(self) -> dict:
-        model = {f"model.{k}": v for k, v in dataclasses.asdict(self.model_cfg).items()}
+        model = {f"model.{k}": v for k, v in dataclasses.asdict(self.model_cfg).items()
+                 if LATER_SETTINGS.get(k, ...) != v}
         training = {f"training.{k}": v for k, v in dataclasses.asdict(self.cfg).items() if k != "epochs"}
         return {**model, **training, **({"init": self.info["init"]} if self.init is not None else {})}
 

@@ -95,6 +95,7 @@ class ModelConfig:
         max_frames: length of the learnable position embedding (longest window).
         residual: add the network's output to the pre-filled input.
         kinematics_weight: weight of the IK loss (global) or FK loss (local), Eq. 15.
+        rotation_weight: weight of the quaternion L1 loss (1: the paper's Eq. 15).
         fk_weight: global coordinates only: weight of an FK loss on the decoded
             output (positions by forward kinematics of the predicted rotations and
             the standard offsets, the positions the benchmark scores); 0 is the paper.
@@ -116,6 +117,7 @@ class ModelConfig:
     fk_weight: float = 0.0
     facing_axis: str = "+Y"
     prefill: str = "interpolation"
+    rotation_weight: float = 1.0
 
     def __post_init__(self):
         if self.coordinates not in ("global", "local"):
@@ -221,7 +223,7 @@ def losses(feat: Features, pred, target, gt_quats, gt_root, kinds, cfg: ModelCon
         "rotation": (rot_l * w).sum() / norm,
         "kinematics": (kin_l * w).sum() / norm,
     }
-    out["total"] = out["position"] + out["rotation"] + cfg.kinematics_weight * out["kinematics"]
+    out["total"] = out["position"] + cfg.rotation_weight * out["rotation"] + cfg.kinematics_weight * out["kinematics"]
     if cfg.fk_weight and feat.coordinates == "global":
         # FK of the decoded output: what the model's user (and L2P) gets.
         dq, droot = feat.decode(pred)

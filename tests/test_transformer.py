@@ -180,6 +180,12 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     assert T.load(tmp_path / "tuned").config.prefill == "cubic"
     with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
         T.ModelConfig(prefill="spline")
+    # a model of another skeleton is refused before any training, naming the difference
+    long_legs = tmp_path / "long_legs"
+    write_corpus(long_legs, styles=("a",), clips_per_style=2, frames=(90, 100), skeleton=walker_skeleton(leg_length=60.0))
+    with pytest.raises(UsageError, match="--init .*another skeleton than the training clips: .*Foot_L"):
+        train(load_corpus([long_legs], cache=False), tmp_path / "x", cubic, cfg, init=folder)
+    assert not (tmp_path / "x").exists()
     # a resumed run must start from the same model
     other = tmp_path / "other"
     train(corpus, other, TINY, cfg, seed=2)

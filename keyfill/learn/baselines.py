@@ -129,9 +129,9 @@ def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, fr
     So the curve leaves ``a`` (and reaches ``b``) with the given frames' velocity, which fades over
     about ``frames`` frames instead of lasting the whole gap: it moves the curve off the interpolation by
     at most ``frames`` frames' worth of the velocity difference, and the ``(1 - u)^2`` factor blends that
-    out by the other key, which is met exactly. As
-    ``frames`` grows it becomes the cubic Hermite curve with those end tangents (the basis terms
-    ``h * h10`` and ``-h * h11``); where no neighbouring frame is given it is the LERP/SLERP.
+    out by the other key, which is met exactly. As ``frames`` grows it becomes the cubic Hermite curve
+    with those end tangents (the basis terms ``h * h10`` and ``-h * h11``); where no neighbouring frame
+    is given it is the LERP/SLERP.
     """
     k = np.asarray(key_frames)
     F, K = len(rotations), len(k)
@@ -144,7 +144,8 @@ def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, fr
     has_out[:-1] = h[1:] == 1  # the frame after its last key is given
     g_in = np.where(has_in[s], frames * -np.expm1(-(f - k[s]) / frames) * (1 - u) ** 2, 0.0)[:, None, None]
     g_out = np.where(has_out[s], frames * -np.expm1(-(k[s + 1] - f) / frames) * u**2, 0.0)[:, None, None]
-    before, after = np.maximum(s - 1, 0), np.minimum(s + 1, K - 2)  # neighbouring segments (unused when absent)
+    seg = np.arange(K - 1)
+    prev, nxt = np.maximum(seg - 1, 0), np.minimum(seg + 1, K - 2)  # neighbouring segments (unused when absent)
     U = u[:, None, None]
 
     P = positions[k]  # (K, M, 3)
@@ -155,12 +156,11 @@ def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, fr
     w_mean = phi / h[:, None, None]
     v = U * phi[s]
     if has_in.any():
-        pos = pos + g_in * (d[before] - d[s])
-        v = v + g_in * (w_mean[before] - w_mean[s])
+        pos = pos + g_in * (d[prev[s]] - d[s])
+        v = v + g_in * (w_mean[prev[s]] - w_mean[s])
     if has_out.any():  # the end tangent in the log map at the segment's first key, per segment
-        end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), w_mean[np.minimum(np.arange(K - 1) + 1,
-                                                                                                 K - 2)])
-        pos = pos + g_out * (d[s] - d[after])
+        end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), w_mean[nxt])
+        pos = pos + g_out * (d[s] - d[nxt[s]])
         v = v + g_out * (w_mean[s] - end_tangent[s])
     return R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v))), pos
 

@@ -138,6 +138,16 @@ def interpolation(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray
     return _hold_outside(q, r, quats, root, k)
 
 
+def _spline_windows(spline, quats: np.ndarray, root: np.ndarray, keys, *args) -> tuple[np.ndarray, np.ndarray]:
+    """``spline(rotations (F, N, 4), positions (F, M, 3), keys, *args)`` of :mod:`keyfill.learn.baselines`
+    on all windows at once (every joint of every window a track), then keys copied and ends held as
+    :func:`interpolation` does."""
+    k = np.asarray(keys, dtype=np.int64)
+    B, T, J, _ = quats.shape
+    q, r = spline(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k, *args)
+    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
+
+
 def cubic(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
     """keyfill's C1 cubic spline through every given frame (:func:`keyfill.learn.baselines.cubic_arrays`).
 
@@ -147,10 +157,7 @@ def cubic(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) 
     """
     from keyfill.learn.baselines import cubic_arrays
 
-    k = np.asarray(keys, dtype=np.int64)
-    B, T, J, _ = quats.shape
-    q, r = cubic_arrays(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k)
-    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
+    return _spline_windows(cubic_arrays, quats, root, keys)
 
 
 #: frames over which :func:`velocity` lets the given frames' velocity fade (chosen on held-out styles,
@@ -161,13 +168,11 @@ VELOCITY_FRAMES = 3.0
 def velocity(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys,
              frames: float = VELOCITY_FRAMES) -> tuple[np.ndarray, np.ndarray]:
     """Interpolation that carries the velocity of given frames next to a gap into it, fading over
-    ``frames`` frames (:func:`keyfill.learn.baselines.velocity_arrays`); otherwise as :func:`cubic`."""
+    ``frames`` frames (:func:`keyfill.learn.baselines.velocity_arrays`); windows, keys and ends as
+    :func:`cubic`."""
     from keyfill.learn.baselines import velocity_arrays
 
-    k = np.asarray(keys, dtype=np.int64)
-    B, T, J, _ = quats.shape
-    q, r = velocity_arrays(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k, frames)
-    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
+    return _spline_windows(velocity_arrays, quats, root, keys, frames)
 
 
 BASELINES: dict[str, Method] = {"zero-velocity": zero_velocity, "interpolation": interpolation, "cubic": cubic,

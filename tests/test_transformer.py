@@ -180,6 +180,8 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     assert T.load(tmp_path / "tuned").config.prefill == "cubic"
     with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
         T.ModelConfig(prefill="spline")
+    with pytest.raises(ModelError, match="rotation_weight must be 0 or more"):
+        T.ModelConfig(rotation_weight=-1.0)
     # a model of another skeleton is refused before any training, naming the difference
     long_legs = tmp_path / "long_legs"
     write_corpus(long_legs, styles=("a",), clips_per_style=2, frames=(90, 100), skeleton=walker_skeleton(leg_length=60.0))

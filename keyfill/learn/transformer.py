@@ -127,6 +127,8 @@ class ModelConfig:
         axis_vector(self.facing_axis)
         if self.prefill not in PREFILLS:
             raise ModelError(f"prefill must be one of {', '.join(PREFILLS)}, not {self.prefill!r}")
+        if not isinstance(self.rotation_weight, int | float) or not 0 <= self.rotation_weight < float("inf"):
+            raise ModelError(f"rotation_weight must be 0 or more, not {self.rotation_weight!r}")
 
     def fill(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
         """Windows ``quats (B, T, J, 4)``, ``root (B, T, 3)`` pre-filled between ``keys`` (only keys are read)."""

@@ -421,6 +421,9 @@ def test_cli_train_transformer(corpus_dir, tmp_path, capsys):
     bad.write_text('{"model": {"layers": 2, "colour": 3}}')
     assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x"), "--config", str(bad)]) == 2
     assert "colour" in capsys.readouterr().err
+    bad.write_text('{"model": {"prefill": "spline"}}')  # a value the model refuses: the same kind of line
+    assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x"), "--config", str(bad)]) == 2
+    assert capsys.readouterr().err == f"keyfill: error: {bad}: prefill must be one of interpolation, cubic, velocity, not 'spline'\n"
     # an output that is not a model is refused before any training, and left alone
     (empty / "notes.txt").write_text("mine")
     assert main(["train", "transformer", str(corpus_dir), "-o", str(empty), "--config", str(config)]) == 2

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill.errors import DataError, UsageError
+from keyfill.errors import DataError, ModelError, UsageError
 from keyfill.files import read_json_object
 from keyfill.learn import benchmark
 from keyfill.learn.corpus import Corpus, find_mirror
@@ -121,7 +121,7 @@ def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfi
     try:
         model = ModelConfig(**data.get("model", {}))
         train = TrainConfig(**{k: tuple(v) if k == "val_lengths" else v for k, v in data.get("training", {}).items()})
-    except TypeError as e:
+    except (TypeError, ModelError) as e:
         raise UsageError(f"{path}: {e}") from None
     return model, train
 

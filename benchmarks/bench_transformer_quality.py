@@ -101,11 +101,8 @@ def main(argv=None) -> int:
     print(B.format_table(inbetween))
     print("\ntransformer / interpolation vs SSMCT / interpolation on LaFAN1 (goal: at most SSMCT's)")
     for m in ("L2Q", "L2P", "NPSS"):
-        cells = []
-        for n in B.LENGTHS:
-            ours = inbetween["transformer"][n][m] / inbetween["interpolation"][n][m]
-            cells.append(f"{n:>2}: {ours:.3f} vs {ssmct_ratio(m, n):.3f} {'met' if goal[m][n] else 'NOT met'}")
-        print(f"  {m:<5}" + "   ".join(cells))
+        print(f"  {m:<5}" + "   ".join(f"{n:>2}: {ratio[m][n]:.3f} vs {ssmct_ratio(m, n):.3f} "
+                                     f"{'met' if goal[m][n] else 'NOT met'}" for n in B.LENGTHS))
     print("\ntransformer / interpolation vs Qin et al. 2022 on LaFAN1 (issue 14's goal: at most Qin's)")
     for m in ("L2Q", "L2P", "NPSS"):
         print(f"  {m:<5}" + "   ".join(f"{n:>2}: {ratio[m][n]:.3f} vs {QIN[m][n]:.2f} {'met' if qin[m][n] else 'NOT met'}"

@@ -105,6 +105,27 @@ def test_sampled_layouts_fit_the_window():
     assert seen == {"inbetween", "infill", "blend"}
 
 
+def test_log_uniform_gap_sampling_trains_short_transitions_more_often():
+    def gaps(sampling):
+        rng = np.random.default_rng(1)
+        return np.array([sample_layout(rng, {"inbetween": 1}, 65, sampling)[2][-1] - 10 for _ in range(4000)])
+
+    uniform, log_uniform = gaps("uniform"), gaps("log-uniform")
+    for n in (uniform, log_uniform):
+        assert n.min() == 5 and n.max() == 54  # the same range
+    # P(n <= 15) is 11/50 = 0.22 uniform and sum(1/n, 5..15) / sum(1/n, 5..54) = 0.496 log-uniform
+    assert abs(np.mean(uniform <= 15) - 0.22) < 0.03 and abs(np.mean(log_uniform <= 15) - 0.496) < 0.03
+    # the default draws exactly as before the option existed (so older runs retrain to the same bytes)
+    rng, old = np.random.default_rng(2), np.random.default_rng(2)
+    for _ in range(50):
+        _, frames, keys = sample_layout(rng, {"inbetween": 1}, 65)
+        old.choice(1, p=[1.0])
+        n = int(old.integers(5, 55))
+        assert keys[-1] == 10 + n and frames == 11 + n + int(old.integers(0, min(5, 54 - n) + 1))
+    with pytest.raises(UsageError, match="gap_sampling 'short'; it is one of uniform, log-uniform"):
+        TrainConfig(gap_sampling="short")
+
+
 def test_canonical_frame_round_trip():
     rng = np.random.default_rng(3)
     q = R.quat_normalize(rng.normal(size=(3, 20, 4, 4)))
@@ -201,11 +222,16 @@ def test_settings_added_later_keep_older_checkpoints_resumable(corpus, tmp_path)
     train(corpus, tmp_path / "m", TINY, cfg, seed=0)
     saved = json.loads(torch.load(tmp_path / "m.checkpoint.pt", weights_only=True)["config"])
     assert "model.prefill" not in saved and "model.rotation_weight" not in saved  # as checkpoints were before
+    assert "training.gap_sampling" not in saved
+    assert "gap_sampling" not in json.loads((tmp_path / "m" / "config.json").read_text())["training"]["training"]
     more = TrainConfig(**{**cfg.__dict__, "epochs": 2})
     train(corpus, tmp_path / "m", TINY, more, seed=0, resume=True)
     velocity = T.ModelConfig(**{**TINY.__dict__, "prefill": "velocity"})
     with pytest.raises(UsageError, match="prefill"):
         train(corpus, tmp_path / "m", velocity, TrainConfig(**{**cfg.__dict__, "epochs": 3}), seed=0, resume=True)
+    log_gaps = TrainConfig(**{**cfg.__dict__, "epochs": 3, "gap_sampling": "log-uniform"})
+    with pytest.raises(UsageError, match="gap_sampling"):
+        train(corpus, tmp_path / "m", TINY, log_gaps, seed=0, resume=True)
 
 
 def test_rotation_weight_scales_the_quaternion_loss(corpus):

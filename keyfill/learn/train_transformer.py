@@ -8,6 +8,10 @@ One model learns every key layout at once: each batch draws a layout
 * ``infill``: a key every ``k`` frames (2 <= k <= 15);
 * ``blend``: a head and a tail of given frames (5-15 each) around a gap of 5-40.
 
+The gap lengths ``n`` of ``inbetween`` and ``blend`` are uniform over their
+range, or with ``gap_sampling: "log-uniform"`` drawn with probability
+proportional to ``1 / n``, which trains short transitions about twice as often.
+
 Windows (65 frames at offset 20 by default) come from the training clips of a
 :class:`~keyfill.learn.corpus.Corpus`; half of them are mirrored left-right
 where the skeleton allows; each is put in the model's canonical
@@ -60,9 +64,17 @@ from keyfill.learn.transformer import (
 )
 
 LAYOUTS = ("inbetween", "infill", "blend")
-#: model settings added after the first checkpoints were written, with the value that behaves as before: at
-#: that value they are left out of the settings a --resume compares, so an older checkpoint still resumes
-LATER_SETTINGS = {"prefill": "interpolation", "rotation_weight": 1.0}
+GAP_SAMPLING = ("uniform", "log-uniform")
+#: settings added after the first checkpoints were written, with the value that behaves as before: at that
+#: value they are left out of the settings a --resume compares and of the training settings a model records,
+#: so an older checkpoint still resumes and an older run retrains to the same files
+LATER_SETTINGS = {"model.prefill": "interpolation", "model.rotation_weight": 1.0, "training.gap_sampling": "uniform"}
+
+
+def recorded_settings(section: str, settings) -> dict:
+    """The fields of the dataclass ``settings`` under ``section`` ("model", "training"), less later
+    settings at their old value (:data:`LATER_SETTINGS`)."""
+    return {k: v for k, v in dataclasses.asdict(settings).items() if LATER_SETTINGS.get(f"{section}.{k}", ...) != v}
 
 
 @dataclass(frozen=True)
@@ -78,6 +90,7 @@ class TrainConfig:
         weight_decay: Adam's L2 penalty.
         window, window_offset: training windows cut from the clips.
         layouts: probability of each key layout per batch.
+        gap_sampling: how transition lengths are drawn, "uniform" or "log-uniform" (see the module).
         val_fraction: share of the training clips held out for validation.
         val_lengths: transition lengths scored after each epoch.
         grad_clip: clip the gradient norm (0: off).
@@ -95,6 +108,7 @@ class TrainConfig:
     window: int = 65
     window_offset: int = 20
     layouts: dict = field(default_factory=lambda: {"inbetween": 0.6, "infill": 0.2, "blend": 0.2})
+    gap_sampling: str = "uniform"
     val_fraction: float = 0.05
     val_lengths: tuple = (5, 15, 30, 45)
     grad_clip: float = 1.0
@@ -104,6 +118,8 @@ class TrainConfig:
         bad = set(self.layouts) - set(LAYOUTS)
         if bad:
             raise UsageError(f"unknown key layout {min(bad)!r}; layouts are {', '.join(LAYOUTS)}")
+        if self.gap_sampling not in GAP_SAMPLING:
+            raise UsageError(f"unknown gap_sampling {self.gap_sampling!r}; it is one of {', '.join(GAP_SAMPLING)}")
         if self.window < 2 * benchmark.N_PAST + 1:
             raise UsageError(f"training windows of {self.window} frames are too short (at least 21)")
         if self.epochs < 1 or self.batch_size < 1:
@@ -163,14 +179,23 @@ def weights_sha256(path: str | os.PathLike) -> str:
 # --- layouts and batches ---------------------------------------------------------------
 
 
-def sample_layout(rng: np.random.Generator, layouts: dict, max_frames: int) -> tuple[str, int, np.ndarray]:
+def draw_gap(rng: np.random.Generator, low: int, high: int, sampling: str) -> int:
+    """A transition length in ``[low, high]`` frames: uniform, or with probability proportional to ``1 / n``."""
+    if sampling == "uniform":
+        return int(rng.integers(low, high + 1))
+    p = 1.0 / np.arange(low, high + 1)
+    return low + int(rng.choice(len(p), p=p / p.sum()))
+
+
+def sample_layout(rng: np.random.Generator, layouts: dict, max_frames: int,
+                  gap_sampling: str = "uniform") -> tuple[str, int, np.ndarray]:
     """Draw ``(name, frames T, keys)`` of one key layout that fits ``max_frames``."""
     names = list(layouts)
     p = np.asarray([layouts[n] for n in names], dtype=np.float64)
     name = names[int(rng.choice(len(names), p=p / p.sum()))]
     past = benchmark.N_PAST
     if name == "inbetween":
-        n = int(rng.integers(5, max_frames - past - 1 + 1))
+        n = draw_gap(rng, 5, max_frames - past - 1, gap_sampling)
         extra = int(rng.integers(0, min(5, max_frames - past - 1 - n) + 1))
         keys = np.append(np.arange(past), past + n)
         return name, past + n + 1 + extra, keys
@@ -179,7 +204,7 @@ def sample_layout(rng: np.random.Generator, layouts: dict, max_frames: int) -> t
         m = int(rng.integers(2, (max_frames - 1) // k + 1))
         return name, m * k + 1, np.arange(0, m * k + 1, k)
     head, tail = int(rng.integers(5, 16)), int(rng.integers(5, 16))
-    gap = int(rng.integers(5, min(40, max_frames - head - tail) + 1))
+    gap = draw_gap(rng, 5, min(40, max_frames - head - tail), gap_sampling)
     T = head + gap + tail
     return name, T, np.concatenate([np.arange(head), np.arange(head + gap, T)])
 
@@ -293,9 +318,8 @@ class TransformerTask(TrainingTask):
         self.device = "cpu"
 
     def config(self) -> dict:
-        model = {f"model.{k}": v for k, v in dataclasses.asdict(self.model_cfg).items()
-                 if LATER_SETTINGS.get(k, ...) != v}
-        training = {f"training.{k}": v for k, v in dataclasses.asdict(self.cfg).items() if k != "epochs"}
+        model = {f"model.{k}": v for k, v in recorded_settings("model", self.model_cfg).items()}
+        training = {f"training.{k}": v for k, v in recorded_settings("training", self.cfg).items() if k != "epochs"}
         return {**model, **training, **({"init": self.info["init"]} if self.init is not None else {})}
 
     def fingerprint(self) -> str:
@@ -343,7 +367,7 @@ class TransformerTask(TrainingTask):
         torch.manual_seed(int(rng.integers(2**62)))
         order = rng.permutation(len(self.data.quats))
         for step in range(self.steps(epoch)):
-            _, T, keys = sample_layout(rng, cfg.layouts, cfg.window)
+            _, T, keys = sample_layout(rng, cfg.layouts, cfg.window, cfg.gap_sampling)
             idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
             wq, wr = self.data.quats[idx, :T], self.data.root[idx, :T]
             if self.mirror is not None:
@@ -375,7 +399,8 @@ class TransformerTask(TrainingTask):
     def save(self, output, nets, history):
         final = {k: v for k, v in (history[-1] if history else {}).items()
                  if k not in ("seconds", "cpu_seconds")}  # files stay reproducible
-        self.model.info.update({"epochs": self.cfg.epochs, "training": dataclasses.asdict(self.cfg), "final": final})
+        self.model.info.update({"epochs": self.cfg.epochs, "training": recorded_settings("training", self.cfg),
+                                "final": final})
         self.model.save(output)
         return self.model
 

@@ -13,7 +13,14 @@ from keyfill.cli.main import main
 from keyfill.errors import ModelError, UsageError
 from keyfill.learn import transformer as T
 from keyfill.learn.corpus import load_corpus
-from keyfill.learn.train_transformer import TrainConfig, learning_rate, make_batch, sample_layout, train
+from keyfill.learn.train_transformer import (
+    TrainConfig,
+    TransformerTask,
+    learning_rate,
+    make_batch,
+    sample_layout,
+    train,
+)
 
 TINY = T.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0, max_frames=65)
 TINY_TRAINING = TrainConfig(epochs=2, batch_size=16, lr=2e-3, warmup_epochs=0.2, decay_every=1, window=65,
@@ -222,7 +229,7 @@ def test_settings_added_later_keep_older_checkpoints_resumable(corpus, tmp_path)
     train(corpus, tmp_path / "m", TINY, cfg, seed=0)
     saved = json.loads(torch.load(tmp_path / "m.checkpoint.pt", weights_only=True)["config"])
     assert "model.prefill" not in saved and "model.rotation_weight" not in saved  # as checkpoints were before
-    assert "training.gap_sampling" not in saved
+    assert "training.gap_sampling" not in saved and "training.relative_loss" not in saved
     assert "gap_sampling" not in json.loads((tmp_path / "m" / "config.json").read_text())["training"]["training"]
     more = TrainConfig(**{**cfg.__dict__, "epochs": 2})
     train(corpus, tmp_path / "m", TINY, more, seed=0, resume=True)
@@ -232,6 +239,25 @@ def test_settings_added_later_keep_older_checkpoints_resumable(corpus, tmp_path)
     log_gaps = TrainConfig(**{**cfg.__dict__, "epochs": 3, "gap_sampling": "log-uniform"})
     with pytest.raises(UsageError, match="gap_sampling"):
         train(corpus, tmp_path / "m", TINY, log_gaps, seed=0, resume=True)
+
+
+def test_relative_loss_divides_each_batch_by_the_prefill_loss(corpus):
+    def first_step(relative):
+        cfg = TrainConfig(**{**TINY_TRAINING.__dict__, "val_fraction": 0.0, "relative_loss": relative})
+        task = TransformerTask(corpus, TINY, cfg, seed=0)
+        torch.manual_seed(0)
+        task.build(None)
+        batch = next(task.batches(0))
+        minimised = []
+        logged, _ = task.step(batch, lambda name, loss: minimised.append(float(loss.detach())))
+        return task, batch, logged, minimised[0]
+
+    _, _, logged_abs, absolute = first_step(False)
+    task, (x, y, gq, gr, kinds), logged_rel, relative = first_step(True)
+    prefill = float(T.losses(task.model.features, x, y, gq, gr, kinds, TINY)["total"])
+    assert 0 < prefill and absolute == pytest.approx(logged_abs["total"])
+    assert relative == pytest.approx(absolute / prefill, rel=1e-5)
+    assert logged_rel == pytest.approx(logged_abs)  # the log stays absolute
 
 
 def test_rotation_weight_scales_the_quaternion_loss(corpus):

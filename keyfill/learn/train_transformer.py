@@ -68,7 +68,8 @@ GAP_SAMPLING = ("uniform", "log-uniform")
 #: settings added after the first checkpoints were written, with the value that behaves as before: at that
 #: value they are left out of the settings a --resume compares and of the training settings a model records,
 #: so an older checkpoint still resumes and an older run retrains to the same files
-LATER_SETTINGS = {"model.prefill": "interpolation", "model.rotation_weight": 1.0, "training.gap_sampling": "uniform"}
+LATER_SETTINGS = {"model.prefill": "interpolation", "model.rotation_weight": 1.0, "training.gap_sampling": "uniform",
+                  "training.relative_loss": False}
 
 
 def recorded_settings(section: str, settings) -> dict:
@@ -91,6 +92,9 @@ class TrainConfig:
         window, window_offset: training windows cut from the clips.
         layouts: probability of each key layout per batch.
         gap_sampling: how transition lengths are drawn, "uniform" or "log-uniform" (see the module).
+        relative_loss: minimise each batch's loss divided by the pre-fill's loss on that batch (a ratio, as
+            the benchmark scores), so that short gaps, whose absolute errors are several times smaller than
+            long ones', pull as hard on the weights; the logged losses stay absolute.
         val_fraction: share of the training clips held out for validation.
         val_lengths: transition lengths scored after each epoch.
         grad_clip: clip the gradient norm (0: off).
@@ -109,6 +113,7 @@ class TrainConfig:
     window_offset: int = 20
     layouts: dict = field(default_factory=lambda: {"inbetween": 0.6, "infill": 0.2, "blend": 0.2})
     gap_sampling: str = "uniform"
+    relative_loss: bool = False
     val_fraction: float = 0.05
     val_lengths: tuple = (5, 15, 30, 45)
     grad_clip: float = 1.0
@@ -382,7 +387,14 @@ class TransformerTask(TrainingTask):
     def step(self, batch, update):
         x, y, gq, gr, kinds = batch
         out = losses(self.model.features, self.model.network(x, kinds), y, gq, gr, kinds, self.model_cfg)
-        update("network", out["total"])
+        if self.cfg.relative_loss:
+            import torch
+
+            with torch.no_grad():  # the pre-filled input x scored as if it were the output
+                prefill = losses(self.model.features, x, y, gq, gr, kinds, self.model_cfg)["total"]
+            update("network", out["total"] / prefill.clamp(min=1e-8))
+        else:
+            update("network", out["total"])
         return {k: float(v.detach()) for k, v in out.items()}, 1  # every step is a whole batch: equal weights
 
     def validate(self, epoch):

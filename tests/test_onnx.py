@@ -35,7 +35,7 @@ def relative_error(a, b) -> float:
     return float(np.abs(np.asarray(a) - np.asarray(b)).max() / max(np.abs(np.asarray(b)).max(), 1e-12))
 
 
-def random_transformer(folder: Path, seed: int):
+def random_transformer(folder: Path, seed: int, **settings):
     """A tiny transformer model folder with random weights (every layer, the zero-initialised output too)."""
     import torch
 
@@ -45,7 +45,7 @@ def random_transformer(folder: Path, seed: int):
     motion = walker_motion(skeleton, 60, np.random.default_rng(seed))
     with torch.random.fork_rng():
         torch.manual_seed(seed)
-        model = T.new_model(skeleton, T.ModelConfig(**TINY), np.zeros(skeleton.num_joints * 3),
+        model = T.new_model(skeleton, T.ModelConfig(**TINY, **settings), np.zeros(skeleton.num_joints * 3),
                             np.full(skeleton.num_joints * 3, 30.0), folded=False)
         with torch.no_grad():
             for p in model.network.parameters():
@@ -70,12 +70,21 @@ def lamp_graph(tmp_path_factory, one_torch_thread):
     return out
 
 
-def test_transformer_graph_equals_torch_on_random_inputs(transformer):
+@pytest.fixture(scope="module")
+def transformer_with_key_distances(tmp_path_factory, one_torch_thread):
+    folder = tmp_path_factory.mktemp("tf-kd") / "model"
+    random_transformer(folder, 2, key_distances=True)
+    assert main(["export", str(folder)]) == 0
+    return folder, None
+
+
+@pytest.mark.parametrize("which", ["transformer", "transformer_with_key_distances"])
+def test_transformer_graph_equals_torch_on_random_inputs(which, request):
     import torch
 
     from keyfill.learn import transformer as T
 
-    folder, _ = transformer
+    folder, _ = request.getfixturevalue(which)
     model = T.load(folder)
     graph = kx.Graph(folder / kx.GRAPH)
     rng = np.random.default_rng(1)

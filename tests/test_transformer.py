@@ -133,6 +133,13 @@ def test_log_uniform_gap_sampling_trains_short_transitions_more_often():
         TrainConfig(gap_sampling="short")
 
 
+def test_key_distances_count_frames_to_the_keys_on_each_side():
+    kinds = torch.as_tensor(np.stack([T.frame_kinds(12, [0, 1, 2, 7, 10]), T.frame_kinds(12, [3, 4])]))
+    since, until = T.key_distances(kinds, 9)
+    assert since.tolist() == [[0, 0, 0, 1, 2, 3, 4, 0, 1, 2, 0, 1], [9, 9, 9, 0, 0, 1, 2, 3, 4, 5, 6, 7]]
+    assert until.tolist() == [[0, 0, 0, 4, 3, 2, 1, 0, 2, 1, 0, 9], [3, 2, 1, 0, 0, 9, 9, 9, 9, 9, 9, 9]]
+
+
 def test_canonical_frame_round_trip():
     rng = np.random.default_rng(3)
     q = R.quat_normalize(rng.normal(size=(3, 20, 4, 4)))
@@ -206,6 +213,14 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     _, ir = model.complete_windows(q[:2], r[:2], keys)
     assert np.abs(cr - ir).max() > 1e-3  # the pre-fill reaches the output
     assert T.load(tmp_path / "tuned").config.prefill == "cubic"
+    # key-distance embeddings start at zero: a model tuned with them starts as the one without
+    with_distances = T.ModelConfig(**{**TINY.__dict__, "key_distances": True})
+    distances = train(corpus, tmp_path / "distances", with_distances, cfg, seed=1, init=folder)
+    _, dr = distances.complete_windows(q[:2], r[:2], keys)
+    _, mr = model.complete_windows(q[:2], r[:2], keys)
+    np.testing.assert_allclose(dr, mr, atol=1e-4)
+    assert T.load(tmp_path / "distances").config.key_distances
+    assert "since_key.weight" in distances.network.state_dict()
     with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
         T.ModelConfig(prefill="spline")
     with pytest.raises(ModelError, match="rotation_weight must be 0 or more"):
@@ -230,7 +245,9 @@ def test_settings_added_later_keep_older_checkpoints_resumable(corpus, tmp_path)
     saved = json.loads(torch.load(tmp_path / "m.checkpoint.pt", weights_only=True)["config"])
     assert "model.prefill" not in saved and "model.rotation_weight" not in saved  # as checkpoints were before
     assert "training.gap_sampling" not in saved and "training.relative_loss" not in saved
-    assert "gap_sampling" not in json.loads((tmp_path / "m" / "config.json").read_text())["training"]["training"]
+    written = json.loads((tmp_path / "m" / "config.json").read_text())
+    assert "gap_sampling" not in written["training"]["training"]
+    assert {"prefill", "rotation_weight", "key_distances"}.isdisjoint(written["architecture"])
     more = TrainConfig(**{**cfg.__dict__, "epochs": 2})
     train(corpus, tmp_path / "m", TINY, more, seed=0, resume=True)
     velocity = T.ModelConfig(**{**TINY.__dict__, "prefill": "velocity"})

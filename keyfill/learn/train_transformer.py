@@ -52,6 +52,7 @@ from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_out
 from keyfill.learn.training import train as run_training
 from keyfill.learn.transformer import (
     KIND,
+    LATER_ARCHITECTURE,
     CompletionModel,
     ModelConfig,
     apply_transform,
@@ -68,8 +69,8 @@ GAP_SAMPLING = ("uniform", "log-uniform")
 #: settings added after the first checkpoints were written, with the value that behaves as before: at that
 #: value they are left out of the settings a --resume compares and of the training settings a model records,
 #: so an older checkpoint still resumes and an older run retrains to the same files
-LATER_SETTINGS = {"model.prefill": "interpolation", "model.rotation_weight": 1.0, "training.gap_sampling": "uniform",
-                  "training.relative_loss": False}
+LATER_SETTINGS = {**{f"model.{k}": v for k, v in LATER_ARCHITECTURE.items()},
+                  "training.gap_sampling": "uniform", "training.relative_loss": False}
 
 
 def recorded_settings(section: str, settings) -> dict:
@@ -347,7 +348,12 @@ class TransformerTask(TrainingTask):
                                                                            self.init.features.pos_std)
         self.model = new_model(self.corpus.skeleton, self.model_cfg, mean, std, self.corpus.folded, self.info)
         if self.init is not None:
-            load_state(self.model.network, self.init.network.state_dict(), self.info["init"]["model"])
+            start = self.init.network.state_dict()
+            if self.model_cfg.key_distances and not self.init.config.key_distances:
+                # the new embeddings keep their zeros: the run starts as the model it tunes
+                start.update({k: v for k, v in self.model.network.state_dict().items()
+                              if k.split(".")[0] in ("since_key", "until_key")})
+            load_state(self.model.network, start, self.info["init"]["model"])
         self.model.to(self.device)
         return {"network": self.model.network}
 

@@ -16,7 +16,8 @@ Every missing frame is predicted in one forward pass (section 3 of the paper):
    normalised root position and the local quaternions.
 3. A Conv1d (kernel 3) turns the sequence into tokens; the *mixture embedding*
    (a learnable position embedding plus a learnable keyframe embedding chosen
-   by the frame's kind) is added; a BERT encoder (``torch.nn.TransformerEncoder``,
+   by the frame's kind; with ``key_distances`` also learnable embeddings of the
+   frames since the last key and until the next) is added; a BERT encoder (``torch.nn.TransformerEncoder``,
    post-norm, GELU; 8 layers, d_model 256, FFN 512, 8 heads by default)
    processes all frames; a Conv1d (kernel 3) maps back to features. With
    ``residual`` (keyfill's default) that output is added to the pre-filled input,
@@ -83,6 +84,9 @@ TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transf
 
 #: the pre-fills a model can be trained with (:attr:`ModelConfig.prefill`)
 PREFILLS = ("interpolation", "cubic", "velocity")
+#: architecture settings added after the first models were written, with the value that behaves as before: at
+#: that value they are left out of a model's ``config.json``, so older runs retrain to the same bytes
+LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
 
 
 @dataclass(frozen=True)
@@ -103,6 +107,10 @@ class ModelConfig:
         prefill: how unknown frames are filled before the network corrects them:
             ``"interpolation"`` (LERP/SLERP, the paper), ``"cubic"`` (C1 spline through the keys) or
             ``"velocity"`` (the interpolation plus the fading velocity of the given frames beside a gap).
+        key_distances: add learnable embeddings of each frame's distance in frames to the previous and
+            the next key (the "time to arrival" of Harvey et al. 2020), so the network reads a gap's length
+            and its place in it directly. They start at zero: a model fine-tuned with them from one
+            without starts as that model.
     """
 
     coordinates: str = "global"
@@ -118,6 +126,7 @@ class ModelConfig:
     facing_axis: str = "+Y"
     prefill: str = "interpolation"
     rotation_weight: float = 1.0
+    key_distances: bool = False
 
     def __post_init__(self):
         if self.coordinates not in ("global", "local"):
@@ -151,6 +160,11 @@ def _torch_module():
             self.input = nn.Conv1d(features, cfg.d_model, kernel_size=3, padding=1)
             self.position = nn.Embedding(cfg.max_frames, cfg.d_model)
             self.keyframe = nn.Embedding(3, cfg.d_model)
+            if cfg.key_distances:
+                self.since_key = nn.Embedding(cfg.max_frames, cfg.d_model)
+                self.until_key = nn.Embedding(cfg.max_frames, cfg.d_model)
+                nn.init.zeros_(self.since_key.weight)
+                nn.init.zeros_(self.until_key.weight)
             layer = nn.TransformerEncoderLayer(
                 cfg.d_model, cfg.heads, cfg.ffn, cfg.dropout, activation="gelu", batch_first=True
             )
@@ -164,7 +178,11 @@ def _torch_module():
             """The mixture embedding ``(B, T, d_model)`` of frame kinds ``(B, T)``."""
             T = kinds.shape[-1]
             pos = torch.arange(T, device=kinds.device)
-            return self.position(pos) + self.keyframe(kinds)
+            out = self.position(pos) + self.keyframe(kinds)
+            if self.cfg.key_distances:
+                since, until = key_distances(kinds, self.cfg.max_frames - 1)
+                out = out + self.since_key(since) + self.until_key(until)
+            return out
 
         def forward(self, x, kinds):
             """``x (B, T, F)`` pre-filled features, ``kinds (B, T)`` -> ``(B, T, F)`` completed features."""
@@ -177,6 +195,21 @@ def _torch_module():
             return x + y if self.cfg.residual else y
 
     return MotionTransformer
+
+
+def key_distances(kinds, limit: int):
+    """``(since, until)``, each ``(B, T)`` int64: frames from the last key at or before each frame and to the
+    next key at or after it (0 on a key), ``limit`` where there is none or it is farther (torch)."""
+    import torch
+
+    T = kinds.shape[-1]
+    t = torch.arange(T, device=kinds.device)
+    d = t[:, None] - t[None, :]  # (T, T): frame i minus frame j
+    key = (kinds == KEY)[:, None, :]  # (B, 1, T): frame j is a key
+    far = torch.full((), limit, dtype=d.dtype, device=d.device)
+    since = torch.where(key & (d >= 0), d, far).amin(-1).clamp(max=limit)
+    until = torch.where(key & (d <= 0), -d, far).amin(-1).clamp(max=limit)
+    return since, until
 
 
 def build_network(features: int, cfg: ModelConfig):
@@ -327,7 +360,8 @@ class CompletionModel:
 
         s = self.skeleton
         return {
-            "architecture": dataclasses.asdict(self.config),
+            "architecture": {k: v for k, v in dataclasses.asdict(self.config).items()
+                             if LATER_ARCHITECTURE.get(k, ...) != v},
             "skeleton": {**skeleton_to_json(s), "channels": [list(c) for c in s.channels],
                          "up_axis": s.up_axis, "meters_per_unit": s.meters_per_unit},
             "folded_root": self.folded,

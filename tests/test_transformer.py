@@ -493,6 +493,12 @@ def test_cli_train_transformer(corpus_dir, tmp_path, capsys):
     bad.write_text('{"model": {"prefill": "spline"}}')  # a value the model refuses: the same kind of line
     assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x"), "--config", str(bad)]) == 2
     assert capsys.readouterr().err == f"keyfill: error: {bad}: prefill must be one of interpolation, cubic, velocity, not 'spline'\n"
+    for text, message in (('{"training": {"gap_sampling": "short"}}', "unknown gap_sampling 'short'"),
+                          ('{"training": {"relative_loss": 3}}', "relative_loss must be true or false, not 3"),
+                          ('{"model": {"key_distances": "yes"}}', "key_distances must be true or false, not 'yes'")):
+        bad.write_text(text)
+        assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "x"), "--config", str(bad)]) == 2
+        assert capsys.readouterr().err.startswith(f"keyfill: error: {bad}: {message}")
     # an output that is not a model is refused before any training, and left alone
     (empty / "notes.txt").write_text("mine")
     assert main(["train", "transformer", str(corpus_dir), "-o", str(empty), "--config", str(config)]) == 2

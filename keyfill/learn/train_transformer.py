@@ -126,6 +126,8 @@ class TrainConfig:
             raise UsageError(f"unknown key layout {min(bad)!r}; layouts are {', '.join(LAYOUTS)}")
         if self.gap_sampling not in GAP_SAMPLING:
             raise UsageError(f"unknown gap_sampling {self.gap_sampling!r}; it is one of {', '.join(GAP_SAMPLING)}")
+        if not isinstance(self.relative_loss, bool):
+            raise UsageError(f"relative_loss must be true or false, not {self.relative_loss!r}")
         if self.window < 2 * benchmark.N_PAST + 1:
             raise UsageError(f"training windows of {self.window} frames are too short (at least 21)")
         if self.epochs < 1 or self.batch_size < 1:
@@ -143,7 +145,7 @@ def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfi
     try:
         model = ModelConfig(**data.get("model", {}))
         train = TrainConfig(**{k: tuple(v) if k == "val_lengths" else v for k, v in data.get("training", {}).items()})
-    except (TypeError, ModelError) as e:
+    except (TypeError, ModelError, UsageError) as e:
         raise UsageError(f"{path}: {e}") from None
     return model, train
 

@@ -138,6 +138,8 @@ class ModelConfig:
             raise ModelError(f"prefill must be one of {', '.join(PREFILLS)}, not {self.prefill!r}")
         if not isinstance(self.rotation_weight, int | float) or not 0 <= self.rotation_weight < float("inf"):
             raise ModelError(f"rotation_weight must be 0 or more, not {self.rotation_weight!r}")
+        if not isinstance(self.key_distances, bool):
+            raise ModelError(f"key_distances must be true or false, not {self.key_distances!r}")
 
     def fill(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
         """Windows ``quats (B, T, J, 4)``, ``root (B, T, 3)`` pre-filled between ``keys`` (only keys are read)."""

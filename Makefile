@@ -77,8 +77,8 @@ gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-part
 
 # The shipped transformer (docs/transformer.md), in two steps, one thread each: the base model, the
 # benchmark's config with the SLERP pre-fill (about 3 hours of one core of the project's VM, 2.9 h
-# measured), then 8 epochs from it with the velocity pre-fill (about 25 minutes). Interrupted, each
-# continues from its checkpoint.
+# measured), then 8 epochs from it with the velocity pre-fill and a falling rate (about 23 minutes).
+# Interrupted, each continues from its checkpoint.
 TRANSFORMER_TRAIN = $(BIN)/keyfill train transformer $(BANDAI2) --exclude '*_normal_*' --seed 0 --threads 1
 
 $(MODELS)/base/bandai2-transformer/weights.safetensors: | $(BANDAI2)

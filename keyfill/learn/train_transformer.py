@@ -52,7 +52,6 @@ from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_out
 from keyfill.learn.training import train as run_training
 from keyfill.learn.transformer import (
     KIND,
-    LATER_ARCHITECTURE,
     CompletionModel,
     ModelConfig,
     apply_transform,
@@ -66,17 +65,11 @@ from keyfill.learn.transformer import (
 
 LAYOUTS = ("inbetween", "infill", "blend")
 GAP_SAMPLING = ("uniform", "log-uniform")
-#: settings added after the first checkpoints were written, with the value that behaves as before: at that
-#: value they are left out of the settings a --resume compares and of the training settings a model records,
-#: so an older checkpoint still resumes and an older run retrains to the same files
-LATER_SETTINGS = {**{f"model.{k}": v for k, v in LATER_ARCHITECTURE.items()},
-                  "training.gap_sampling": "uniform", "training.relative_loss": False}
-
-
-def recorded_settings(section: str, settings) -> dict:
-    """The fields of the dataclass ``settings`` under ``section`` ("model", "training"), less later
-    settings at their old value (:data:`LATER_SETTINGS`)."""
-    return {k: v for k, v in dataclasses.asdict(settings).items() if LATER_SETTINGS.get(f"{section}.{k}", ...) != v}
+#: training settings added after the first checkpoints were written, with the value that behaves as before: at
+#: that value they are left out of what --resume compares and of the settings a model records, so an older
+#: checkpoint still resumes and an older run retrains to the same files (as
+#: :data:`keyfill.learn.transformer.LATER_ARCHITECTURE` for the model's settings)
+LATER_TRAINING = {"gap_sampling": "uniform", "relative_loss": False}
 
 
 @dataclass(frozen=True)
@@ -119,6 +112,10 @@ class TrainConfig:
     val_lengths: tuple = (5, 15, 30, 45)
     grad_clip: float = 1.0
     mirror: bool = True
+
+    def recorded(self) -> dict:
+        """The settings a model file and a checkpoint record: all but later ones at their old value."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if LATER_TRAINING.get(k, ...) != v}
 
     def __post_init__(self):
         bad = set(self.layouts) - set(LAYOUTS)
@@ -326,8 +323,8 @@ class TransformerTask(TrainingTask):
         self.device = "cpu"
 
     def config(self) -> dict:
-        model = {f"model.{k}": v for k, v in recorded_settings("model", self.model_cfg).items()}
-        training = {f"training.{k}": v for k, v in recorded_settings("training", self.cfg).items() if k != "epochs"}
+        model = {f"model.{k}": v for k, v in self.model_cfg.recorded().items()}
+        training = {f"training.{k}": v for k, v in self.cfg.recorded().items() if k != "epochs"}
         return {**model, **training, **({"init": self.info["init"]} if self.init is not None else {})}
 
     def fingerprint(self) -> str:
@@ -419,8 +416,7 @@ class TransformerTask(TrainingTask):
     def save(self, output, nets, history):
         final = {k: v for k, v in (history[-1] if history else {}).items()
                  if k not in ("seconds", "cpu_seconds")}  # files stay reproducible
-        self.model.info.update({"epochs": self.cfg.epochs, "training": recorded_settings("training", self.cfg),
-                                "final": final})
+        self.model.info.update({"epochs": self.cfg.epochs, "training": self.cfg.recorded(), "final": final})
         self.model.save(output)
         return self.model
 

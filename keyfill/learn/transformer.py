@@ -85,7 +85,8 @@ TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transf
 #: the pre-fills a model can be trained with (:attr:`ModelConfig.prefill`)
 PREFILLS = ("interpolation", "cubic", "velocity")
 #: architecture settings added after the first models were written, with the value that behaves as before: at
-#: that value they are left out of a model's ``config.json``, so older runs retrain to the same bytes
+#: that value they are left out of a model's ``config.json`` and of what ``--resume`` compares, so older runs
+#: resume and retrain to the same bytes (:meth:`ModelConfig.recorded`)
 LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
 
 
@@ -140,6 +141,10 @@ class ModelConfig:
             raise ModelError(f"rotation_weight must be 0 or more, not {self.rotation_weight!r}")
         if not isinstance(self.key_distances, bool):
             raise ModelError(f"key_distances must be true or false, not {self.key_distances!r}")
+
+    def recorded(self) -> dict:
+        """The settings a model file and a checkpoint record: all but later ones at their old value."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if LATER_ARCHITECTURE.get(k, ...) != v}
 
     def fill(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
         """Windows ``quats (B, T, J, 4)``, ``root (B, T, 3)`` pre-filled between ``keys`` (only keys are read)."""
@@ -362,8 +367,7 @@ class CompletionModel:
 
         s = self.skeleton
         return {
-            "architecture": {k: v for k, v in dataclasses.asdict(self.config).items()
-                             if LATER_ARCHITECTURE.get(k, ...) != v},
+            "architecture": self.config.recorded(),
             "skeleton": {**skeleton_to_json(s), "channels": [list(c) for c in s.channels],
                          "up_axis": s.up_axis, "meters_per_unit": s.meters_per_unit},
             "folded_root": self.folded,

@@ -77,7 +77,7 @@ gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-part
 
 # The shipped transformer (docs/transformer.md), in two steps, one thread each: the base model, the
 # benchmark's config with the SLERP pre-fill (about 3 hours of one core of the project's VM, 2.9 h
-# measured), then 8 epochs from it with the velocity pre-fill and a falling rate (about 23 minutes).
+# measured), then 24 epochs from it with the velocity pre-fill and a falling rate (66 minutes measured).
 # Interrupted, each continues from its checkpoint.
 TRANSFORMER_TRAIN = $(BIN)/keyfill train transformer $(BANDAI2) --exclude '*_normal_*' --seed 0 --threads 1
 

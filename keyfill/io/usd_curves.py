@@ -197,33 +197,36 @@ def from_stage(stage, motion: Motion, label) -> Curves:
     in_tan = np.empty((K, C, 2))
     out_tan = np.empty((K, C, 2))
     broken = np.zeros((K, C), dtype=bool)
-    for i, (curve_type, knots) in enumerate(per_control):
-        for k, knot in enumerate(knots):
-            if knot.IsDualValued():
-                raise FormatError(
-                    f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label
-                )
-            values[k, i] = float(knot.GetValue())
-            pre = np.array([knot.GetPreTanWidth(), knot.GetPreTanSlope()], dtype=np.float64)
-            post = np.array([knot.GetPostTanWidth(), knot.GetPostTanSlope()], dtype=np.float64)
-            if curve_type == Ts.CurveTypeHermite:
-                pre[0] = seg[k - 1] / 3 if k > 0 else seg[0] / 3
-                post[0] = seg[k] / 3 if k < K - 1 else seg[-1] / 3
-            in_tan[k, i] = pre[0], pre[0] * pre[1]
-            out_tan[k, i] = post[0], post[0] * post[1]
-            flag = knot.GetCustomData().get("broken")  # GetCustomDataByKey segfaults on a missing key (usd-core 26.11)
-            broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9, atol=1e-12)
-        for k, knot in enumerate(knots[:-1]):
-            interp = knot.GetNextInterpolation()
-            if interp == Ts.InterpLinear:
-                rise = (values[k + 1, i] - values[k, i]) / 3
-                out_tan[k, i] = seg[k] / 3, rise
-                in_tan[k + 1, i] = seg[k] / 3, rise
-                broken[k, i] = broken[k + 1, i] = True
-            elif interp != Ts.InterpCurve:
-                raise FormatError(
-                    f"curve {names[i]} holds its value after {times[k]:g}; keyfill curves are Bezier", label
-                )
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge width or slope: Curves rejects what is not finite
+        for i, (curve_type, knots) in enumerate(per_control):
+            for k, knot in enumerate(knots):
+                if knot.IsDualValued():
+                    raise FormatError(
+                        f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label
+                    )
+                values[k, i] = float(knot.GetValue())
+                pre = np.array([knot.GetPreTanWidth(), knot.GetPreTanSlope()], dtype=np.float64)
+                post = np.array([knot.GetPostTanWidth(), knot.GetPostTanSlope()], dtype=np.float64)
+                if curve_type == Ts.CurveTypeHermite:
+                    pre[0] = seg[k - 1] / 3 if k > 0 else seg[0] / 3
+                    post[0] = seg[k] / 3 if k < K - 1 else seg[-1] / 3
+                in_tan[k, i] = pre[0], pre[0] * pre[1]
+                out_tan[k, i] = post[0], post[0] * post[1]
+                # GetCustomDataByKey segfaults on a missing key (usd-core 26.11)
+                flag = knot.GetCustomData().get("broken")
+                broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9,
+                                                                                  atol=1e-12)
+            for k, knot in enumerate(knots[:-1]):
+                interp = knot.GetNextInterpolation()
+                if interp == Ts.InterpLinear:
+                    rise = (values[k + 1, i] - values[k, i]) / 3
+                    out_tan[k, i] = seg[k] / 3, rise
+                    in_tan[k + 1, i] = seg[k] / 3, rise
+                    broken[k, i] = broken[k + 1, i] = True
+                elif interp != Ts.InterpCurve:
+                    raise FormatError(
+                        f"curve {names[i]} holds its value after {times[k]:g}; keyfill curves are Bezier", label
+                    )
     try:
         return Curves(
             skeleton=sk,

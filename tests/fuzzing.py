@@ -3,8 +3,9 @@
 Every case is a seed input (a test fixture, an example, the shipped model)
 changed by a few random mutations, fed to the library (and, for some cases,
 to the CLI) in this process. A :class:`KeyfillError` is a *clean* error; any
-other exception, a ``keyfill: error: internal error`` line, a file that keyfill
-writes but cannot read back, running out of memory or a hang is a *finding*.
+other exception, a ``keyfill: error: internal error`` line, a warning (numpy's
+overflow warnings, say: a user of the CLI would see it printed), a file that
+keyfill writes but cannot read back, running out of memory or a hang is a *finding*.
 
 ``tests/test_fuzz.py`` runs a few hundred cases through hypothesis in
 ``make test``. ``make fuzz`` runs this module as a script::
@@ -33,6 +34,7 @@ import sys
 import tempfile
 import time
 import traceback
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -326,6 +328,13 @@ def _model_case(folder: Path) -> Outcome:
 
 def run_case(kind: str, data: bytes, work: Path, variant: int = 0) -> Outcome:
     """Feed ``data`` (an input of ``kind``) to keyfill in ``work`` (an empty folder) and classify what happens."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # becomes an exception, so a finding
+        warnings.simplefilter("error", UserWarning)
+        return _run_case(kind, data, work, variant)
+
+
+def _run_case(kind: str, data: bytes, work: Path, variant: int) -> Outcome:
     try:
         if kind == "model":
             folder = work / "model"

@@ -10,10 +10,12 @@ import shutil
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from conftest import DATA
 from keyfill import io
@@ -56,6 +58,7 @@ EXPECTED = {
     "not_utf8.usda": "not a readable USD file",
     "joints_unregistered_type.usda": "holds a UnregisteredValue, not a token[] of joint paths",
     "animation_source_not_a_relationship.usda": "USD cannot read this file",
+    "curves_tangent_slope_1e308.usda": "a key value or tangent is not finite",
 }
 
 
@@ -64,7 +67,9 @@ def test_regression_files(capsys, tmp_path, name):
     src = REGRESS / name
     out = tmp_path / ("out.usda" if src.suffix == ".bvh" else "out.bvh")
     start = time.perf_counter()
-    code, _, err = run(capsys, "convert", src, out)
+    with warnings.catch_warnings():  # pytest records warnings that a user would see printed above the error line
+        warnings.simplefilter("error")
+        code, _, err = run(capsys, "convert", src, out)
     assert time.perf_counter() - start < 20
     if EXPECTED[name] is None:
         assert code == 0 and io.load(out).num_joints == io.load(src).num_joints
@@ -227,14 +232,40 @@ def _model_with(tmp_path, config_text: str) -> Path:
     (lambda c: c.replace("0.2657059614611094", "1e999"), "is not a finite number"),
     (lambda c: (REGRESS / "model_config_integer_too_large.json").read_text(), "does not fit in 64 bits"),
     (lambda c: c.replace('"sizes": {}', '"sizes": ' + "[" * 5000 + "]" * 5000), "nested too deeply"),
+    # make fuzz, seed 2026113, cases 3023 and 3755: finite but absurd statistics overflowed (numpy's warnings
+    # printed, then "frame 0 holds a value that is not finite" without the model's name)
+    (lambda c: c.replace("-0.13508971124162533", "1e+308"), "normalisation statistics must be"),
+    (lambda c: c.replace("-0.19818995774627715", "-1e+39"), "normalisation statistics must be"),
+    (lambda c: c.replace("0.21328981920422926", "1e-320"), "normalisation statistics must be"),
 ])
 def test_tampered_model_configs_are_one_clean_error(capsys, tmp_path, change, fragment):
     folder = _model_with(tmp_path, change((MODEL / "config.json").read_text()))
     start = time.perf_counter()
-    code, _, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "o.usda", "--method", "arnn", "--model", folder)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code, _, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "o.usda", "--method", "arnn",
+                           "--model", folder)
     line = one_error_line(err)
     assert code == 1 and fragment in line and str(folder) in line, line
     assert time.perf_counter() - start < 20
+
+
+def test_weights_that_overflow_are_one_clean_error(capsys, tmp_path):
+    """Finite weights whose products overflow float32: the model is named, nothing is written."""
+    from safetensors.torch import load_file, save_file
+
+    folder = _model_with(tmp_path, (MODEL / "config.json").read_text())
+    tensors = load_file(folder / "weights.safetensors")
+    for name in ("ff.first.weight", "ff.out.weight"):
+        tensors[name] = torch.full_like(tensors[name], 3e38)
+    save_file(tensors, folder / "weights.safetensors")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code, _, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "o.usda", "--method", "arnn",
+                           "--model", folder)
+    line = one_error_line(err)
+    assert code == 1 and str(folder) in line and "the network's output is not finite" in line, line
+    assert not (tmp_path / "o.usda").exists()
 
 
 # --- a crash inside usd-core (see tests/data/README.md) ---------------------------------------------

@@ -97,6 +97,10 @@ def read_sequences(folder) -> list[LampSequence]:
     return [sequence_from_motion(s.motion, name=s.id) for s in read_dataset(folder)]
 
 
+#: smallest standard deviation a variable is divided by (a variable that varies less is not scaled)
+MIN_STD = 1e-6
+
+
 @dataclass(frozen=True)
 class Normalizer:
     """Per-variable standardisation ``z = (v - mean) / std`` of encoded variables.
@@ -115,16 +119,22 @@ class Normalizer:
             raise DataError("no sequences to compute normalisation statistics from")
         frames = np.concatenate([relative(s.span) for s in sequences])
         std = frames.std(axis=0)
-        return cls(frames.mean(axis=0), np.where(std > 1e-6, std, 1.0))
+        return cls(frames.mean(axis=0), np.where(std > MIN_STD, std, 1.0))
 
     def to_json(self) -> dict:
         return {"mean": [float(v) for v in self.mean], "std": [float(v) for v in self.std]}
 
     @classmethod
     def from_json(cls, data: dict) -> "Normalizer":
+        """The statistics :meth:`to_json` wrote; ``ValueError`` unless they are 6 means of at most
+        ``keyfill.limits.max_abs()`` and 6 deviations between :data:`MIN_STD` and that (as :meth:`fit` gives)."""
+        from keyfill.limits import max_abs
+
         mean, std = np.asarray(data["mean"], dtype=np.float64), np.asarray(data["std"], dtype=np.float64)
-        if mean.shape != (NUM_VARIABLES,) or std.shape != (NUM_VARIABLES,) or not np.all(std > 0):
-            raise ValueError("normalisation statistics must be 6 means and 6 positive deviations")
+        if (mean.shape != (NUM_VARIABLES,) or std.shape != (NUM_VARIABLES,) or not np.all(np.abs(mean) <= max_abs())
+                or not np.all((std > MIN_STD) & (std <= max_abs()))):
+            raise ValueError(f"normalisation statistics must be 6 means of at most {max_abs():g} and 6 deviations "
+                             f"over {MIN_STD:g} and at most {max_abs():g}")
         return cls(mean, std)
 
     def encode(self, span: np.ndarray) -> np.ndarray:
@@ -291,7 +301,7 @@ def complete_lamp_many(jobs, options, get_model, builtin_name: str):
     the network go through one ``predict`` call (one batch).
     """
     from keyfill.characters.lamp import from_variables, is_lamp, to_variables
-    from keyfill.errors import KeyfillError, UsageError
+    from keyfill.errors import KeyfillError, ModelError, UsageError
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.modelfile import check_skeleton
@@ -320,8 +330,13 @@ def complete_lamp_many(jobs, options, get_model, builtin_name: str):
             ready.append((i, motion, keys, key_values, LampSequence(values, k)))
         except KeyfillError as e:
             results[i] = e
-    spans = model.predict([r[-1] for r in ready]) if ready else []
+    with np.errstate(over="ignore", invalid="ignore"):  # a damaged network's overflow is reported below
+        spans = model.predict([r[-1] for r in ready]) if ready else []
     for (i, motion, keys, key_values, _), span in zip(ready, spans):
+        if not np.isfinite(span).all():
+            results[i] = ModelError(f"{model.path or builtin_name}: the network's output is not finite "
+                                    "(are its weights damaged?)")
+            continue
         k = keys.frames
         out = np.empty((motion.num_frames, NUM_VARIABLES))
         out[k[0]: k[-1] + 1] = span

@@ -6,6 +6,7 @@ keyfill (see ``tests/data/README.md`` for where each comes from).
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -265,6 +266,50 @@ def test_weights_that_overflow_are_one_clean_error(capsys, tmp_path):
                            "--model", folder)
     line = one_error_line(err)
     assert code == 1 and str(folder) in line and "the network's output is not finite" in line, line
+    assert not (tmp_path / "o.usda").exists()
+
+
+MODELS = Path(__file__).parent.parent / "keyfill" / "learn" / "models"
+HUMAN_KEYS = Path(__file__).parent.parent / "examples" / "human" / "keys_15.usda"
+
+
+def _set(path, value):
+    """A change of a config: ``path`` (keys and indices) set to ``value``."""
+    def change(config):
+        node = config
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = value
+    return change
+
+
+@pytest.mark.parametrize("model,change,fragment", [
+    ("bandai2-transformer", _set(("statistics", "pos_mean", 1), 1e308), "the position means must be numbers"),
+    ("bandai2-transformer", _set(("statistics", "pos_std", 1), 1e300), "the position deviations must be numbers"),
+    ("bandai2-transformer", _set(("architecture", "heads"), 0), "heads must be a whole number from 1"),
+    ("bandai2-transformer", _set(("architecture", "layers"), 10**9), "layers must be a whole number from 1"),
+    ("bandai2-transformer", _set(("architecture", "d_model"), 10**9), "d_model must be a whole number from 1"),
+    ("bandai2-gan", _set(("gan", "output_smoothing"), 1e308), "'output_smoothing' must be of type int"),
+    ("bandai2-gan", _set(("gan", "output_smoothing"), 10**6), "output_smoothing must be an even order"),
+    ("bandai2-gan", _set(("gan", "style_dim"), 10**9), "must be from 0 to 65536"),
+    ("bandai2-gan", _set(("ranges", "hi", 0, 0), 1e308), "upper limits must be numbers"),
+    ("bandai2-gan", _set(("fps",), 1e-300), "fps is outside"),
+])
+def test_tampered_human_model_configs_are_one_clean_error(capsys, tmp_path, model, change, fragment):
+    """Probes of session 8: absurd numbers in a shipped human model's config.json were numpy warnings, an
+    error about frame 0, an internal TypeError or ZeroDivisionError, or an allocation of hundreds of GB."""
+    folder = tmp_path / "model"
+    shutil.copytree(MODELS / model, folder)
+    config = json.loads((folder / "config.json").read_text())
+    change(config)
+    (folder / "config.json").write_text(json.dumps(config))
+    method = "gan" if "gan" in model else "transformer"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code, _, err = run(capsys, "complete", HUMAN_KEYS, "-o", tmp_path / "o.usda", "--method", method,
+                           "--model", folder)
+    line = one_error_line(err)
+    assert code == 1 and str(folder) in line and fragment in line, line
     assert not (tmp_path / "o.usda").exists()
 
 

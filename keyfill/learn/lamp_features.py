@@ -126,16 +126,11 @@ class Normalizer:
 
     @classmethod
     def from_json(cls, data: dict) -> "Normalizer":
-        """The statistics :meth:`to_json` wrote; ``ValueError`` unless they are 6 means of at most
-        ``keyfill.limits.max_abs()`` and 6 deviations between :data:`MIN_STD` and that (as :meth:`fit` gives)."""
-        from keyfill.limits import max_abs
+        """The statistics :meth:`to_json` wrote (``ValueError`` unless they are bounded as :meth:`fit` gives them)."""
+        from keyfill.learn.modelfile import bounded_array
 
-        mean, std = np.asarray(data["mean"], dtype=np.float64), np.asarray(data["std"], dtype=np.float64)
-        if (mean.shape != (NUM_VARIABLES,) or std.shape != (NUM_VARIABLES,) or not np.all(np.abs(mean) <= max_abs())
-                or not np.all((std > MIN_STD) & (std <= max_abs()))):
-            raise ValueError(f"normalisation statistics must be 6 means of at most {max_abs():g} and 6 deviations "
-                             f"over {MIN_STD:g} and at most {max_abs():g}")
-        return cls(mean, std)
+        return cls(bounded_array(data["mean"], "the normalisation means", (NUM_VARIABLES,)),
+                   bounded_array(data["std"], "the normalisation deviations", (NUM_VARIABLES,), above=MIN_STD))
 
     def encode(self, span: np.ndarray) -> np.ndarray:
         """``(T, 6)`` frames starting at the first key -> standardised, relative to frame 0 (see :func:`origin`)."""

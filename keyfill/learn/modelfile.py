@@ -60,6 +60,24 @@ def _finite(text: str) -> float:
     return value
 
 
+def bounded_array(values, what: str, shape: tuple | None = None, above: float | None = None) -> np.ndarray:
+    """``values`` (numbers of a model config) as a float64 array, or a ``ValueError`` naming ``what``.
+
+    Every value must be at most ``keyfill.limits.max_abs()`` in size and, where ``above`` is given,
+    greater than it; the array must have ``shape`` where given. Statistics and limits that training
+    stores are far inside these bounds; beyond them the arithmetic that uses them overflows.
+    """
+    from keyfill.limits import max_abs
+
+    a = np.asarray(values, dtype=np.float64)
+    if shape is not None and a.shape != shape:
+        raise ValueError(f"{what} must have shape {shape}, not {a.shape}")
+    if not np.all(np.abs(a) <= max_abs()) or (above is not None and not np.all(a > above)):
+        raise ValueError(f"{what} must be numbers of at most {max_abs():g} in size"
+                         + (f" and over {above:g}" if above is not None else ""))
+    return a
+
+
 def _check_skeleton_json(want, folder) -> None:
     """Raise :class:`ModelError` unless ``want`` is a skeleton as :func:`skeleton_to_json` writes it."""
     from keyfill.limits import max_abs, max_joints

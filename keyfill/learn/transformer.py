@@ -90,6 +90,11 @@ PREFILLS = ("interpolation", "cubic", "velocity")
 LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
 
 
+#: the largest sizes a :class:`ModelConfig` may give (far above any model this CPU trains; a config that
+#: asks for more is damaged, and building it would take the machine's memory before the weights are checked)
+SIZE_LIMITS = {"layers": 256, "d_model": 16384, "heads": 256, "ffn": 65536, "max_frames": 100_000}
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Architecture and representation of a :class:`MotionTransformer`.
@@ -130,6 +135,10 @@ class ModelConfig:
     key_distances: bool = False
 
     def __post_init__(self):
+        for name, most in SIZE_LIMITS.items():  # before any arithmetic with them (heads 0, layers 1e9, 2.5)
+            value = getattr(self, name)
+            if type(value) is not int or not 1 <= value <= most:
+                raise ModelError(f"{name} must be a whole number from 1 to {most}, not {value!r:.40}")
         if self.coordinates not in ("global", "local"):
             raise ModelError(f"coordinates must be 'global' or 'local', not {self.coordinates!r}")
         if self.d_model % self.heads:
@@ -396,12 +405,18 @@ def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: b
 
 def config_parts(config: dict):
     """``(ModelConfig, Skeleton, statistics, folded, training)`` of a model's ``config.json`` content."""
+    from keyfill.learn.modelfile import bounded_array
+
     cfg = ModelConfig(**config["architecture"])
     s = config["skeleton"]
     skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
                     channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
                     meters_per_unit=s["meters_per_unit"])
-    return cfg, skel, config["statistics"], bool(config["folded_root"]), config.get("training")
+    n = (skel.num_joints * 3,)
+    st = config["statistics"]
+    stats = {"pos_mean": bounded_array(st["pos_mean"], "the position means", n),
+             "pos_std": bounded_array(st["pos_std"], "the position deviations", n, above=0.0)}
+    return cfg, skel, stats, bool(config["folded_root"]), config.get("training")
 
 
 def torch_device(name: str):

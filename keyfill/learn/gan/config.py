@@ -43,6 +43,11 @@ EFFECTIVE_RECEPTIVE_FIELD = 636
 #: the longest gap with the sparse input format of partial-key models: a key is seen only where it is,
 #: so a frame must have both keys within the 318-frame receptive field of a latent step
 SPARSE_RECEPTIVE_FIELD = 318
+#: the highest order of the binomial low-pass on the generator's angles (``output_smoothing``): 64 already
+#: spreads a frame over about 8 frames either side (its standard deviation is 4 frames)
+MAX_SMOOTHING = 64
+#: the most channels of noise, style or Motion DNA encoder width (the paper's largest is 1024)
+MAX_CHANNELS = 65536
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
 DNA_WIDTHS = {"paper": 1024, "cpu": 128}
 
@@ -151,8 +156,9 @@ class GanConfig:
                 raise UsageError(f"GAN widths[{name!r}] must be {n} positive integers, got {w!r}")
         if set(self.widths) != set(_LAYERS):
             raise UsageError(f"GAN widths name {sorted(self.widths)}; expected {sorted(_LAYERS)}")
-        if self.output_smoothing < 0 or self.output_smoothing % 2:
-            raise UsageError(f"output_smoothing must be 0 or a positive even order, got {self.output_smoothing}")
+        if not 0 <= self.output_smoothing <= MAX_SMOOTHING or self.output_smoothing % 2:
+            raise UsageError(f"output_smoothing must be an even order from 0 to {MAX_SMOOTHING}, "
+                             f"got {self.output_smoothing}")
         if self.sequence_frames % 64 or self.real_frames % 64 or self.real_frames < 64:
             raise UsageError("sequence_frames and real_frames must be positive multiples of 64")
         if not 1 <= self.min_gap <= self.max_gap:
@@ -160,8 +166,8 @@ class GanConfig:
         if self.max_gap > EFFECTIVE_RECEPTIVE_FIELD:
             raise UsageError(f"max_gap {self.max_gap} is longer than the generator's effective receptive field "
                              f"({EFFECTIVE_RECEPTIVE_FIELD} frames): frames in such a gap could not see both keys")
-        if self.noise_dim < 0 or self.style_dim < 0 or self.dna_width < 0:
-            raise UsageError("noise_dim, style_dim and dna_width cannot be negative")
+        if not all(0 <= n <= MAX_CHANNELS for n in (self.noise_dim, self.style_dim, self.dna_width)):
+            raise UsageError(f"noise_dim, style_dim and dna_width must be from 0 to {MAX_CHANNELS}")
         if self.dna_width and not self.style_dim:
             raise UsageError("a Motion DNA encoder (dna_width > 0) needs style_dim > 0 channels for its vector")
         if self.partial_keys and self.max_gap > SPARSE_RECEPTIVE_FIELD:
@@ -192,11 +198,20 @@ class GanConfig:
 
     @classmethod
     def from_json(cls, data: dict) -> GanConfig:
-        """The config from :meth:`to_json` output; unknown keys are a :class:`UsageError`."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - names  # fields added later (Motion DNA, partial keys) take their defaults
+        """The config from :meth:`to_json` output; unknown keys, and values of another type than the field's
+        (or numbers over ``keyfill.limits.max_abs()`` in size), are a :class:`UsageError`."""
+        from keyfill.limits import max_abs
+
+        types = {f.name: f.type for f in dataclasses.fields(cls)}  # names of types: annotations are strings
+        unknown = set(data) - set(types)  # fields added later (Motion DNA, partial keys) take their defaults
         if unknown:
             raise UsageError(f"unknown GAN setting {min(unknown)!r}")
+        for name, value in data.items():
+            allowed = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
+            if type(value) not in allowed[types[name]]:
+                raise UsageError(f"GAN setting {name!r} must be of type {types[name]}, not {value!r:.40}")
+            if type(value) in (int, float) and not abs(value) <= max_abs():
+                raise UsageError(f"GAN setting {name!r} is {value:g}, more than {max_abs():g} in size")
         return cls(**data)
 
     def root_weight(self, step: int) -> float:

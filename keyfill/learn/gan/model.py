@@ -57,6 +57,7 @@ from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
+from keyfill.limits import check_fps
 from keyfill.motion import Skeleton
 
 STAGES = ("path", "full")
@@ -173,6 +174,9 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
                         channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
                         meters_per_unit=s["meters_per_unit"])
         ranges = JointRanges.from_json(config["ranges"])
+        fps = float(config["fps"])
+        if check_fps(fps):
+            raise ValueError(check_fps(fps))
         model_stage = config["stage"]
         if model_stage not in STAGES:
             raise ValueError(f"unknown stage {model_stage!r}")
@@ -194,7 +198,7 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
         if "dna_bank.poses" not in tensors or "dna_bank.clips" not in tensors:
             raise ModelError(f"{folder}: a gan model with Motion DNA but no bank of representative poses")
         bank = DnaBank(tensors["dna_bank.poses"].numpy(), tensors["dna_bank.clips"].numpy())
-    return GanModel(cfg, skel, ranges, gen, nets["path"], bool(config["folded_root"]), float(config["fps"]),
+    return GanModel(cfg, skel, ranges, gen, nets["path"], bool(config["folded_root"]), fps,
                     model_stage, dict(config.get("training") or {}), bank)
 
 

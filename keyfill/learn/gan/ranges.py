@@ -75,9 +75,12 @@ class JointRanges:
 
     @classmethod
     def from_json(cls, data: dict) -> JointRanges:
+        """The ranges :meth:`to_json` wrote (``ValueError`` for limits that are not bounded numbers)."""
+        from keyfill.learn.modelfile import bounded_array
+
         return cls(np.asarray(data["driven"], dtype=np.int64), tuple(R.check_order(o) for o in data["orders"]),
-                   np.asarray(data["lo"], dtype=np.float64).reshape(-1, 3),
-                   np.asarray(data["hi"], dtype=np.float64).reshape(-1, 3))
+                   bounded_array(data["lo"], "the joint ranges' lower limits").reshape(-1, 3),
+                   bounded_array(data["hi"], "the joint ranges' upper limits").reshape(-1, 3))
 
 
 def driven_joints(skeleton: Skeleton, atol: float = 1e-9) -> np.ndarray:

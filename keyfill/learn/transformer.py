@@ -90,8 +90,7 @@ PREFILLS = ("interpolation", "cubic", "velocity")
 LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
 
 
-#: the largest sizes a :class:`ModelConfig` may give (far above any model this CPU trains; a config that
-#: asks for more is damaged, and building it would take the machine's memory before the weights are checked)
+#: the largest sizes of a :class:`ModelConfig`; a config asking for more is damaged (it would exhaust memory)
 SIZE_LIMITS = {"layers": 256, "d_model": 16384, "heads": 256, "ffn": 65536, "max_frames": 100_000}
 
 

@@ -135,9 +135,8 @@ class ModelConfig:
 
     def __post_init__(self):
         for name, most in SIZE_LIMITS.items():  # before any arithmetic with them (heads 0, layers 1e9, 2.5)
-            value = getattr(self, name)
-            if type(value) is not int or not 1 <= value <= most:
-                raise ModelError(f"{name} must be a whole number from 1 to {most}, not {value!r:.40}")
+            if type(v := getattr(self, name)) is not int or not 1 <= v <= most:
+                raise ModelError(f"{name} must be a whole number from 1 to {most}, not {v!r:.40}")
         if self.coordinates not in ("global", "local"):
             raise ModelError(f"coordinates must be 'global' or 'local', not {self.coordinates!r}")
         if self.d_model % self.heads:

@@ -48,6 +48,8 @@ SPARSE_RECEPTIVE_FIELD = 318
 MAX_SMOOTHING = 64
 #: the most channels of noise, style or Motion DNA encoder width (the paper's largest is 1024)
 MAX_CHANNELS = 65536
+#: the JSON value types each annotated field type accepts (an int where a float is expected)
+_JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
 DNA_WIDTHS = {"paper": 1024, "cpu": 128}
 
@@ -207,8 +209,7 @@ class GanConfig:
         if unknown:
             raise UsageError(f"unknown GAN setting {min(unknown)!r}")
         for name, value in data.items():
-            allowed = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
-            if type(value) not in allowed[types[name]]:
+            if type(value) not in _JSON_TYPES[types[name]]:
                 raise UsageError(f"GAN setting {name!r} must be of type {types[name]}, not {value!r:.40}")
             if type(value) in (int, float) and not abs(value) <= max_abs():
                 raise UsageError(f"GAN setting {name!r} is {value:g}, more than {max_abs():g} in size")

@@ -175,8 +175,8 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
                         meters_per_unit=s["meters_per_unit"])
         ranges = JointRanges.from_json(config["ranges"])
         fps = float(config["fps"])
-        if check_fps(fps):
-            raise ValueError(check_fps(fps))
+        if problem := check_fps(fps):
+            raise ValueError(problem)
         model_stage = config["stage"]
         if model_stage not in STAGES:
             raise ValueError(f"unknown stage {model_stage!r}")

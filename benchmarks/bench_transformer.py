@@ -20,7 +20,9 @@ random weights unless ``--model`` names a trained model folder: the time does
 not depend on the weights, only on the model's size. Threads: torch's default
 (one per core) and 1. ``--onnx GRAPH`` (a graph written by ``keyfill export``
 from the ``--model`` folder) adds ``complete`` through onnxruntime, as
-``keyfill complete --model GRAPH`` runs it (one thread).
+``keyfill complete --model GRAPH`` runs it (one thread). The report also gives
+this CPU's one-thread float32 matrix-product rate (``timing.matmul_gflops``):
+the network's time follows it, and it varies between days on one VM kind.
 
     .venv/bin/python benchmarks/bench_transformer.py
     .venv/bin/python benchmarks/bench_transformer.py --model data/models/bandai2-transformer --repeat 200 --json
@@ -39,7 +41,7 @@ import sys
 
 import numpy as np
 import torch
-from timing import timed_ms
+from timing import cpu_name, matmul_gflops, timed_ms
 
 from keyfill import rotations as R
 from keyfill.learn import transformer as T
@@ -112,7 +114,8 @@ def main(argv=None) -> int:
     torch.set_num_threads(default_threads)
     load_after = os.getloadavg()
     report = {
-        "machine": f"{platform.machine()}, {os.cpu_count()} logical CPUs, torch {torch.__version__}",
+        "machine": f"{cpu_name()} ({platform.machine()}), {os.cpu_count()} logical CPUs, torch {torch.__version__}",
+        "matmul_gflops_1_thread": matmul_gflops(),
         "load_before": load_before,
         "load_after": load_after,
         "model": args.model or "paper size (8 x 256, FFN 512, 8 heads), random weights",
@@ -124,6 +127,7 @@ def main(argv=None) -> int:
         print(json.dumps(report, indent=2))
         return 0
     print(f"machine: {report['machine']}; load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
+    print(f"float32 matrix products on one thread: {report['matmul_gflops_1_thread']:.0f} GFLOP/s")
     print(f"model: {report['model']}; in-betweening of 30 frames ({frames} frames in), median of {args.repeat}")
     print(f"{'threads':>7} {'batch':>5} {'network ms':>11} {'complete ms':>12} {'goal ms':>8} {'paper ms':>9} {'vs paper':>9}")
     for row in report["results"]:

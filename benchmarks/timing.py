@@ -29,3 +29,22 @@ def cpu_name() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine()
+
+
+def matmul_gflops(rows: int = 410, inner: int = 256, cols: int = 512, repeat: int = 200) -> float:
+    """This CPU's float32 matrix-product rate on one torch thread, in GFLOP/s (median of ``repeat``).
+
+    The default shape ``(410, 256) @ (256, 512)`` is the transformer's feed-forward product for 10 windows
+    of 41 frames. Shared cloud VMs of one kind differ by up to about 2x in this rate from day to day, so
+    the speed benchmarks report it beside their times.
+    """
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        a, b = torch.randn(rows, inner), torch.randn(inner, cols)
+        ms = timed_ms(lambda: a @ b, repeat, warmup=20)["median"]
+    finally:
+        torch.set_num_threads(threads)
+    return 2 * rows * inner * cols / (ms * 1e6)

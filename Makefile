@@ -62,13 +62,16 @@ $(BANDAI2): | $(STAMP)
 	$(BIN)/python -c "from keyfill.learn.corpus import locate; print(locate('bandai2'))"
 
 $(MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2)
+	@mkdir -p $(dir $(@D))
 	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan-path --stage path --threads 2 $(call resume_if,$(MODELS)/bandai2-gan-path)
 
 $(MODELS)/bandai2-gan/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors
+	@mkdir -p $(dir $(@D))
 	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan --stage generator --path-model $(MODELS)/bandai2-gan-path \
 	    --dna --threads 1 $(call resume_if,$(MODELS)/bandai2-gan)
 
 $(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors
+	@mkdir -p $(dir $(@D))
 	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan-partial --stage generator --path-model $(MODELS)/bandai2-gan-path \
 	    --dna --partial-keys --threads 1 $(call resume_if,$(MODELS)/bandai2-gan-partial)
 
@@ -82,10 +85,12 @@ gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-part
 TRANSFORMER_TRAIN = $(BIN)/keyfill train transformer $(BANDAI2) --exclude '*_normal_*' --seed 0 --threads 1
 
 $(MODELS)/base/bandai2-transformer/weights.safetensors: | $(BANDAI2)
+	@mkdir -p $(dir $(@D))
 	$(TRANSFORMER_TRAIN) -o $(MODELS)/base/bandai2-transformer --config benchmarks/bench_transformer_bandai2.json \
 	    $(call resume_if,$(MODELS)/base/bandai2-transformer)
 
 $(MODELS)/bandai2-transformer/weights.safetensors: $(MODELS)/base/bandai2-transformer/weights.safetensors
+	@mkdir -p $(dir $(@D))
 	$(TRANSFORMER_TRAIN) -o $(MODELS)/bandai2-transformer --init $(MODELS)/base/bandai2-transformer \
 	    --config benchmarks/bench_transformer_bandai2_tune.json $(call resume_if,$(MODELS)/bandai2-transformer)
 

@@ -1,4 +1,5 @@
-"""Limits on what keyfill reads, and the one number grammar of its text formats.
+"""Limits on what keyfill reads and on the numbers its options take, and the one number grammar of its
+text formats.
 
 Readers check a file's declared sizes against these limits and against the
 data the file holds *before* they allocate, so a few bytes can never ask for
@@ -22,6 +23,10 @@ time codes             |t| <= 1e12     USD start, end and sample times
 model sizes            see             :mod:`keyfill.learn.modelfile`
 =====================  ==============  ======================================================
 
+Options: ``--seed`` 0 to 2**63-1 (what numpy's and torch's generators both take), ``--workers`` and
+``--threads`` 1 to 1,024, ``--connect-timeout`` up to a day; a value outside is a :class:`UsageError`
+before any work, not an overflow deep inside a library.
+
 Numbers in BVH text follow one grammar, ``[+-]?(digits[.digits]|.digits)([eE][+-]?digits)?``,
 in the hierarchy and in the motion block alike: no ``inf``, ``nan``, ``1_0`` or hexadecimal.
 """
@@ -34,13 +39,17 @@ import re
 
 import numpy as np
 
-from keyfill.errors import DataError
+from keyfill.errors import DataError, UsageError
 
 #: what one frame costs beside its joints, in joint-frames (a USD time sample's own overhead)
 FRAME_COST = 8
 MIN_FPS = 1e-6
 MAX_FPS = 1e6
 MAX_TIME_CODE = 1e12
+MAX_SEED = 2**63 - 1
+#: local worker processes, jobs in flight on a cluster, and torch threads
+MAX_WORKERS = 1024
+MAX_CONNECT_SECONDS = 86_400.0
 
 #: one number in keyfill's text formats (bytes or str via :func:`is_number`)
 NUMBER = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
@@ -146,3 +155,15 @@ def check_values(motion, what: str = "the motion") -> None:
     for j, off in sk.end_sites:
         if not np.all(np.abs(off) <= limit):
             raise DataError(f"{what}: an End Site offset of joint {sk.names[j]!r} is beyond {limit:g}; refusing to write it")
+
+
+def check_seed(seed: int) -> None:
+    """Raise :class:`UsageError` unless ``seed`` is a ``--seed`` every generator keyfill seeds can take."""
+    if not 0 <= seed <= MAX_SEED:
+        raise UsageError(f"--seed must be between 0 and 2**63-1, got {seed}")
+
+
+def check_count(option: str, value: int, high: int) -> None:
+    """Raise :class:`UsageError` unless ``value`` of ``option`` (e.g. ``"--workers"``) is 1 to ``high``."""
+    if not 1 <= value <= high:
+        raise UsageError(f"{option} must be between 1 and {high:,}, got {value}")

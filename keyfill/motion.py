@@ -297,6 +297,9 @@ class Keys:
             frames = [int(t) for t in text.replace(" ", "").split(",") if t != ""]
         except ValueError:
             raise UsageError(f"--keys takes frame numbers separated by commas, like 0,12,30; got {text!r}") from None
+        huge = [f for f in frames if abs(f) >= 2**63]
+        if huge:
+            raise UsageError(f"key {huge[0]} is out of range: no motion has that many frames")
         return cls(np.array(frames, dtype=np.int64))
 
     @classmethod

@@ -24,6 +24,7 @@ import threading
 import time
 
 from keyfill.errors import KeyfillError, UsageError
+from keyfill.limits import MAX_CONNECT_SECONDS, MAX_WORKERS, check_count
 
 
 def available_cpus() -> int:
@@ -134,10 +135,11 @@ class DaskCluster:
 
 def check_options(workers: int | None, connect_timeout: float = 10.0) -> None:
     """:class:`UsageError` for a ``--workers`` or ``--connect-timeout`` no executor can use."""
-    if workers is not None and workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {workers}")
-    if not connect_timeout > 0:
-        raise UsageError(f"--connect-timeout must be positive, got {connect_timeout}")
+    if workers is not None:
+        check_count("--workers", workers, MAX_WORKERS)
+    if not 0 < connect_timeout <= MAX_CONNECT_SECONDS:
+        raise UsageError(f"--connect-timeout must be positive and at most {MAX_CONNECT_SECONDS:,.0f} s, "
+                         f"got {connect_timeout}")
 
 
 def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = 10.0):

@@ -387,3 +387,36 @@ def test_long_reads_and_writes_report_progress(tmp_path):
         progress.listen(None)
     assert [b.description for b in seen] == ["writing USD", "writing BVH", "reading BVH", "reading USD"]
     assert all(b.done == b.total for b in seen), [(b.description, b.done, b.total) for b in seen]
+
+
+BIG = "99999999999999999999"  # beyond a C long: once an OverflowError deep inside numpy, torch or time
+
+
+@pytest.mark.parametrize("args,fragment", [
+    (["complete", MIXAMO, "-o", "o.bvh", "--key-every", "10", "--seed", "-1"],
+     "--seed must be between 0 and 2**63-1, got -1"),
+    (["complete", HUMAN_KEYS, "-o", "o.usda", "--method", "gan", "--seed", BIG],
+     f"--seed must be between 0 and 2**63-1, got {BIG}"),
+    (["complete", MIXAMO, "-o", "o.bvh", "--keys", f"0,{BIG}"], f"key {BIG} is out of range"),
+    # 10**8 poses of Motion DNA took 23 GB before the kernel killed the process
+    (["complete", HUMAN_KEYS, "-o", "o.usda", "--method", "gan", "--dna-count", "100000000"],
+     "--dna-count must be between 1 and 8,192"),
+    (["complete", MIXAMO, MIXAMO, "-o", "out", "--key-every", "10", "--workers", BIG],
+     "--workers must be between 1 and 1,024"),
+    (["complete", MIXAMO, MIXAMO, "-o", "out", "--key-every", "10", "--connect-timeout", "1e20", "--scheduler",
+      "tcp://127.0.0.1:1"], "--connect-timeout must be positive and at most 86,400 s"),
+    (["simulate", "-o", "hops", "--count", "1", "--workers", BIG], "--workers must be between 1 and 1,024"),
+    (["train", "arnn", MIXAMO, "-o", "model", "--threads", "0"], "--threads must be between 1 and 1,024, got 0"),
+    (["train", "arnn", MIXAMO, "-o", "model", "--seed", BIG], "--seed must be between 0 and 2**63-1"),
+    (["preview", MIXAMO, "-o", "o.gif", "--step", BIG], "--step must be between 1 and 10,000,000"),
+])
+def test_option_numbers_out_of_range_are_one_clean_error(capsys, monkeypatch, tmp_path, args, fragment):
+    """Probes of session 9: each was an internal error (an OverflowError or ValueError from numpy, torch or
+    time), a numpy warning above a 1-frame GIF, or a memory blow-up. Now one usage line and nothing written."""
+    monkeypatch.chdir(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code, _, err = run(capsys, *args)
+    line = one_error_line(err)
+    assert code == 2 and fragment in line, line
+    assert list(tmp_path.iterdir()) == []

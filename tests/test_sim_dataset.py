@@ -166,7 +166,7 @@ def test_bvh_format(tmp_path, capsys):
     [
         (["--count", "0"], "--count must be at least 1, got 0"),
         (["--seed", "-1"], "--seed must be between 0 and 2**63-1, got -1"),
-        (["--workers", "0"], "--workers must be at least 1, got 0"),
+        (["--workers", "0"], "--workers must be between 1 and 1,024, got 0"),
         (["--iterations", "0"], "--iterations must be at least 1, got 0"),
         (["--count", "many"], "'many' is not a valid integer"),
     ],

@@ -387,7 +387,7 @@ def test_cli_plot_and_preview(files, capsys):
         (["preview", "walk.usda", "--frames", "5:2"], "selects no frame", 2),
         (["preview", "empty.bvh"], "empty.bvh: the motion has no frames", 1),
         (["preview", "walk.usda", "--size", "8x8"], "each side must be 16 to 8192 pixels", 2),
-        (["preview", "walk.usda", "--step", "0"], "--step must be at least 1", 2),
+        (["preview", "walk.usda", "--step", "0"], "--step must be between 1 and 10,000,000", 2),
     ],
 )
 def test_cli_bad_input(files, capsys, args, message, code):

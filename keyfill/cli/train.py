@@ -15,6 +15,7 @@ import click
 
 from keyfill.cli.common import emit_json, progress, say
 from keyfill.learn import registry
+from keyfill.limits import MAX_WORKERS, check_count
 
 _TYPES = {"file": click.Path(exists=True, dir_okay=False)}
 
@@ -61,6 +62,7 @@ def _command(method: registry.Method) -> click.Command:
         from keyfill.learn.training import Common, check_outputs, read_checkpoint, side_files, train
 
         if threads is not None:
+            check_count("--threads", threads, MAX_WORKERS)
             torch.set_num_threads(threads)
         output = output.rstrip("/") or output
         default_checkpoint, default_log = side_files(output)

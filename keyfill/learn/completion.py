@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from keyfill.limits import check_seed
 from keyfill.motion import Motion
 
 
@@ -36,6 +37,9 @@ class CompleteOptions:
     runtime: str = "auto"
     dna: str | None = None
     dna_count: int | None = None
+
+    def __post_init__(self):
+        check_seed(self.seed)
 
 
 @dataclass

@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from keyfill.errors import KeyfillError, ModelError, UsageError
+from keyfill.limits import check_seed
 
 CHECKPOINT_FORMAT = "keyfill-checkpoint"
 
@@ -170,6 +171,9 @@ class Common:
     epochs: int | None = None
     checkpoint_every: int | None = None
     device: str = "cpu"
+
+    def __post_init__(self):
+        check_seed(self.seed)  # before the data is read
 
 
 @dataclass(frozen=True)
@@ -349,6 +353,7 @@ def train(
     """
     import torch
 
+    check_seed(seed)
     ctx = distributed_context(device)
     try:
         check_outputs(output, checkpoint, log)

@@ -26,12 +26,12 @@ from typing import Callable
 from keyfill.errors import DataError, UsageError
 from keyfill.io import hops as ds
 from keyfill.motion import Motion
+from keyfill.limits import check_seed
+from keyfill.parallel import check_options
 from keyfill.parallel import executor as make_executor
 from keyfill.sim.extract import extract
 from keyfill.sim.search import anneal, run_generator
 from keyfill.sim.settings import DEFAULT_SETTINGS, Settings
-
-MAX_SEED = 2**63 - 1
 
 
 @dataclass(frozen=True)
@@ -106,18 +106,14 @@ def check_arguments(
     """Raise :class:`UsageError` for values ``simulate`` cannot work with."""
     if count < 1:
         raise UsageError(f"--count must be at least 1, got {count}")
-    if not 0 <= seed <= MAX_SEED:
-        raise UsageError(f"--seed must be between 0 and 2**63-1, got {seed}")
+    check_seed(seed)
     if iterations < 1:
         raise UsageError(f"--iterations must be at least 1, got {iterations}")
-    if workers is not None and workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {workers}")
     if fmt not in ds.SUFFIXES:
         raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(ds.SUFFIXES)}")
     if max_runs is not None and max_runs < 1:
         raise UsageError(f"--max-runs must be at least 1, got {max_runs}")
-    if not connect_timeout > 0:
-        raise UsageError(f"--connect-timeout must be positive, got {connect_timeout}")
+    check_options(workers, connect_timeout)
 
 
 # --- the folder -----------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
+from keyfill.limits import check_count, max_frames
 from keyfill.motion import Motion
 from keyfill.viz import PREVIEW_SUFFIXES, check_suffix, frame_range
 from keyfill.viz.scene import VIEWS, figure_points, ground_segments, is_planar, make_camera, travel_axis, up_index
@@ -290,8 +291,8 @@ def preview(
     suffix = check_suffix(str(output), PREVIEW_SUFFIXES)
     if view not in VIEWS:
         raise UsageError(f"unknown view {view!r}; expected one of {', '.join(VIEWS)}")
-    if step is not None and step < 1:
-        raise UsageError(f"--step must be at least 1, got {step}")
+    if step is not None:
+        check_count("--step", step, max_frames())
     if fps is not None and not (fps > 0 and math.isfinite(fps)):
         raise UsageError(f"--fps must be positive, got {fps}")
     if size is not None and not all(16 <= v <= 8192 for v in size):

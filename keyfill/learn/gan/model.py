@@ -57,7 +57,7 @@ from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
-from keyfill.limits import check_fps
+from keyfill.limits import check_count, check_fps
 from keyfill.motion import Skeleton
 
 STAGES = ("path", "full")
@@ -305,8 +305,7 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
         raise UsageError("this gan model has no Motion DNA encoder (it was trained without --dna)")
     if count is None:
         count = dna_count(key_frames, model.fps, cfg.dna_seconds) if key_frames is not None else 1
-    if count < 1:
-        raise UsageError(f"--dna-count must be at least 1, got {count}")
+    check_count("--dna-count", count, cfg.max_frames)  # at most a pose per frame the model fills at once
     if source is None:
         return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
     q, _ = model_hierarchy(model.skeleton, model.folded, source.skeleton, source.rotations, source.positions,

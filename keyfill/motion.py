@@ -299,7 +299,7 @@ class Keys:
             raise UsageError(f"--keys takes frame numbers separated by commas, like 0,12,30; got {text!r}") from None
         huge = [f for f in frames if abs(f) >= 2**63]
         if huge:
-            raise UsageError(f"key {huge[0]} is out of range: no motion has that many frames")
+            raise UsageError(f"key {huge[0]} is out of range")
         return cls(np.array(frames, dtype=np.int64))
 
     @classmethod

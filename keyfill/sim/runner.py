@@ -25,8 +25,8 @@ from typing import Callable
 
 from keyfill.errors import DataError, UsageError
 from keyfill.io import hops as ds
-from keyfill.motion import Motion
 from keyfill.limits import check_seed
+from keyfill.motion import Motion
 from keyfill.parallel import check_options
 from keyfill.parallel import executor as make_executor
 from keyfill.sim.extract import extract

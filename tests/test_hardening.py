@@ -409,6 +409,10 @@ BIG = "99999999999999999999"  # beyond a C long: once an OverflowError deep insi
     (["train", "arnn", MIXAMO, "-o", "model", "--threads", "0"], "--threads must be between 1 and 1,024, got 0"),
     (["train", "arnn", MIXAMO, "-o", "model", "--seed", BIG], "--seed must be between 0 and 2**63-1"),
     (["preview", MIXAMO, "-o", "o.gif", "--step", BIG], "--step must be between 1 and 10,000,000"),
+    (["preview", MIXAMO, "-o", "o.gif", "--fps", "1e308"], "--fps: the frame rate 1e+308 fps is outside"),
+    (["preview", MIXAMO, "-o", "o.gif", "--fps", "1e-6"], "a GIF frame lasts at most 655.35 s"),
+    (["train", "arnn", MIXAMO, "-o", "model", "--max-deleted", BIG], "--max-deleted must be 0 to 10,000,000"),
+    (["train", "arnn", MIXAMO, "-o", "model", "--clip", "nan"], "--clip must be 0 (no clipping) or a positive"),
 ])
 def test_option_numbers_out_of_range_are_one_clean_error(capsys, monkeypatch, tmp_path, args, fragment):
     """Probes of session 9: each was an internal error (an OverflowError or ValueError from numpy, torch or
@@ -420,3 +424,27 @@ def test_option_numbers_out_of_range_are_one_clean_error(capsys, monkeypatch, tm
     line = one_error_line(err)
     assert code == 2 and fragment in line, line
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("setting,fragment", [
+    ('"lr": NaN', "'lr' must be a number from 0 to 10, not nan"),
+    ('"lr": "x"', "'lr' must be a number"),
+    ('"epochs": 1.5', "'epochs' must be a whole number from 1"),
+    ('"weight_decay": -1', "'weight_decay' must be a number from 0"),
+    ('"window_offset": 0', "'window_offset' must be a whole number from 1"),
+    ('"grad_clip": -1', "'grad_clip' must be a number from 0"),
+    ('"layouts": {}', "layouts must name at least one of"),
+    ('"layouts": {"inbetween": -1}', "'layouts.inbetween' must be a number from 0"),
+    ('"val_lengths": [100000]', "'val_lengths' must be a whole number from 1 to 54"),
+    ('"mirror": 3', "mirror must be true or false"),
+])
+def test_bad_transformer_training_settings_are_one_clean_error(capsys, tmp_path, setting, fragment):
+    """Probes of session 9: a NaN or negative rate, a float epoch count, a string, no layouts or a window
+    offset of 0 were internal errors from torch or numpy; a negative clip, share or validation fraction, and
+    validation lengths no window holds, trained silently."""
+    config = tmp_path / "config.json"
+    config.write_text(f'{{"training": {{{setting}}}}}')
+    code, _, err = run(capsys, "train", "transformer", MIXAMO, "-o", tmp_path / "model", "--config", config)
+    line = one_error_line(err)
+    assert code == 2 and fragment in line and "config.json" in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["config.json"]

@@ -57,6 +57,7 @@ from keyfill.learn import arnn
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs
 from keyfill.learn.training import train as run_training
 from keyfill.learn.lamp_features import Batch, LampSequence, Normalizer, delete_keys, make_batch
+from keyfill.limits import max_frames
 
 #: fractions of the epochs: teacher forcing decays over [0, TF_END); omega rises over [OMEGA_START, OMEGA_END]
 TF_END, OMEGA_START, OMEGA_END = 0.5, 0.5, 0.85
@@ -126,8 +127,10 @@ class Settings:
             raise UsageError(f"--key-weight must be 0 or more, got {self.key_weight}")
         if self.key_loss not in ("mean", "sum"):
             raise UsageError(f"--key-loss must be mean or sum, not {self.key_loss!r}")
-        if self.max_deleted < 0:
-            raise UsageError(f"--max-deleted must be 0 or more, got {self.max_deleted}")
+        if not 0 <= self.max_deleted <= max_frames():  # a sequence has fewer keys than frames
+            raise UsageError(f"--max-deleted must be 0 to {max_frames():,}, got {self.max_deleted}")
+        if not (self.clip >= 0 and math.isfinite(self.clip)):
+            raise UsageError(f"--clip must be 0 (no clipping) or a positive number, got {self.clip}")
         return self
 
 

@@ -118,17 +118,47 @@ class TrainConfig:
         return {k: v for k, v in dataclasses.asdict(self).items() if LATER_TRAINING.get(k, ...) != v}
 
     def __post_init__(self):
+        for name, (whole, low, high, low_ok) in _TRAIN_NUMBERS.items():
+            _check_number(name, getattr(self, name), whole, low, high, low_ok)
+        if not isinstance(self.layouts, dict) or not self.layouts:
+            raise UsageError(f"layouts must name at least one of {', '.join(LAYOUTS)} with its share")
         bad = set(self.layouts) - set(LAYOUTS)
         if bad:
             raise UsageError(f"unknown key layout {min(bad)!r}; layouts are {', '.join(LAYOUTS)}")
+        for name, share in self.layouts.items():
+            _check_number(f"layouts.{name}", share, False, 0, 1e6, True)
+        if not sum(self.layouts.values()) > 0:
+            raise UsageError("the layouts' shares must not all be 0")
+        longest = self.window - benchmark.N_PAST - 1
+        if not self.val_lengths:
+            raise UsageError("val_lengths must list at least one transition length")
+        for length in self.val_lengths:
+            _check_number("val_lengths", length, True, 1, longest, True)
         if self.gap_sampling not in GAP_SAMPLING:
             raise UsageError(f"unknown gap_sampling {self.gap_sampling!r}; it is one of {', '.join(GAP_SAMPLING)}")
-        if not isinstance(self.relative_loss, bool):
-            raise UsageError(f"relative_loss must be true or false, not {self.relative_loss!r}")
-        if self.window < 2 * benchmark.N_PAST + 1:
-            raise UsageError(f"training windows of {self.window} frames are too short (at least 21)")
-        if self.epochs < 1 or self.batch_size < 1:
-            raise UsageError("epochs and batch size must be positive")
+        for name in ("relative_loss", "mirror"):
+            if not isinstance(getattr(self, name), bool):
+                raise UsageError(f"{name} must be true or false, not {getattr(self, name)!r}")
+
+
+#: each number of the training section: (whole number?, lowest, highest, lowest allowed?); validation
+#: transitions must also fit a training window after its 10 context frames and target key
+_TRAIN_NUMBERS = {
+    "epochs": (True, 1, 1_000_000, True), "batch_size": (True, 1, 1_000_000, True),
+    "window": (True, 2 * benchmark.N_PAST + 1, 100_000, True), "window_offset": (True, 1, 100_000, True),
+    "lr": (False, 0, 10, True), "warmup_epochs": (False, 0, 1e6, True), "decay_every": (False, 0, 1e6, False),
+    "decay": (False, 0, 1, False), "weight_decay": (False, 0, 1e3, True), "val_fraction": (False, 0, 0.9, True),
+    "grad_clip": (False, 0, 1e6, True),
+}
+
+
+def _check_number(name: str, value, whole: bool, low: float, high: float, low_ok: bool) -> None:
+    kinds = (int,) if whole else (int, float)  # bool is not a number here
+    fits = type(value) in kinds and (low <= value if low_ok else low < value) and value <= high
+    if not fits:
+        what = "a whole number" if whole else "a number"
+        raise UsageError(f"training setting {name!r} must be {what} from {low:g}{'' if low_ok else ' (excluded)'} "
+                         f"to {high:g}, not {value!r:.40}")
 
 
 def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfig]:

@@ -20,8 +20,12 @@ from typing import Iterable, Sequence
 import numpy as np
 from PIL import Image
 
+from keyfill.errors import UsageError
+
 #: fastest frame rate that GIF viewers play correctly (delays of 2 cs)
 MAX_GIF_FPS = 50.0
+#: the longest delay a GIF frame can hold (a 16-bit count of centiseconds)
+MAX_DELAY_CS = 65_535
 
 
 def gif_step(fps: float, step: int = 1) -> int:
@@ -31,7 +35,12 @@ def gif_step(fps: float, step: int = 1) -> int:
 
 def delays_ms(num_frames: int, fps: float, step: int = 1) -> list[int]:
     """Per-frame delays (multiples of 10 ms) for ``num_frames`` GIF frames that show
-    every ``step``-th frame of a motion at ``fps``; the last frame holds one frame time."""
+    every ``step``-th frame of a motion at ``fps``; the last frame holds one frame time.
+
+    A :class:`UsageError` when one shown frame would last longer than a GIF delay can (655.35 s)."""
+    if 100.0 * step / fps > MAX_DELAY_CS:
+        raise UsageError(f"a GIF frame lasts at most {MAX_DELAY_CS / 100:g} s; one of {step} motion frame(s) at "
+                         f"{fps:g} fps would last {step / fps:g} s (give a higher --fps or a smaller --step)")
     times_cs = np.round(100.0 * step * np.arange(num_frames + 1) / fps).astype(np.int64)
     return [int(d) * 10 for d in np.maximum(np.diff(times_cs), 1)]
 

@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
-from keyfill.limits import check_count, max_frames
+from keyfill.limits import check_count, check_fps, max_frames
 from keyfill.motion import Motion
 from keyfill.viz import PREVIEW_SUFFIXES, check_suffix, frame_range
 from keyfill.viz.scene import VIEWS, figure_points, ground_segments, is_planar, make_camera, travel_axis, up_index
@@ -293,8 +293,8 @@ def preview(
         raise UsageError(f"unknown view {view!r}; expected one of {', '.join(VIEWS)}")
     if step is not None:
         check_count("--step", step, max_frames())
-    if fps is not None and not (fps > 0 and math.isfinite(fps)):
-        raise UsageError(f"--fps must be positive, got {fps}")
+    if fps is not None and check_fps(fps):
+        raise UsageError(f"--fps: {check_fps(fps)}")
     if size is not None and not all(16 <= v <= 8192 for v in size):
         raise UsageError(f"--size {size[0]}x{size[1]}: each side must be 16 to 8192 pixels")
     if len(labels) != len(motions):
@@ -320,6 +320,7 @@ def preview(
         ts = list(range(0, length, stride))
         if len(ts) > MAX_GIF_FRAMES:
             raise UsageError(f"{len(ts)} GIF frames is too many (at most {MAX_GIF_FRAMES}); use --step or --frames")
+        delays = gif.delays_ms(len(ts), rate, stride)  # before rendering: refuses what a GIF cannot time
     else:
         kind = "still" if trail else "filmstrip"
     side = {"gif": GIF_SIDE, "still": STILL_SIDE, "filmstrip": -STRIP_HEIGHT}[kind]
@@ -333,7 +334,7 @@ def preview(
                                   required=r.palette_colors())
             images = [palette.apply(r.render(t, r.bracketing_keys(t), r.frame_label(t)))
                       for t in wrap(ts, desc="frames", unit="frame")]
-            gif.write_gif(images, tmp, gif.delays_ms(len(images), rate, stride))
+            gif.write_gif(images, tmp, delays)
             shown, out_fps = ts, rate / stride
         elif kind == "filmstrip":
             if step is not None:

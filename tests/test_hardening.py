@@ -427,23 +427,26 @@ def test_option_numbers_out_of_range_are_one_clean_error(capsys, monkeypatch, tm
 
 
 @pytest.mark.parametrize("setting,fragment", [
-    ('"lr": NaN', "'lr' must be a number from 0 to 10, not nan"),
-    ('"lr": "x"', "'lr' must be a number"),
-    ('"epochs": 1.5', "'epochs' must be a whole number from 1"),
-    ('"weight_decay": -1', "'weight_decay' must be a number from 0"),
-    ('"window_offset": 0', "'window_offset' must be a whole number from 1"),
-    ('"grad_clip": -1', "'grad_clip' must be a number from 0"),
-    ('"layouts": {}', "layouts must name at least one of"),
-    ('"layouts": {"inbetween": -1}', "'layouts.inbetween' must be a number from 0"),
-    ('"val_lengths": [100000]', "'val_lengths' must be a whole number from 1 to 54"),
-    ('"mirror": 3', "mirror must be true or false"),
+    ('"training": {"lr": NaN}', "'lr' must be a number from 0 to 10, not nan"),
+    ('"training": {"lr": "x"}', "'lr' must be a number"),
+    ('"training": {"epochs": 1.5}', "'epochs' must be a whole number from 1"),
+    ('"training": {"weight_decay": -1}', "'weight_decay' must be a number from 0"),
+    ('"training": {"window_offset": 0}', "'window_offset' must be a whole number from 1"),
+    ('"training": {"grad_clip": -1}', "'grad_clip' must be a number from 0"),
+    ('"training": {"layouts": {}}', "layouts must name at least one of"),
+    ('"training": {"layouts": {"inbetween": -1}}', "'layouts.inbetween' must be a number from 0"),
+    ('"training": {"val_lengths": [100000]}', "'val_lengths' must be a whole number from 1 to 54"),
+    ('"training": {"mirror": 3}', "mirror must be true or false"),
+    ('"model": {"dropout": 2}', "dropout must be a number from 0 to 0.99, not 2"),
+    ('"model": {"fk_weight": NaN}', "fk_weight must be a number from 0 to 1e+06, not nan"),
+    ('"model": {"residual": 3}', "residual must be true or false"),
 ])
 def test_bad_transformer_training_settings_are_one_clean_error(capsys, tmp_path, setting, fragment):
-    """Probes of session 9: a NaN or negative rate, a float epoch count, a string, no layouts or a window
-    offset of 0 were internal errors from torch or numpy; a negative clip, share or validation fraction, and
-    validation lengths no window holds, trained silently."""
+    """Probes of session 9: a NaN or negative rate, a float epoch count, a string, no layouts, a window
+    offset of 0 or a dropout of 2 were internal errors from torch or numpy; a negative clip, share or loss
+    weight, validation lengths no window holds, or a residual of 3, trained silently."""
     config = tmp_path / "config.json"
-    config.write_text(f'{{"training": {{{setting}}}}}')
+    config.write_text(f"{{{setting}}}")
     code, _, err = run(capsys, "train", "transformer", MIXAMO, "-o", tmp_path / "model", "--config", config)
     line = one_error_line(err)
     assert code == 2 and fragment in line and "config.json" in line, line

@@ -223,7 +223,7 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     assert "since_key.weight" in distances.network.state_dict()
     with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
         T.ModelConfig(prefill="spline")
-    with pytest.raises(ModelError, match="rotation_weight must be 0 or more"):
+    with pytest.raises(ModelError, match="rotation_weight must be a number from 0 to 1e"):
         T.ModelConfig(rotation_weight=-1.0)
     # a model of another skeleton is refused before any training, naming the difference
     long_legs = tmp_path / "long_legs"

@@ -88,10 +88,10 @@ PREFILLS = ("interpolation", "cubic", "velocity")
 #: that value they are left out of a model's ``config.json`` and of what ``--resume`` compares, so older runs
 #: resume and retrain to the same bytes (:meth:`ModelConfig.recorded`)
 LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
-
-
-#: the largest sizes of a :class:`ModelConfig`; a config asking for more is damaged (it would exhaust memory)
-SIZE_LIMITS = {"layers": 256, "d_model": 16384, "heads": 256, "ffn": 65536, "max_frames": 100_000}
+#: each number of a :class:`ModelConfig`: (whole number?, lowest, highest); larger sizes would exhaust memory
+NUMBER_LIMITS = {"layers": (True, 1, 256), "d_model": (True, 1, 16384), "heads": (True, 1, 256),
+                 "ffn": (True, 1, 65536), "max_frames": (True, 1, 100_000), "dropout": (False, 0, 0.99),
+                 "kinematics_weight": (False, 0, 1e6), "fk_weight": (False, 0, 1e6), "rotation_weight": (False, 0, 1e6)}
 
 
 @dataclass(frozen=True)
@@ -134,9 +134,9 @@ class ModelConfig:
     key_distances: bool = False
 
     def __post_init__(self):
-        for name, most in SIZE_LIMITS.items():  # before any arithmetic with them (heads 0, layers 1e9, 2.5)
-            if type(v := getattr(self, name)) is not int or not 1 <= v <= most:
-                raise ModelError(f"{name} must be a whole number from 1 to {most}, not {v!r:.40}")
+        for name, (whole, low, high) in NUMBER_LIMITS.items():  # before any arithmetic (heads 0, layers 1e9)
+            if type(v := getattr(self, name)) not in ((int,) if whole else (int, float)) or not low <= v <= high:
+                raise ModelError(f"{name} must be a {'whole ' * whole}number from {low} to {high:g}, not {v!r:.40}")
         if self.coordinates not in ("global", "local"):
             raise ModelError(f"coordinates must be 'global' or 'local', not {self.coordinates!r}")
         if self.d_model % self.heads:
@@ -144,10 +144,9 @@ class ModelConfig:
         axis_vector(self.facing_axis)
         if self.prefill not in PREFILLS:
             raise ModelError(f"prefill must be one of {', '.join(PREFILLS)}, not {self.prefill!r}")
-        if not isinstance(self.rotation_weight, int | float) or not 0 <= self.rotation_weight < float("inf"):
-            raise ModelError(f"rotation_weight must be 0 or more, not {self.rotation_weight!r}")
-        if not isinstance(self.key_distances, bool):
-            raise ModelError(f"key_distances must be true or false, not {self.key_distances!r}")
+        for name in ("residual", "key_distances"):
+            if not isinstance(getattr(self, name), bool):
+                raise ModelError(f"{name} must be true or false, not {getattr(self, name)!r}")
 
     def recorded(self) -> dict:
         """The settings a model file and a checkpoint record: all but later ones at their old value."""

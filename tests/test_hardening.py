@@ -451,3 +451,22 @@ def test_bad_transformer_training_settings_are_one_clean_error(capsys, tmp_path,
     line = one_error_line(err)
     assert code == 2 and fragment in line and "config.json" in line, line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["config.json"]
+
+
+@pytest.mark.parametrize("setting,fragment", [
+    ('"lr_path": -1', "'lr_path' must be a number from 0 to 10, got -1"),
+    ('"lr_generator": NaN', "'lr_generator' must be a number from 0 to 10, got nan"),
+    ('"mask_scale": 0', "'mask_scale' must be a number from 0 (excluded)"),
+    ('"max_frames": 0', "'max_frames' must be a number from 1"),
+    ('"val_fraction": 2', "'val_fraction' must be a number from 0 to 0.9"),
+    ('"lr_path": "x"', "'lr_path' must be a number from 0 to 10, got 'x'"),
+])
+def test_bad_gan_training_settings_are_one_clean_error(capsys, tmp_path, setting, fragment):
+    """Probes of session 9: a negative rate was an internal error from torch; a mask scale of 0 (a division by
+    zero), a window of 0 frames or a validation share of 2 trained silently; a string compared as Python does."""
+    config = tmp_path / "gan.json"
+    config.write_text(f"{{{setting}}}")
+    code, _, err = run(capsys, "train", "gan", MIXAMO, "-o", tmp_path / "model", "--stage", "path", "--config", config)
+    line = one_error_line(err)
+    assert code == 2 and fragment in line and "gan.json" in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gan.json"]

@@ -48,6 +48,18 @@ SPARSE_RECEPTIVE_FIELD = 318
 MAX_SMOOTHING = 64
 #: the most channels of noise, style or Motion DNA encoder width (the paper's largest is 1024)
 MAX_CHANNELS = 65536
+#: the other numbers of a :class:`GanConfig`: (lowest, highest, lowest allowed?); rates and weights may be 0
+_RANGES = {
+    "dna_weight": (0, 1e6, True), "dna_seconds": (0, 1e4, False), "partial_fraction": (0, 1, True),
+    "mask_scale": (0, 1e6, False), "short_gap_seconds": (0, 1e4, True), "jump_speed": (0, 1e3, True),
+    "max_frames": (1, 10_000_000, True), "batch_size": (1, 10_000, True), "real_frames": (64, 65_536, True),
+    "sequence_frames": (64, 65_536, True), "crops_per_sequence": (1, 10_000, True), "path_batch": (1, 100_000, True),
+    "steps_per_epoch": (1, 10_000_000, True), "lr_generator": (0, 10, True), "lr_discriminator": (0, 10, True),
+    "lr_path": (0, 10, True), "adv_weight": (0, 1e6, True), "br_weight": (0, 1e6, True),
+    "joint_weight": (0, 1e6, True), "root_weight_start": (0, 1e6, True), "root_weight_end": (0, 1e6, True),
+    "root_weight_every": (1, 10_000_000, True), "grad_clip": (0, 1e6, True), "path_epochs": (1, 1_000_000, True),
+    "generator_epochs": (1, 1_000_000, True), "val_fraction": (0, 0.9, True), "val_sequences": (0, 100_000, True),
+}
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
@@ -152,6 +164,11 @@ class GanConfig:
     seed: int = 0
 
     def __post_init__(self):
+        for name, (low, high, low_ok) in _RANGES.items():  # NaN fails both comparisons
+            value = getattr(self, name)
+            if type(value) not in (int, float) or not ((low <= value if low_ok else low < value) and value <= high):
+                raise UsageError(f"GAN setting {name!r} must be a number from {low:g}{'' if low_ok else ' (excluded)'} "
+                                 f"to {high:g}, got {value!r:.40}")
         for name, n in _LAYERS.items():
             w = self.widths.get(name)
             if not isinstance(w, (list, tuple)) or len(w) != n or not all(isinstance(c, int) and c > 0 for c in w):
@@ -175,10 +192,6 @@ class GanConfig:
         if self.partial_keys and self.max_gap > SPARSE_RECEPTIVE_FIELD:
             raise UsageError(f"partial-key models see each key only where it is (the sparse input format): "
                              f"max_gap {self.max_gap} must be at most {SPARSE_RECEPTIVE_FIELD} frames")
-        if not 0 <= self.partial_fraction <= 1 or self.dna_seconds <= 0:
-            raise UsageError("partial_fraction must be in [0, 1] and dna_seconds positive")
-        if self.batch_size < 1 or self.path_batch < 1 or self.crops_per_sequence < 1 or self.steps_per_epoch < 1:
-            raise UsageError("batch sizes, crops and steps per epoch must be positive")
         if self.real_frames > self.sequence_frames:
             raise UsageError("real_frames cannot exceed sequence_frames")
 

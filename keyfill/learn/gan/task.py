@@ -489,8 +489,8 @@ def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int =
     try:
         return GanConfig.from_preset(preset, **data, seed=seed) if "widths" not in data else \
             GanConfig.from_json({**data, "seed": seed})
-    except TypeError as e:
-        raise UsageError(f"{path}: {e}") from None
+    except (TypeError, UsageError) as e:  # name the file a bad setting came from
+        raise UsageError(f"{path}: {e}" if path is not None else str(e)) from None
 
 
 def _make_task(common, options: dict, progress) -> GanTask:

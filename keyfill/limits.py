@@ -167,3 +167,14 @@ def check_count(option: str, value: int, high: int) -> None:
     """Raise :class:`UsageError` unless ``value`` of ``option`` (e.g. ``"--workers"``) is 1 to ``high``."""
     if not 1 <= value <= high:
         raise UsageError(f"{option} must be between 1 and {high:,}, got {value}")
+
+
+def check_number(what: str, value, low: float, high: float, *, whole: bool = False, low_ok: bool = True,
+                 error: type[Exception] = UsageError) -> None:
+    """Raise ``error`` unless ``value`` (a setting named ``what``) is an int (or, unless ``whole``, a float)
+    from ``low`` (excluded unless ``low_ok``) to ``high``: NaN, infinities, bools and strings fail too."""
+    kinds = (int,) if whole else (int, float)  # type(), not isinstance: True is no number here
+    if type(value) not in kinds or not ((low <= value) if low_ok else (low < value)) or not value <= high:
+        kind = "a whole number" if whole else "a number"
+        raise error(f"{what} must be {kind} from {low:g}{'' if low_ok else ' (excluded)'} to {high:g}, "
+                    f"not {value!r:.40}")

@@ -454,12 +454,12 @@ def test_bad_transformer_training_settings_are_one_clean_error(capsys, tmp_path,
 
 
 @pytest.mark.parametrize("setting,fragment", [
-    ('"lr_path": -1', "'lr_path' must be a number from 0 to 10, got -1"),
-    ('"lr_generator": NaN', "'lr_generator' must be a number from 0 to 10, got nan"),
+    ('"lr_path": -1', "'lr_path' must be a number from 0 to 10, not -1"),
+    ('"lr_generator": NaN', "'lr_generator' must be a number from 0 to 10, not nan"),
     ('"mask_scale": 0', "'mask_scale' must be a number from 0 (excluded)"),
     ('"max_frames": 0', "'max_frames' must be a number from 1"),
     ('"val_fraction": 2', "'val_fraction' must be a number from 0 to 0.9"),
-    ('"lr_path": "x"', "'lr_path' must be a number from 0 to 10, got 'x'"),
+    ('"lr_path": "x"', "'lr_path' must be a number from 0 to 10, not 'x'"),
 ])
 def test_bad_gan_training_settings_are_one_clean_error(capsys, tmp_path, setting, fragment):
     """Probes of session 9: a negative rate was an internal error from torch; a mask scale of 0 (a division by

@@ -62,6 +62,7 @@ from keyfill.learn.transformer import (
     new_model,
     torch_device,
 )
+from keyfill.limits import check_number
 
 LAYOUTS = ("inbetween", "infill", "blend")
 GAP_SAMPLING = ("uniform", "log-uniform")
@@ -119,21 +120,21 @@ class TrainConfig:
 
     def __post_init__(self):
         for name, (whole, low, high, low_ok) in _TRAIN_NUMBERS.items():
-            _check_number(name, getattr(self, name), whole, low, high, low_ok)
+            check_number(f"training setting {name!r}", getattr(self, name), low, high, whole=whole, low_ok=low_ok)
         if not isinstance(self.layouts, dict) or not self.layouts:
             raise UsageError(f"layouts must name at least one of {', '.join(LAYOUTS)} with its share")
         bad = set(self.layouts) - set(LAYOUTS)
         if bad:
             raise UsageError(f"unknown key layout {min(bad)!r}; layouts are {', '.join(LAYOUTS)}")
         for name, share in self.layouts.items():
-            _check_number(f"layouts.{name}", share, False, 0, 1e6, True)
+            check_number(f"training setting 'layouts.{name}'", share, 0, 1e6)
         if not sum(self.layouts.values()) > 0:
             raise UsageError("the layouts' shares must not all be 0")
         longest = self.window - benchmark.N_PAST - 1
         if not self.val_lengths:
             raise UsageError("val_lengths must list at least one transition length")
         for length in self.val_lengths:
-            _check_number("val_lengths", length, True, 1, longest, True)
+            check_number("training setting 'val_lengths'", length, 1, longest, whole=True)
         if self.gap_sampling not in GAP_SAMPLING:
             raise UsageError(f"unknown gap_sampling {self.gap_sampling!r}; it is one of {', '.join(GAP_SAMPLING)}")
         for name in ("relative_loss", "mirror"):
@@ -150,15 +151,6 @@ _TRAIN_NUMBERS = {
     "decay": (False, 0, 1, False), "weight_decay": (False, 0, 1e3, True), "val_fraction": (False, 0, 0.9, True),
     "grad_clip": (False, 0, 1e6, True),
 }
-
-
-def _check_number(name: str, value, whole: bool, low: float, high: float, low_ok: bool) -> None:
-    kinds = (int,) if whole else (int, float)  # bool is not a number here
-    fits = type(value) in kinds and (low <= value if low_ok else low < value) and value <= high
-    if not fits:
-        what = "a whole number" if whole else "a number"
-        raise UsageError(f"training setting {name!r} must be {what} from {low:g}{'' if low_ok else ' (excluded)'} "
-                         f"to {high:g}, not {value!r:.40}")
 
 
 def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfig]:

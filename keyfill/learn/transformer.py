@@ -71,6 +71,7 @@ from keyfill.learn.transformer_features import (  # noqa: F401 - the layouts and
     canonical_transform,
     frame_kinds,
 )
+from keyfill.limits import check_number
 from keyfill.motion import Skeleton
 
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
@@ -135,8 +136,7 @@ class ModelConfig:
 
     def __post_init__(self):
         for name, (whole, low, high) in NUMBER_LIMITS.items():  # before any arithmetic (heads 0, layers 1e9)
-            if type(v := getattr(self, name)) not in ((int,) if whole else (int, float)) or not low <= v <= high:
-                raise ModelError(f"{name} must be a {'whole ' * whole}number from {low} to {high:g}, not {v!r:.40}")
+            check_number(name, getattr(self, name), low, high, whole=whole, error=ModelError)
         if self.coordinates not in ("global", "local"):
             raise ModelError(f"coordinates must be 'global' or 'local', not {self.coordinates!r}")
         if self.d_model % self.heads:

@@ -20,6 +20,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from keyfill.errors import UsageError
+from keyfill.limits import check_number
 
 #: channel widths per network: encoder (6 layers), decoder (13 hidden layers), discriminator (6), path predictor (8)
 PRESETS: dict[str, dict[str, list[int]]] = {
@@ -164,11 +165,8 @@ class GanConfig:
     seed: int = 0
 
     def __post_init__(self):
-        for name, (low, high, low_ok) in _RANGES.items():  # NaN fails both comparisons
-            value = getattr(self, name)
-            if type(value) not in (int, float) or not ((low <= value if low_ok else low < value) and value <= high):
-                raise UsageError(f"GAN setting {name!r} must be a number from {low:g}{'' if low_ok else ' (excluded)'} "
-                                 f"to {high:g}, got {value!r:.40}")
+        for name, (low, high, low_ok) in _RANGES.items():
+            check_number(f"GAN setting {name!r}", getattr(self, name), low, high, low_ok=low_ok)
         for name, n in _LAYERS.items():
             w = self.widths.get(name)
             if not isinstance(w, (list, tuple)) or len(w) != n or not all(isinstance(c, int) and c > 0 for c in w):

@@ -5,15 +5,29 @@ model files) is a :class:`KeyfillError`. Its message is one line that makes
 sense on its own; the CLI prints it as ``keyfill: error: <message>`` and exits
 with :attr:`KeyfillError.exit_code`. Anything else is a bug and shows a
 traceback only with ``--debug``.
+
+Errors about an argument name it as the library does (``batch_size must be at
+least 1``) and list it in :attr:`KeyfillError.params`, so that a Python caller
+reads the parameter it passed; the CLI writes each listed parameter as the
+command-line flag that gives it (``--batch-size must be at least 1``, see
+:func:`keyfill.cli.common.flag_words`).
 """
 
 from __future__ import annotations
 
 
 class KeyfillError(Exception):
-    """Base of all expected errors. ``exit_code`` 1: the work failed."""
+    """Base of all expected errors. ``exit_code`` 1: the work failed.
+
+    ``params``: the names of the function parameters the message names (e.g. ``("key_every",)``), which the
+    CLI rewrites as its flags; empty when the message names none.
+    """
 
     exit_code = 1
+
+    def __init__(self, message: str = "", *, params: str | tuple[str, ...] = ()):
+        super().__init__(message)
+        self.params = (params,) if isinstance(params, str) else tuple(params)
 
 
 class UsageError(KeyfillError):
@@ -28,14 +42,15 @@ class FormatError(KeyfillError):
     ``path`` and ``line`` (1-based) are put in front of the message when known.
     """
 
-    def __init__(self, message: str, path: object = None, line: int | None = None):
+    def __init__(self, message: str, path: object = None, line: int | None = None, *,
+                 params: str | tuple[str, ...] = ()):
         where = ""
         if path is not None:
             where = f"{path}"
             if line is not None:
                 where += f":{line}"
             where += ": "
-        super().__init__(where + message)
+        super().__init__(where + message, params=params)
         self.path = path
         self.line = line
 

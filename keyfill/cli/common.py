@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -12,6 +13,22 @@ from keyfill.errors import UsageError
 from keyfill.motion import Keys, Motion
 
 FORMAT_CHOICE = click.Choice(["bvh", "usda", "usdc", "usd"], case_sensitive=False)
+
+
+#: library parameters whose flag is not ``--`` + the name with dashes
+FLAG_OF = {"learning_rate": "--lr"}
+
+
+def flag(param: str) -> str:
+    """The command-line flag that gives the library parameter ``param`` (``key_every`` -> ``--key-every``)."""
+    return FLAG_OF.get(param, "--" + param.replace("_", "-"))
+
+
+def flag_words(message: str, params) -> str:
+    """``message`` with each parameter of ``params`` that it names (as a whole word) written as its flag."""
+    for param in params:
+        message = re.sub(rf"(?<![\w-]){re.escape(param)}(?![\w-])", flag(param), message)
+    return message
 
 
 def verbosity(ctx: click.Context | None = None) -> int:

@@ -170,7 +170,9 @@ def _main(args: list[str], debug: bool) -> int:
         if debug:
             raise
         if not getattr(e, "reported", False):
-            _error(str(e))
+            from keyfill.cli.common import flag_words
+
+            _error(flag_words(str(e), getattr(e, "params", ())))
         return e.exit_code
     except KeyboardInterrupt:
         _error("interrupted")

@@ -9,14 +9,16 @@ from pathlib import Path
 
 import click
 
+from keyfill import io
 from keyfill.errors import UsageError
 from keyfill.motion import Keys, Motion
 
-FORMAT_CHOICE = click.Choice(["bvh", "usda", "usdc", "usd"], case_sensitive=False)
+#: ``--format`` / ``--in-format`` choices: the names of the one table of formats
+FORMAT_CHOICE = click.Choice(list(io.FORMATS), case_sensitive=False)
 
 
 #: library parameters whose flag is not ``--`` + the name with dashes
-FLAG_OF = {"learning_rate": "--lr"}
+FLAG_OF = {"learning_rate": "--lr", "chunk": "--batch-size", "outdir": "-o"}
 
 
 def flag(param: str) -> str:
@@ -27,7 +29,8 @@ def flag(param: str) -> str:
 def flag_words(message: str, params) -> str:
     """``message`` with each parameter of ``params`` that it names (as a whole word) written as its flag."""
     for param in params:
-        message = re.sub(rf"(?<![\w-]){re.escape(param)}(?![\w-])", flag(param), message)
+        # a whole word, not part of a name or path (``/data/format/x.bvh``, ``format.json``)
+        message = re.sub(rf"(?<![\w\-/.]){re.escape(param)}(?![\w\-/.])", flag(param), message)
     return message
 
 
@@ -124,7 +127,14 @@ def apply_partial_keys(motion: Motion, keys: Keys, joints_text: str | None, posi
 def output_format(path: str, fmt: str | None) -> str | None:
     """``--format`` is required for ``-`` (stdout) and otherwise overrides the suffix."""
     if path == "-" and fmt is None:
-        raise UsageError("writing to '-' needs --format (bvh, usda or usdc)")
+        raise UsageError(f"writing to '-' needs --format ({io.listing(io.FORMATS)})")
+    return fmt
+
+
+def input_format(path: str, fmt: str | None) -> str | None:
+    """``--in-format`` is required for ``-`` (stdin) and otherwise overrides the suffix."""
+    if path == "-" and fmt is None:
+        raise UsageError(f"reading '-' needs --in-format ({io.listing(io.FORMATS)})")
     return fmt
 
 
@@ -135,7 +145,6 @@ def load_labelled(files, labels: str | None, in_fmt: str | None, keys_text: str 
     ``--keys`` / ``--key-every`` replace each file's own keys. A file with no
     frames is a :class:`DataError`.
     """
-    from keyfill import io
     from keyfill.errors import DataError
 
     names = [Path(f).stem if f != "-" else "stdin" for f in files]
@@ -145,7 +154,7 @@ def load_labelled(files, labels: str | None, in_fmt: str | None, keys_text: str 
             raise UsageError(f"--labels gives {len(names)} names for {len(files)} files")
     motions = []
     for f in files:
-        motion = io.load(f, in_fmt)
+        motion = io.load(f, input_format(f, in_fmt))
         if motion.num_frames == 0:
             raise DataError(f"{f}: the motion has no frames")
         if keys_text is not None or key_every is not None:
@@ -177,8 +186,6 @@ def run_batch(inputs, outdir, fmt, job, spec, workers, scheduler, connect_timeou
 
     from keyfill.io.batch import plan, run
 
-    if fmt is not None and fmt.lower() not in ("bvh", "usda", "usdc", "usd"):
-        raise UsageError(f"unknown format {fmt!r}")
     items = plan(inputs, outdir, fmt)
     if check is not None:
         check()

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import click
 
+from keyfill import io
 from keyfill.cli.common import (
     FORMAT_CHOICE,
     apply_partial_keys,
     batch_options,
     emit_json,
+    input_format,
     keys_options,
     output_format,
     partial_keys_options,
@@ -23,7 +25,7 @@ from keyfill.learn.registry import METHODS
 @click.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(allow_dash=True), metavar="IN...")
 @click.option("-o", "--output", "dst", required=True, type=click.Path(allow_dash=True),
-              help="Output file (.bvh, .usda, .usdc, .usd) or '-' with --format; for several inputs, a folder "
+              help=f"Output file ({', '.join(io.SUFFIXES)}) or '-' with --format; for several inputs, a folder "
                    "(OUTDIR/).")
 @keys_options
 @partial_keys_options
@@ -88,6 +90,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete keys.usda -o filled.usda
       keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
+      keyfill complete character.glb --key-every 10 -o filled.glb       (keeps the meshes of character.glb)
       keyfill complete hops/ --method arnn -o filled/ --workers 2
       keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
       keyfill complete keys.usda --method arnn --model lamp-arnn.onnx -o filled.usda
@@ -96,7 +99,6 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete path.bvh --keys 0,200,400 --key-joints Hips --key-positions --method gan -o out.bvh
       keyfill complete walk.bvh --keys 0,300,600 --method gan --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
     """
-    from keyfill import io
     from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
@@ -118,11 +120,11 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     if len(inputs) != 1:
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
-    motion = io.load(src, in_fmt)
+    motion = io.load(src, input_format(src, in_fmt))
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)
     result = run(motion, keys, method, options)
-    io.save(result.motion, dst, output_format(dst, fmt))
+    io.save(result.motion, dst, output_format(dst, fmt), source=src)
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})
     elif dst != "-":

@@ -1,4 +1,4 @@
-"""``keyfill convert``: between BVH and USD."""
+"""``keyfill convert``: between the formats of :data:`keyfill.io.FORMATS` (BVH, USD, glTF)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from keyfill.cli.common import (
     FORMAT_CHOICE,
     batch_options,
     emit_json,
+    input_format,
     keys_options,
     output_format,
     resolve_keys,
@@ -30,12 +31,13 @@ from keyfill.cli.common import (
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, scheduler, connect_timeout, force,
             batch_size, as_json):
-    """Convert a motion file between BVH and USD (.usda, .usdc, .usd).
+    """Convert a motion file between BVH, USD (.usda, .usdc, .usd) and glTF (.glb, .gltf).
 
     Formats come from the suffixes; '-' reads standard input or writes
-    standard output (then give --in-format / --format). BVH -> USD -> BVH keeps
-    the joint names, channel layouts, Euler orders and End Sites. The output is
-    written atomically: on any error no file appears.
+    standard output (then give --in-format / --format). BVH -> USD -> BVH and
+    BVH -> glTF -> BVH keep the joint names, channel layouts, Euler orders and
+    End Sites; glTF -> glTF keeps the meshes and materials of SRC. The output
+    is written atomically: on any error no file appears (docs/formats.md).
 
     With --curves, DST becomes a curves file for `keyfill edit-tangents`:
     Bezier curves through the keys (--keys, --key-every, or the file's own),
@@ -52,6 +54,7 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
     Examples:
       keyfill convert walk.bvh walk.usda
       keyfill convert walk.usdc walk.bvh
+      keyfill convert walk.bvh walk.glb
       keyfill convert walk.bvh walk_curves.usda --curves --keys 0,10,20,30
       cat walk.bvh | keyfill convert - - --in-format bvh --format usda > walk.usda
       keyfill convert mocap/ -o usd/ --format usdc --workers 2
@@ -71,19 +74,19 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
         raise click.UsageError(f"got {len(paths)} paths: give SRC DST, or SRC... -o OUTDIR/")
     src, dst = paths
 
-    motion = io.load(src, in_fmt)
+    motion = io.load(src, input_format(src, in_fmt))
     if curves:
         from keyfill.edit.fit import fit
         from keyfill.io import usd_curves as curvefile
 
-        if dst == "-" or io.format_of(dst, fmt) == "bvh":
-            raise UsageError("--curves writes a USD curves file: give DST a .usda, .usdc or .usd name")
+        if dst == "-" or io.FORMATS[io.format_of(dst, fmt)].family != "usd":
+            raise UsageError(f"--curves writes a USD curves file: give DST a {io.listing(io.suffixes('usd'))} name")
         keys = resolve_keys(motion, keys_text, key_every)
         curvefile.save(fit(motion, keys), dst)
     elif keys_text is not None or key_every is not None:
         raise UsageError("--keys and --key-every choose the keys of --curves; add --curves")
     else:
-        io.save(motion, dst, output_format(dst, fmt))
+        io.save(motion, dst, output_format(dst, fmt), source=src)
     if as_json and dst != "-":
         emit_json({"input": src, "output": dst, "frames": motion.num_frames, "joints": motion.num_joints})
     elif dst != "-":

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import click
 
+from keyfill import io
 from keyfill.cli.common import emit_json, say
 
 
@@ -51,7 +52,8 @@ def output_options(f):
         "dst",
         required=True,
         type=click.Path(dir_okay=False),
-        help="Output: a curves file (.usda, .usdc, .usd) or the baked motion (.bvh).",
+        help=f"Output: a curves file ({', '.join(io.suffixes('usd'))}) or the baked motion "
+             f"({', '.join(s for s in io.SUFFIXES if s not in io.suffixes('usd'))}).",
     )(f)
 
 

@@ -47,7 +47,7 @@ def describe(motion, path: str) -> dict:
                    "takes from this file, see docs/gan.md).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
 def info(file, fmt, representative, as_json):
-    """Show what a BVH or USD motion file holds.
+    """Show what a motion file (BVH, USD or glTF) holds.
 
     Skeleton (joints, channels, Euler orders), frame count, frame rate,
     duration, keys and the world-space bounding box.

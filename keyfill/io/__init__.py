@@ -1,13 +1,16 @@
 """Reading and writing motion files: ``load(path) -> Motion``, ``save(motion, path)``.
 
-The format comes from the suffix (``.bvh``, ``.usda``, ``.usdc``, ``.usd``) or
-from ``format=`` (required for ``-``, standard input or output). Each format
-has a reader ``read(path, label=None) -> Motion`` (``label`` names the file in
-error messages) and a writer ``write(motion, path, **options)``: BVH in
-:mod:`keyfill.io.bvh`; USD in :mod:`keyfill.io.usd` (UsdSkel), read through
-:func:`keyfill.io.usd_curves.read_motion` so that a keyfill curves file gives
-its Bezier curves baked at every frame. Saving is atomic: the file appears
-complete or not at all (see :func:`keyfill.files.atomic_output`).
+:data:`FORMATS` is the one table of file formats: each :class:`Format` names its
+reader ``read(path, label=None) -> Motion`` (``label`` names the file in error
+messages), its writer ``write(motion, path, **options)``, its suffixes and a
+description. The command-line choices, the suffixes a batch picks from a
+folder, and every message that lists formats read it. The format comes from
+the suffix or from ``format=`` (required for ``-``, standard input or output).
+BVH is :mod:`keyfill.io.bvh`; USD is :mod:`keyfill.io.usd` (UsdSkel), read
+through :func:`keyfill.io.usd_curves.read_motion` so that a keyfill curves file
+gives its Bezier curves baked at every frame; glTF 2.0 is :mod:`keyfill.io.gltf`.
+Saving is atomic: the file appears complete or not at all (see
+:func:`keyfill.files.atomic_output`).
 """
 
 from __future__ import annotations
@@ -16,23 +19,68 @@ import importlib
 import os
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from keyfill.errors import FormatError, UsageError
 from keyfill.files import atomic_output
 from keyfill.motion import Motion
 
+
+@dataclass(frozen=True)
+class Format:
+    """One file format: ``reader`` and ``writer`` as ``"module:function"`` (imported on first use)."""
+
+    name: str
+    family: str
+    reader: str
+    writer: str
+    suffixes: tuple[str, ...]
+    description: str
+    #: suffix of a second file the writer puts beside the output (a ``.gltf``'s ``.bin``), or None
+    sidecar: str | None = None
+    #: the writer takes ``template=``: a file of the same family whose content beyond the motion it keeps
+    template: bool = False
+
+
 _USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
-#: format name -> its (reader, writer) as "module:function", imported on first use
-FORMATS = {"bvh": ("keyfill.io.bvh:read", "keyfill.io.bvh:write"), "usda": _USD, "usdc": _USD, "usd": _USD}
+_GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.io.gltf:write", "template": True}
+#: format name -> :class:`Format`, in the order messages list them
+FORMATS = {f.name: f for f in (
+    Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text"),
+    Format("usda", "usd", *_USD, (".usda",), "USD text (UsdSkel)"),
+    Format("usdc", "usd", *_USD, (".usdc",), "USD binary crate (UsdSkel)"),
+    Format("usd", "usd", *_USD, (".usd",), "USD, text or crate (written as crate)"),
+    Format("glb", suffixes=(".glb",), description="glTF 2.0 binary (skin + animation)", **_GLTF),
+    Format("gltf", suffixes=(".gltf",), description="glTF 2.0 JSON with a .bin beside it (embedded on standard output)",
+           sidecar=".bin", **_GLTF),
+)}
+#: suffix (lower case, with the dot) -> format name
+SUFFIXES = {s: f.name for f in FORMATS.values() for s in f.suffixes}
 STDIO = "-"
 
 
-def format_of(path: str | os.PathLike, format: str | None = None, option: str = "--format") -> str:
+def listing(items, last: str = "or") -> str:
+    """``"a, b or c"``: the words of ``items`` for a message."""
+    items = list(items)
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} {last} {items[-1]}"
+
+
+def names(family: str | None = None) -> list[str]:
+    """Format names (of one ``family``: ``"bvh"``, ``"usd"``, ``"gltf"``), in table order."""
+    return [f.name for f in FORMATS.values() if family is None or f.family == family]
+
+
+def suffixes(family: str | None = None) -> list[str]:
+    """Suffixes (``".usda"``) of the formats (of one ``family``), in table order."""
+    return [s for name in names(family) for s in FORMATS[name].suffixes]
+
+
+def format_of(path: str | os.PathLike, format: str | None = None, reading: bool = False) -> str:
     """The format name for ``path``: ``format`` when given, else from the suffix.
 
-    ``option`` is the command-line option that gives the format, named in the
-    error for ``-`` (``--in-format`` for inputs).
+    ``-`` needs ``format``; ``reading`` says whether ``-`` is standard input
+    (for the error). Errors name the parameter ``format`` (in ``params``).
     """
     if format is not None:
         fmt = format.lower().lstrip(".")
@@ -40,12 +88,13 @@ def format_of(path: str | os.PathLike, format: str | None = None, option: str = 
             raise UsageError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}")
         return fmt
     if str(path) == STDIO:
-        reading = option == "--in-format"
-        raise UsageError(f"{'reading' if reading else 'writing'} '-' needs {option} (bvh, usda or usdc)")
-    suffix = Path(path).suffix.lower().lstrip(".")
-    if suffix not in FORMATS:
-        raise UsageError(f"{path}: unknown file type {Path(path).suffix or '(no suffix)'!r}; expected .bvh, .usda, .usdc or .usd")
-    return suffix
+        raise UsageError(f"{'reading' if reading else 'writing'} '-' needs format ({listing(FORMATS)})",
+                         params="format")
+    suffix = Path(path).suffix.lower()
+    if suffix not in SUFFIXES:
+        raise UsageError(f"{path}: unknown file type {Path(path).suffix or '(no suffix)'!r}; "
+                         f"expected {listing(SUFFIXES)}")
+    return SUFFIXES[suffix]
 
 
 def _function(target: str):
@@ -55,11 +104,11 @@ def _function(target: str):
 
 def load(path: str | os.PathLike, format: str | None = None) -> Motion:
     """Read a motion file (``"-"``: standard input, with ``format``)."""
-    fmt = format_of(path, format, option="--in-format")
-    read = _function(FORMATS[fmt][0])
+    fmt = format_of(path, format, reading=True)
+    read = _function(FORMATS[fmt].reader)
     if str(path) == STDIO:
         with tempfile.TemporaryDirectory() as tmp:
-            p = Path(tmp) / ("stdin." + fmt)
+            p = Path(tmp) / ("stdin" + FORMATS[fmt].suffixes[0])
             p.write_bytes(sys.stdin.buffer.read())
             return read(p, label="<stdin>")
     p = Path(path)
@@ -68,20 +117,40 @@ def load(path: str | os.PathLike, format: str | None = None) -> Motion:
     return read(p)
 
 
-def save(motion: Motion, path: str | os.PathLike, format: str | None = None, **options) -> None:
+def save(motion: Motion, path: str | os.PathLike, format: str | None = None, source: str | os.PathLike | None = None,
+         **options) -> None:
     """Write ``motion`` atomically (``"-"``: standard output, with ``format``).
 
-    ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key files).
+    ``source``: the file ``motion`` came from; when it is of the output's
+    family and the format keeps a :attr:`Format.template`, what it holds
+    beyond the motion is kept (a glTF character's meshes and materials).
+    ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key
+    files). A format with a :attr:`Format.sidecar`
+    writes that file beside the output, atomically too: its writer gets
+    ``sidecar=(temporary path, final file name)``, or ``sidecar=None`` on
+    standard output, where it embeds what the sidecar would hold.
     """
     fmt = format_of(path, format)
-    write = _function(FORMATS[fmt][1])
+    spec = FORMATS[fmt]
+    write = _function(spec.writer)
+    source_suffix = Path(source).suffix.lower() if source is not None and str(source) != STDIO else None
+    if spec.template and source_suffix in SUFFIXES and FORMATS[SUFFIXES[source_suffix]].family == spec.family:
+        options["template"] = Path(source)
     if str(path) == STDIO:
+        if spec.sidecar:
+            options["sidecar"] = None
         with tempfile.TemporaryDirectory() as tmp:
-            out = Path(tmp) / ("stdout." + fmt)
+            out = Path(tmp) / ("stdout" + spec.suffixes[0])
             write(motion, out, **options)
             sys.stdout.flush()
             sys.stdout.buffer.write(out.read_bytes())
             sys.stdout.buffer.flush()
+        return
+    if spec.sidecar:
+        side = Path(path).with_suffix(spec.sidecar)
+        # the sidecar is renamed into place first, so the output never appears without it
+        with atomic_output(path) as tmp, atomic_output(side) as tmp_side:
+            write(motion, tmp, sidecar=(tmp_side, side.name), **options)
         return
     with atomic_output(path) as tmp:
         write(motion, tmp, **options)

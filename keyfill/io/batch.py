@@ -25,14 +25,15 @@ from __future__ import annotations
 import glob
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from keyfill.errors import FormatError, KeyfillError, UsageError
+from keyfill.io import FORMATS, SUFFIXES
 
-#: suffixes of motion files a folder input contributes
-MOTION_SUFFIXES = (".bvh", ".usda", ".usdc", ".usd")
+#: suffixes of motion files a folder input contributes (those of :data:`keyfill.io.FORMATS`)
+MOTION_SUFFIXES = tuple(SUFFIXES)
 #: inputs per chunk (the unit of work sent to a worker, and a learned method's batch)
 CHUNK = 64
 
@@ -95,29 +96,34 @@ def _prefix(parts):
     return out
 
 
-def plan(inputs, outdir: str | os.PathLike, fmt: str | None = None) -> list[Item]:
+def plan(inputs, outdir: str | os.PathLike, format: str | None = None) -> list[Item]:
     """The items of a batch, sorted by input; refuses what cannot work before any work is done.
 
     Args:
         inputs: files, folders (their motion files, recursively) and globs.
         outdir: the output folder (created later if missing).
-        fmt: output format (``bvh``, ``usda``, ``usdc``, ``usd``): the outputs' suffix; None keeps the input's.
+        format: output format (a name of :data:`keyfill.io.FORMATS`): the outputs' suffix; None keeps the
+            input's.
+
+    Errors name the parameters ``outdir`` and ``format`` (in ``params``).
     """
     out = Path(outdir)
     if out.exists() and not out.is_dir():
-        raise UsageError(f"-o {outdir}: is a file; a batch writes into an output folder")
-    if fmt is not None:
-        fmt = fmt.lower().lstrip(".")
-        if "." + fmt not in MOTION_SUFFIXES:
-            raise UsageError(f"unknown format {fmt!r}; expected one of bvh, usda, usdc, usd")
+        raise UsageError(f"outdir {outdir}: is a file; a batch writes into an output folder", params="outdir")
+    fmt = None
+    if format is not None:
+        fmt = format.lower().lstrip(".")
+        if fmt not in FORMATS:
+            raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     resolved_out = out.resolve()
     seen: dict[Path, Path] = {}  # output -> input
     items = []
     for text in inputs:
         for src, rel in _expand(str(text), resolved_out):
-            dst = out / (rel.with_suffix("." + fmt) if fmt else rel)
+            dst = out / (rel.with_suffix(FORMATS[fmt].suffixes[0]) if fmt else rel)
             if dst.suffix.lower() not in MOTION_SUFFIXES:
-                raise UsageError(f"{src}: unknown file type {src.suffix or '(no suffix)'!r}; give --format")
+                raise UsageError(f"{src}: unknown file type {src.suffix or '(no suffix)'!r}; give format",
+                                 params="format")
             if src.resolve() == dst.resolve():
                 raise UsageError(f"{src}: would be overwritten by its own output; choose another output folder")
             key = dst.resolve()
@@ -217,7 +223,7 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
 
     check_options(workers, connect_timeout)
     if chunk < 1:
-        raise UsageError(f"--batch-size must be at least 1, got {chunk}")
+        raise UsageError(f"chunk must be at least 1, got {chunk}", params="chunk")
     start = time.perf_counter()
     summary = Summary(output="")
     outcomes: dict[str, dict] = {}
@@ -251,7 +257,7 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
                         results = fut.result()
                     except KeyfillError:
                         raise
-                    except Exception as e:  # a worker that died: its inputs failed, the others go on
+                    except Exception as e:  # noqa: BLE001 (a worker that died: its inputs failed, the others go on)
                         results = [failure(it, e) for it in job]
                     for it, res in zip(job, results):
                         if it.write:
@@ -281,7 +287,7 @@ def convert_chunk(chunk: list[Item], spec=None) -> list[dict]:
             continue
         try:
             motion = io.load(it.src)
-            io.save(motion, it.dst)
+            io.save(motion, it.dst, source=it.src)
             out.append({"input": it.src, "output": it.dst, "status": "done", "frames": motion.num_frames,
                         "joints": motion.num_joints})
         except (KeyfillError, OSError) as e:

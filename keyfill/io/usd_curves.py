@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from keyfill import io
 from keyfill.curves import Control, Curves
 from keyfill.errors import DataError, FormatError
 from keyfill.files import quiet_stderr
@@ -102,11 +103,10 @@ def write(curves: Curves, path: str | Path) -> None:
 
 
 def save(curves: Curves, path: str | Path) -> None:
-    """Write ``curves`` atomically: a curves file for USD suffixes, the baked motion for ``.bvh``."""
-    from keyfill import io
+    """Write ``curves`` atomically: a curves file for USD suffixes, the baked motion for the other formats."""
     from keyfill.files import atomic_output
 
-    if io.format_of(path) == "bvh":
+    if io.FORMATS[io.format_of(path)].family != "usd":
         io.save(curves.bake(), path)
         return
     with atomic_output(path) as tmp:
@@ -247,8 +247,8 @@ def read(path: str | Path, label=None) -> Curves:
     """Read a keyfill curves file written by :func:`write` (or following its layout)."""
     label = path if label is None else label
     hint = "make one with keyfill convert IN.bvh OUT.usda --curves --keys ..."
-    if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
-        raise FormatError(f"not a keyfill curves file (a .usda, .usdc or .usd file); {hint}", label)
+    if Path(path).suffix.lower() not in io.suffixes("usd"):
+        raise FormatError(f"not a keyfill curves file (a {io.listing(io.suffixes('usd'))} file); {hint}", label)
     if not Path(path).is_file():
         raise FormatError("no such file", label)
     stage = usd.open_stage(path, label)

@@ -15,7 +15,7 @@ process on a 3-hop sequence (87 frames, 9 keys), with the model loaded once:
 The goal is under 20 ms for ``complete``.
 
 Quality (``--tables DATA``): every ``--model LABEL=PATH`` and the spline
-baselines scored by :func:`keyfill.learn.lamp_eval.evaluate` on the test
+baselines scored by :func:`keyfill.learn.protocols.keys.evaluate` on the test
 split of the dataset (the last 20 % of its sequences) with all keys and with
 1-2 keys deleted; a markdown table with key, frame and total loss, the frame
 loss relative to cubic, and each model's training time from its config.
@@ -53,11 +53,11 @@ def machine() -> str:
 
 def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
     from keyfill import io
-    from keyfill.learn import arnn
-    from keyfill.learn.lamp_features import LampSequence
-    from keyfill.learn.completion import CompleteOptions
-    from keyfill.learn.registry import complete
     from keyfill.characters.lamp import to_variables
+    from keyfill.learn.arnn import model as arnn
+    from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.lamp_data import LampSequence
+    from keyfill.learn.registry import complete
 
     motion = io.load(keys_file)
     keys = motion.keys
@@ -85,10 +85,9 @@ def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
 
 
 def tables(data: str, models: list[tuple[str, str]], seed: int) -> list[dict]:
-    from keyfill.learn import arnn
-    from keyfill.learn.lamp_eval import evaluate
-    from keyfill.learn.lamp_features import read_sequences
-    from keyfill.learn.train_arnn import split
+    from keyfill.learn.arnn import model as arnn
+    from keyfill.learn.lamp_data import read_sequences, split
+    from keyfill.learn.protocols.keys import evaluate
 
     test = split(read_sequences(data))["test"]
     rows = []
@@ -164,8 +163,7 @@ def main() -> None:
         print(f"  complete / goal: {r['complete_ms']['median'] / GOAL_MS:.2f} (median), "
               f"{r['complete_ms']['best'] / GOAL_MS:.2f} (best)")
     if "tables" in report:
-        from keyfill.learn.lamp_features import read_sequences
-        from keyfill.learn.train_arnn import split
+        from keyfill.learn.lamp_data import read_sequences, split
 
         n = len(split(read_sequences(args.tables))["test"])
         print(markdown(report["tables"], n))

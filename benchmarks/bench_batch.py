@@ -80,7 +80,8 @@ def startup(work: Path, repeat: int) -> dict:
     """Subprocess wall times of a single ``complete``: torch vs the exported graph (ARNN, transformer)."""
     import torch
 
-    from keyfill.learn import transformer as T
+    from keyfill.learn.transformer import config as TC
+    from keyfill.learn.transformer import model as T
     from keyfill.motion import Keys
 
     sys.path.insert(0, str(ROOT / "tests"))
@@ -95,7 +96,7 @@ def startup(work: Path, repeat: int) -> dict:
     motion = walker_motion(skeleton, 40, np.random.default_rng(0))
     with torch.random.fork_rng():
         torch.manual_seed(0)
-        model = T.new_model(skeleton, T.ModelConfig(dropout=0.0), np.zeros(21), np.full(21, 30.0), folded=False)
+        model = T.new_model(skeleton, TC.ModelConfig(dropout=0.0), np.zeros(21), np.full(21, 30.0), folded=False)
         with torch.no_grad():  # every layer random, the zero-initialised output too (else it returns its input)
             for p in model.network.parameters():
                 p.add_(0.02 * torch.randn(p.shape))
@@ -132,10 +133,10 @@ def latency(model, graph: Path, work: Path, repeat: int) -> dict:
 
     from keyfill import io
     from keyfill.characters.lamp import to_variables
-    from keyfill.learn import arnn
     from keyfill.learn import onnx as kx
-    from keyfill.learn.arnn_onnx import OnnxLampModel
-    from keyfill.learn.lamp_features import LampSequence
+    from keyfill.learn.arnn import model as arnn
+    from keyfill.learn.arnn.onnx import OnnxLampModel
+    from keyfill.learn.lamp_data import LampSequence
 
     torch.set_num_threads(1)
     tf_graph = kx.Graph(work / "tf-onnx" / kx.GRAPH)

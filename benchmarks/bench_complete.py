@@ -28,7 +28,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from bench_bvh_io import Skipped, concatenated_bvh, load_average, machine, median_times
 
 GOAL_SECONDS = 1.0

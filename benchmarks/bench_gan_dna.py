@@ -24,7 +24,6 @@ from keyfill.errors import DataError
 from keyfill.learn.corpus import load_corpus, locate
 from keyfill.learn.gan.model import load_model
 from keyfill.learn.gan.quality import quality_report
-from keyfill.learn.train_transformer import select_clips
 
 
 def main(argv=None) -> int:
@@ -44,7 +43,7 @@ def main(argv=None) -> int:
         return 0
     print(f"load average before: {os.getloadavg()[0]:.2f}", file=sys.stderr)
     model = load_model(args.model)
-    corpus = select_clips(load_corpus([data], fold=model.folded), include=(args.test_pattern,))
+    corpus = load_corpus([data], fold=model.folded).select(include=(args.test_pattern,))
     report = quality_report(model, corpus, range(len(corpus)), args.sequences, args.frames, args.seed)
     print(f"load average after: {os.getloadavg()[0]:.2f}", file=sys.stderr)
     if args.json:

@@ -21,7 +21,7 @@ Three parts, all on the ``normal`` clips the model never saw:
    clip long enough for two gaps: keys every ``G`` frames (``--gaps``) and on
    the last frame, filled by linear, cubic, the gan (seed 0) and, with
    ``--transformer MODEL``, the transformer (gaps up to 63 frames), beside the
-   real clip: foot skating (cm/s, :mod:`keyfill.learn.realism`, the real
+   real clip: foot skating (cm/s, :mod:`keyfill.learn.protocols.metrics`, the real
    clip's lowest foot heights as the floor), jitter (m/s^3), the share of driven
    joint rotations outside the model's RC-FK ranges by more than 0.01 degree on
    the frames between keys (%; keys are the input), and the largest
@@ -50,9 +50,8 @@ from keyfill.learn.gan.model import load_model
 from keyfill.learn.gan.poses import clip_pool
 from keyfill.learn.gan.quality import path_errors, quality_report
 from keyfill.learn.gan.ranges import inside
-from keyfill.learn.realism import foot_joints, foot_skating, jitter
+from keyfill.learn.protocols.metrics import foot_joints, foot_skating, jitter
 from keyfill.learn.registry import complete
-from keyfill.learn.train_transformer import select_clips
 from keyfill.motion import Keys
 
 #: a rotation counts as outside its range beyond this (radians): the real clips' hinge joints leave their
@@ -152,7 +151,7 @@ def main(argv=None) -> int:
     print(f"load average before: {os.getloadavg()[0]:.2f}", file=sys.stderr)
     started = time.perf_counter()
     model = load_model(args.model)
-    corpus = select_clips(load_corpus([data], fold=model.folded), include=(args.test_pattern,))
+    corpus = load_corpus([data], fold=model.folded).select(include=(args.test_pattern,))
     report = {"path_cm": path_errors(model, clip_pool(corpus))}
     report["sampled"] = quality_report(model, corpus, range(len(corpus)), args.sequences, args.frames, args.seed)
     files = bvh_files([data], args.test_pattern)[: args.clips]

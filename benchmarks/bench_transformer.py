@@ -44,7 +44,9 @@ import torch
 from timing import cpu_name, matmul_gflops, timed_ms
 
 from keyfill import rotations as R
-from keyfill.learn import transformer as T
+from keyfill.learn.transformer import config as TC
+from keyfill.learn.transformer import features as TF
+from keyfill.learn.transformer import model as T
 from keyfill.motion import Skeleton
 
 PAPER_MS = {1: 25.0, 10: 83.0}
@@ -76,11 +78,11 @@ def main(argv=None) -> int:
     else:
         torch.manual_seed(0)
         skel = bandai_like_skeleton()
-        model = T.new_model(skel, T.ModelConfig(), np.zeros(66), np.full(66, 20.0), folded=False)
+        model = T.new_model(skel, TC.ModelConfig(), np.zeros(66), np.full(66, 20.0), folded=False)
         model.network.eval()
     if args.onnx:
         from keyfill.learn.onnx import open_graph
-        from keyfill.learn.transformer_onnx import model_from_graph
+        from keyfill.learn.transformer.onnx import model_from_graph
 
         graph_model = model_from_graph(open_graph(args.onnx))
     J = model.skeleton.num_joints
@@ -95,7 +97,7 @@ def main(argv=None) -> int:
             q = R.quat_normalize(rng.normal(size=(batch, frames, J, 4)))
             r = rng.normal(size=(batch, frames, 3)) * 50
             x = torch.randn(batch, frames, model.features.size)
-            kinds = torch.as_tensor(T.frame_kinds(frames, keys)).expand(batch, frames)
+            kinds = torch.as_tensor(TF.frame_kinds(frames, keys)).expand(batch, frames)
 
             def network(x=x, kinds=kinds):
                 with torch.inference_mode():

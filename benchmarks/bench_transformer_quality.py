@@ -39,10 +39,11 @@ import time
 
 import numpy as np
 
+from keyfill import interpolate
 from keyfill.errors import DataError
-from keyfill.learn import benchmark as B
 from keyfill.learn.corpus import locate
-from keyfill.learn.transformer import load
+from keyfill.learn.protocols import lafan1 as B
+from keyfill.learn.transformer.model import load
 
 SSMCT = {  # Table 1 of the paper: (SSMCT, interpolation) at 5, 15, 30 frames
     "L2Q": {5: (0.14, 0.22), 15: (0.36, 0.62), 30: (0.61, 0.98)},
@@ -74,8 +75,8 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     model = load(args.model)
     proto = B.lafan1([folder], ["*_normal_*"], fold=True, facing_axis="+Y")
-    methods = {"zero-velocity": B.zero_velocity, "interpolation": B.interpolation, "cubic": B.cubic,
-               "velocity": B.velocity, "transformer": model.benchmark_method()}
+    methods = {"zero-velocity": interpolate.hold_windows, "interpolation": interpolate.linear_windows, "cubic": interpolate.cubic_windows,
+               "velocity": interpolate.velocity_windows, "transformer": model.benchmark_method()}
     inbetween = B.evaluate(methods, proto.test, proto.stats, B.LENGTHS)
     layouts = {
         "in-filling, key every 5": np.arange(0, 61, 5),

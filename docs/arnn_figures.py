@@ -32,11 +32,10 @@ from pathlib import Path
 import numpy as np
 
 from keyfill import io
-from keyfill.learn.lamp_features import read_sequences
-from keyfill.learn.train_arnn import split
-from keyfill.motion import Keys
-from keyfill.io.hops import read_dataset
 from keyfill.characters.lamp import from_variables
+from keyfill.io.hops import read_dataset
+from keyfill.learn.lamp_data import read_sequences, split
+from keyfill.motion import Keys
 
 HERE = Path(__file__).parent
 KEYFILL = str(Path(sys.executable).parent / "keyfill")

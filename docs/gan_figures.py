@@ -36,7 +36,7 @@ import numpy as np
 from keyfill import io
 from keyfill import rotations as R
 from keyfill.learn.corpus import locate
-from keyfill.learn.facing import axis_vector, facing_rotation
+from keyfill.learn.windows import axis_vector, facing_rotation
 from keyfill.motion import Keys
 
 HERE = Path(__file__).parent

@@ -23,7 +23,6 @@ from typing import Iterator
 
 from keyfill.errors import UsageError
 
-
 #: temporary files are ``.<stem>.k<pid>.<random>.part<suffix>``; a USD export adds its own
 #: ``.<stem>.k<pid>.<random>.part.XXXXXX`` beside it. The pid tells a live writer from a dead one.
 _PART = re.compile(r"\.(?P<stem>.*)\.k(?P<pid>[0-9]+)\.[A-Za-z0-9_]+\.part(?:\..*)?")

@@ -379,10 +379,11 @@ def _worker(seed: int, indices, mem_mb: int, conn) -> None:
     import torch
 
     torch.set_num_threads(1)
-    import keyfill.io.usd  # noqa: F401
-    import keyfill.learn.arnn  # noqa: F401
-    import keyfill.learn.registry  # noqa: F401
     from pxr import Usd  # noqa: F401
+
+    import keyfill.io.usd  # noqa: F401
+    import keyfill.learn.arnn.model  # noqa: F401
+    import keyfill.learn.registry  # noqa: F401
 
     _lamp_curves()
     _lamp_keys()

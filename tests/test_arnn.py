@@ -10,14 +10,13 @@ import json
 import numpy as np
 import pytest
 import torch
-
 from conftest import DATA
-from keyfill.learn import arnn
-from keyfill.learn.lamp_eval import deleted_keys, evaluate
-from keyfill.learn.lamp_features import (
-    LampSequence, Normalizer, conditioning, delete_keys, make_batch, origin, relative,
-)
-from keyfill.learn.train_arnn import Schedule, Settings, loss_terms, sigmoid_ramp, split, train
+
+from keyfill.learn.arnn import network as arnn_network
+from keyfill.learn.arnn.features import conditioning, delete_keys, make_batch
+from keyfill.learn.arnn.task import Schedule, Settings, loss_terms, sigmoid_ramp, train
+from keyfill.learn.lamp_data import LampSequence, Normalizer, origin, relative, split
+from keyfill.learn.protocols.keys import deleted_keys, evaluate
 from keyfill.learn.training import TrainingDiverged, read_checkpoint
 
 
@@ -111,12 +110,12 @@ def test_eval_deletions_are_one_or_two_interior_keys(sequences):
 # --- architectures ----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("arch", arnn.ARCHITECTURES)
+@pytest.mark.parametrize("arch", arnn_network.ARCHITECTURES)
 def test_forward_shapes_and_teacher_path_matches_free_path(arch, sequences):
-    net = arnn.build(arch, torch.Generator().manual_seed(0)).eval()
+    net = arnn_network.build(arch, torch.Generator().manual_seed(0)).eval()
     batch = make_batch(sequences[:3], Normalizer.fit(sequences))
     with torch.no_grad():
-        free = arnn.run(net, batch.frames, batch.is_key)
+        free = arnn_network.run(net, batch.frames, batch.is_key)
         assert free.shape == (3, 86, 6) and torch.isfinite(free).all()
         # Feeding the free run's own predictions as "teacher" frames through the fused path gives the same frames.
         x_prev, x_next, t_rel, _ = conditioning(batch.frames, batch.is_key)
@@ -124,24 +123,24 @@ def test_forward_shapes_and_teacher_path_matches_free_path(arch, sequences):
         fused = net(batch.frames[:, 0], x_prev, x_next, t_rel, teacher=own)
     assert torch.allclose(fused, free, atol=1e-5)
     # about the same number of weights for a fair comparison (section 9)
-    assert 100_000 < arnn.num_weights(net) < 115_000
+    assert 100_000 < arnn_network.num_weights(net) < 115_000
 
 
 def test_arnn_layers_are_those_of_section_6():
-    net = arnn.build("arnn")
+    net = arnn_network.build("arnn")
     assert (net.gru1.hidden_size, net.gru2.hidden_size) == (100, 100)
     assert (net.ff.first.out_features, net.ff.second.out_features, net.ff.out.out_features) == (10, 10, 6)
     assert net.gru1.input_size == 3 * net.pose.second.out_features + 1  # three pose features + t_rel
-    assert arnn.DROPOUT == (0.1, 0.05, 0.2, 0.1)
+    assert arnn_network.DROPOUT == (0.1, 0.05, 0.2, 0.1)
 
 
 def test_dropout_is_drawn_from_the_generator_only(sequences):
-    net = arnn.build("arnn", torch.Generator().manual_seed(0)).train()
+    net = arnn_network.build("arnn", torch.Generator().manual_seed(0)).train()
     batch = make_batch(sequences[:2], Normalizer.fit(sequences))
-    a = arnn.run(net, batch.frames, batch.is_key, generator=torch.Generator().manual_seed(5))
+    a = arnn_network.run(net, batch.frames, batch.is_key, generator=torch.Generator().manual_seed(5))
     torch.manual_seed(123)  # the global generator must not matter
-    b = arnn.run(net, batch.frames, batch.is_key, generator=torch.Generator().manual_seed(5))
-    c = arnn.run(net, batch.frames, batch.is_key, generator=torch.Generator().manual_seed(6))
+    b = arnn_network.run(net, batch.frames, batch.is_key, generator=torch.Generator().manual_seed(5))
+    c = arnn_network.run(net, batch.frames, batch.is_key, generator=torch.Generator().manual_seed(6))
     assert torch.equal(a, b) and not torch.equal(a, c)
 
 
@@ -264,7 +263,7 @@ def test_diverging_training_stops_with_a_clear_message(tmp_path, sequences):
 
 
 def test_nan_loss_keeps_the_last_good_checkpoint(tmp_path, sequences, monkeypatch):
-    import keyfill.learn.train_arnn as T
+    import keyfill.learn.arnn.task as T
 
     calls = {"n": 0}
     real = T.loss_terms
@@ -306,7 +305,7 @@ def test_evaluate_splines_hit_keys_and_fewer_keys_score_worse(sequences):
 
 
 def test_scores_compare_angles_modulo_a_turn(sequences):
-    from keyfill.learn.lamp_eval import score
+    from keyfill.learn.protocols.keys import score
 
     s = sequences[0]
     norm = Normalizer.fit(sequences)
@@ -317,8 +316,8 @@ def test_scores_compare_angles_modulo_a_turn(sequences):
 
 
 def test_keys_are_read_within_half_a_turn():
-    from keyfill.learn.lamp_eval import keys_as_read
-    from keyfill.learn.lamp_features import wrap_angles
+    from keyfill.learn.lamp_data import wrap_angles
+    from keyfill.learn.protocols.keys import keys_as_read
 
     v = np.zeros((5, 6))
     v[:, 4] = [0.0, 1.5, 3.0, 2.0, -2.0]  # a neck swinging more than half a turn between keys 2.0 and -2.0 ...

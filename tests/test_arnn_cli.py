@@ -8,14 +8,13 @@ import shutil
 import numpy as np
 import pytest
 import torch
-
 from conftest import DATA
+
 from keyfill import io
+from keyfill.characters.lamp import from_variables, to_variables
 from keyfill.cli.main import main
 from keyfill.learn.modelfile import CONFIG, WEIGHTS
 from keyfill.motion import Keys
-from keyfill.characters.lamp import from_variables, to_variables
-
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
-
 from conftest import DATA
+
 from keyfill import rotations as R
+from keyfill.interpolate import cubic, inverse_right_jacobian, linear, segment_coordinates
 from keyfill.io import bvh
-from keyfill.learn.baselines import cubic, inverse_right_jacobian, linear, segment_coordinates
 from keyfill.learn.exact_keys import snap_to_keys
 from keyfill.motion import Keys
 

@@ -214,12 +214,13 @@ def test_transformer_batch_sends_windows_of_one_layout_together(tmp_path, capsys
     import torch
     from synthetic_corpus import walker_motion, walker_skeleton
 
-    from keyfill.learn import transformer as T
+    from keyfill.learn.transformer import config as TC
+    from keyfill.learn.transformer import model as T
 
     skeleton = walker_skeleton(static_root=False)
     with torch.random.fork_rng():
         torch.manual_seed(0)
-        model = T.new_model(skeleton, T.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0),
+        model = T.new_model(skeleton, TC.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0),
                             np.zeros(21), np.full(21, 30.0), folded=False)
         with torch.no_grad():
             for p in model.network.parameters():

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 from synthetic_corpus import write_corpus
 
+from keyfill import interpolate
 from keyfill import rotations as R
 from keyfill.cli.main import main
 from keyfill.errors import DataError, UsageError
-from keyfill.learn import benchmark as B
 from keyfill.learn.corpus import load_corpus
+from keyfill.learn.protocols import lafan1 as B
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 EXPECTED = SHARED / "golden" / "bandai1_lafan_protocol_expected.json"
@@ -51,16 +52,16 @@ def test_baselines_fill_only_the_transition():
     q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 16, 3, 4))), axis=1)
     r = rng.normal(size=(2, 16, 3))
     keys = np.append(np.arange(10), 15)
-    zq, zr = B.zero_velocity(None, q, r, keys)
+    zq, zr = interpolate.hold_windows(None, q, r, keys)
     np.testing.assert_array_equal(zq[:, 10:15], np.repeat(q[:, 9:10], 5, axis=1))
     np.testing.assert_array_equal(zr[:, :10], r[:, :10])
-    iq, ir = B.interpolation(None, q, r, keys)
+    iq, ir = interpolate.linear_windows(None, q, r, keys)
     np.testing.assert_allclose(ir[:, 12], r[:, 9] + 0.5 * (r[:, 15] - r[:, 9]))
     np.testing.assert_allclose(iq[:, 12], R.quat_slerp(q[:, 9], q[:, 15], 0.5), atol=1e-12)
 
 
 def test_cubic_fills_all_windows_at_once_as_the_spline_does_each():
-    from keyfill.learn.baselines import cubic
+    from keyfill.interpolate import cubic
     from keyfill.motion import Keys, Motion, Skeleton
 
     rng = np.random.default_rng(3)
@@ -70,7 +71,7 @@ def test_cubic_fills_all_windows_at_once_as_the_spline_does_each():
     hidden = np.setdiff1d(np.arange(21), keys)
     given_q, given_r = q.copy(), r.copy()
     given_q[:, hidden], given_r[:, hidden] = np.nan, np.nan  # only key frames may be read
-    cq, cr = B.cubic(None, given_q, given_r, keys)
+    cq, cr = interpolate.cubic_windows(None, given_q, given_r, keys)
     skel = Skeleton([f"j{j}" for j in range(4)], [-1, 0, 1, 1], np.ones((4, 3)), [()] * 4)
     for w in range(3):
         pos = np.broadcast_to(skel.offsets, (21, 4, 3)).copy()
@@ -83,7 +84,7 @@ def test_cubic_fills_all_windows_at_once_as_the_spline_does_each():
     np.testing.assert_array_equal(cq[:, 19:], np.repeat(q[:, 18:19], 2, axis=1))  # after the last key: hold it
     # it carries the velocity of the keys before a gap into it, which interpolation does not
     line = np.arange(21.0)[None, :, None] * [1.0, 0.0, 0.0]
-    lr = B.cubic(None, q[:1], line, keys)[1]
+    lr = interpolate.cubic_windows(None, q[:1], line, keys)[1]
     np.testing.assert_allclose(lr[0, 6:14, 0], np.arange(6.0, 14.0), atol=1e-12)
 
 
@@ -94,8 +95,8 @@ def test_velocity_prefill_leaves_with_the_context_velocity_and_meets_the_keys():
     keys = np.append(np.arange(10), 50)
     given_q, given_r = q.copy(), r.copy()
     given_q[:, 10:50], given_r[:, 10:50] = np.nan, np.nan
-    vq, vr = B.velocity(None, given_q, given_r, keys, frames=3.0)
-    iq, ir = B.interpolation(None, given_q, given_r, keys)
+    vq, vr = interpolate.velocity_windows(None, given_q, given_r, keys, frames=3.0)
+    iq, ir = interpolate.linear_windows(None, given_q, given_r, keys)
     np.testing.assert_array_equal(vq[:, keys], q[:, keys])
     np.testing.assert_array_equal(vr[:, keys], r[:, keys])
     # the first frames continue the context's motion for about 3 frames' worth of its velocity; that
@@ -109,11 +110,11 @@ def test_velocity_prefill_leaves_with_the_context_velocity_and_meets_the_keys():
     assert np.all(np.abs(step - R.quat_angle(q[:, 8], q[:, 9])) < np.abs(R.quat_angle(iq[:, 9], iq[:, 10]) - step) + 1e-9)
     # no given frame beside the gap (keys every 10): the interpolation itself
     sparse = np.arange(0, 60, 10)
-    for a, b in zip(B.velocity(None, q, r, sparse), B.interpolation(None, q, r, sparse)):
+    for a, b in zip(interpolate.velocity_windows(None, q, r, sparse), interpolate.linear_windows(None, q, r, sparse)):
         np.testing.assert_allclose(a, b, atol=1e-12)
     # a very long fade is the cubic Hermite curve with one-sided velocity tangents: a line stays a line
     line = np.arange(60.0)[None, :, None] * [0.5, 0.0, -1.0]
-    np.testing.assert_allclose(B.velocity(None, q[:1], line, keys, frames=1e9)[1][:, :51], line[:, :51], atol=1e-9)
+    np.testing.assert_allclose(interpolate.velocity_windows(None, q[:1], line, keys, frames=1e9)[1][:, :51], line[:, :51], atol=1e-9)
 
 
 def test_baselines_on_any_key_layout():
@@ -121,13 +122,13 @@ def test_baselines_on_any_key_layout():
     q = R.quat_continuous_np(R.quat_normalize(rng.normal(size=(2, 13, 3, 4))), axis=1)
     r = rng.normal(size=(2, 13, 3))
     keys = [1, 4, 10]
-    pq, pr = B.interpolation(None, q, r, keys)
+    pq, pr = interpolate.linear_windows(None, q, r, keys)
     np.testing.assert_array_equal(pq[:, keys], q[:, keys])
     np.testing.assert_allclose(pr[:, 2], r[:, 1] + (r[:, 4] - r[:, 1]) / 3)
     np.testing.assert_allclose(pq[:, 7], R.quat_slerp(q[:, 4], q[:, 10], 0.5), atol=1e-12)
     np.testing.assert_array_equal(pr[:, 0], r[:, 1])  # before the first key: hold it
     np.testing.assert_array_equal(pr[:, 12], r[:, 10])  # after the last key: hold it
-    zq, zr = B.zero_velocity(None, q, r, keys)
+    zq, zr = interpolate.hold_windows(None, q, r, keys)
     np.testing.assert_array_equal(zr[:, 5:10], np.repeat(r[:, 4:5], 5, axis=1))
     np.testing.assert_array_equal(zq[:, 5:10], np.repeat(q[:, 4:5], 5, axis=1))
     np.testing.assert_array_equal(zr[:, [1, 4, 10, 11]], r[:, [1, 4, 10, 10]])
@@ -135,18 +136,18 @@ def test_baselines_on_any_key_layout():
 
 def test_score_any_key_layout(walkers):
     proto = B.lafan1([walkers], ["*_happy_*"])
-    infill = B.score_keys({"i": B.interpolation, "z": B.zero_velocity}, proto.test, proto.stats, np.arange(0, 61, 10))
+    infill = B.score_keys({"i": interpolate.linear_windows, "z": interpolate.hold_windows}, proto.test, proto.stats, np.arange(0, 61, 10))
     assert 0 < infill["i"]["L2P"] < infill["z"]["L2P"]
-    inbetween = B.score_keys({"i": B.interpolation}, proto.test, proto.stats, np.append(np.arange(10), 25))
-    assert inbetween["i"] == B.evaluate({"i": B.interpolation}, proto.test, proto.stats, (15,))["i"][15]
+    inbetween = B.score_keys({"i": interpolate.linear_windows}, proto.test, proto.stats, np.append(np.arange(10), 25))
+    assert inbetween["i"] == B.evaluate({"i": interpolate.linear_windows}, proto.test, proto.stats, (15,))["i"][15]
     with pytest.raises(UsageError, match="key 70 is beyond the 65-frame test windows"):
-        B.score_keys({"i": B.interpolation}, proto.test, proto.stats, [0, 70])
+        B.score_keys({"i": interpolate.linear_windows}, proto.test, proto.stats, [0, 70])
 
 
 def test_lengths_the_windows_cannot_hold_are_refused(walkers):
     proto = B.lafan1([walkers], ["*_happy_*"], fold=True)
     with pytest.raises(UsageError, match="transition length 46 does not fit: .*65 frames.*1 to 45"):
-        B.evaluate({"i": B.interpolation}, proto.test, proto.stats, (5, 46))
+        B.evaluate({"i": interpolate.linear_windows}, proto.test, proto.stats, (5, 46))
 
 
 def test_split_by_patterns(walkers):
@@ -173,13 +174,13 @@ def test_methods_never_see_the_transition(walkers):
 
     def spy(skel, q, r, keys):
         seen.append(bool(np.isnan(q[:, 10:-1]).all() and np.isfinite(q[:, keys]).all()))
-        return B.interpolation(skel, q, r, keys)
+        return interpolate.linear_windows(skel, q, r, keys)
 
-    res = B.evaluate({"spy": spy, "interpolation": B.interpolation}, proto.test, proto.stats, (5, 30))
+    res = B.evaluate({"spy": spy, "interpolation": interpolate.linear_windows}, proto.test, proto.stats, (5, 30))
     assert seen == [True, True]
     assert res["spy"] == res["interpolation"]
     # on smooth walks, interpolation beats holding the last frame
-    zero = B.evaluate({"z": B.zero_velocity}, proto.test, proto.stats, (5, 30))["z"]
+    zero = B.evaluate({"z": interpolate.hold_windows}, proto.test, proto.stats, (5, 30))["z"]
     assert all(zero[n]["L2P"] > res["interpolation"][n]["L2P"] for n in (5, 30))
 
 
@@ -198,7 +199,7 @@ def test_cli_evaluate_json_matches_the_library(walkers, capsys):
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     proto = B.lafan1([walkers], ["*_happy_*", "*_tired_*"])
-    lib = B.evaluate({"interpolation": B.interpolation}, proto.test, proto.stats, (5, 15))
+    lib = B.evaluate({"interpolation": interpolate.linear_windows}, proto.test, proto.stats, (5, 15))
     assert out["results"]["interpolation"]["15"]["L2P"] == pytest.approx(lib["interpolation"][15]["L2P"], rel=1e-12)
     assert set(out["results"]) == {"interpolation", "zero-velocity"}
     assert out["test_windows"] == len(proto.test.quats)
@@ -229,7 +230,7 @@ def test_golden_values_from_the_bandai1_files():
         pytest.skip(str(e))
     proto = B.lafan1([folder], ["*_happy_*", "*_tired_*"], fold=True, facing_axis="+Y", cache=False)
     assert proto.info["test_windows"] == 66 and proto.info["train_windows"] == 1102
-    res = B.evaluate({"zerov": B.zero_velocity, "interp": B.interpolation}, proto.test, proto.stats)
+    res = B.evaluate({"zerov": interpolate.hold_windows, "interp": interpolate.linear_windows}, proto.test, proto.stats)
     names = {"quat": "L2Q", "pos": "L2P", "npss": "NPSS"}
     for key, value in json.loads(EXPECTED.read_text()).items():
         method, metric, _, n = key.replace("@", "_").split("_")

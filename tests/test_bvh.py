@@ -4,10 +4,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, shared_fixtures
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import DATA, shared_fixtures
 from keyfill import rotations as R
 from keyfill.io import bvh
 from keyfill.motion import Motion

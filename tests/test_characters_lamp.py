@@ -6,9 +6,17 @@ import numpy as np
 import pytest
 
 from keyfill import io
+from keyfill.characters.lamp import (
+    DIMENSIONS,
+    VARIABLE_NAMES,
+    VARIABLES,
+    from_variables,
+    is_lamp,
+    lamp_skeleton,
+    to_variables,
+)
 from keyfill.errors import DataError
 from keyfill.motion import Keys, Motion
-from keyfill.characters.lamp import DIMENSIONS, VARIABLE_NAMES, VARIABLES, from_variables, is_lamp, lamp_skeleton, to_variables
 
 
 def random_variables(rng: np.random.Generator, frames: int = 12) -> np.ndarray:

@@ -6,8 +6,8 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import DATA
+
 from keyfill import io
 from keyfill.cli.main import main
 from keyfill.io import bvh

@@ -4,12 +4,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synthetic_corpus import walker_motion, walker_skeleton, write_corpus
 
 from keyfill import io
 from keyfill.errors import DataError
 from keyfill.kinematics import fk
 from keyfill.learn import corpus as C
-from synthetic_corpus import walker_motion, walker_skeleton, write_corpus
 
 
 @pytest.fixture(autouse=True)

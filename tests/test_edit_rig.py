@@ -7,12 +7,12 @@ import pytest
 from test_curves import random_curves
 
 from keyfill import rotations as R
+from keyfill.characters.lamp import from_variables
 from keyfill.curves import controls_to_pose
 from keyfill.edit.fit import fit
 from keyfill.edit.rig import Point, Rig
 from keyfill.kinematics import fk
 from keyfill.motion import Keys
-from keyfill.characters.lamp import from_variables
 
 
 def lamp_curves():

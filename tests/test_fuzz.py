@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import random
 
+import fuzzing
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-import fuzzing
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -12,7 +12,7 @@ from synthetic_corpus import walker_motion, walker_skeleton
 
 from keyfill import io
 from keyfill.errors import ModelError, UsageError
-from keyfill.learn.baselines import linear
+from keyfill.interpolate import linear
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.gan.model import complete, complete_motion, load_model
 from keyfill.learn.gan.task import GanTask

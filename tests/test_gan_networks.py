@@ -11,9 +11,9 @@ torch = pytest.importorskip("torch")
 
 from keyfill.learn.gan import losses as L
 from keyfill.learn.gan.config import PRESETS, GanConfig
-from keyfill.learn.gan.dense import dense_input, nearest_key
+from keyfill.learn.gan.features import dense_input, nearest_key
 from keyfill.learn.gan.layers import ResidualConv, batch_regularisation
-from keyfill.learn.gan.networks import (
+from keyfill.learn.gan.network import (
     Discriminator,
     Generator,
     PathPredictor,
@@ -181,7 +181,7 @@ def test_network_shapes_and_the_style_hook():
 
 
 def test_presets_build_and_count():
-    from keyfill.learn.gan.networks import count_weights
+    from keyfill.learn.gan.network import count_weights
 
     cpu = GanConfig()
     paper = GanConfig.from_preset("paper")

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-
 from conftest import DATA
+
 from keyfill import io
 from keyfill.cli.main import main
 from keyfill.errors import DataError, FormatError

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import BVH_FIXTURES, DATA, shared_path
+
 from keyfill import io
 from keyfill.motion import Motion
 

@@ -7,12 +7,18 @@ import stat
 import numpy as np
 import pytest
 import torch
-
 from conftest import DATA
+
 from keyfill.errors import ModelError
 from keyfill.io import bvh
 from keyfill.learn.modelfile import (
-    CONFIG, WEIGHTS, check_skeleton, load_model, load_state, save_model, skeleton_to_json,
+    CONFIG,
+    WEIGHTS,
+    check_skeleton,
+    load_model,
+    load_state,
+    save_model,
+    skeleton_to_json,
 )
 
 

@@ -39,13 +39,14 @@ def random_transformer(folder: Path, seed: int, **settings):
     """A tiny transformer model folder with random weights (every layer, the zero-initialised output too)."""
     import torch
 
-    from keyfill.learn import transformer as T
+    from keyfill.learn.transformer import config as TC
+    from keyfill.learn.transformer import model as T
 
     skeleton = walker_skeleton(static_root=False)
     motion = walker_motion(skeleton, 60, np.random.default_rng(seed))
     with torch.random.fork_rng():
         torch.manual_seed(seed)
-        model = T.new_model(skeleton, T.ModelConfig(**TINY, **settings), np.zeros(skeleton.num_joints * 3),
+        model = T.new_model(skeleton, TC.ModelConfig(**TINY, **settings), np.zeros(skeleton.num_joints * 3),
                             np.full(skeleton.num_joints * 3, 30.0), folded=False)
         with torch.no_grad():
             for p in model.network.parameters():
@@ -82,7 +83,7 @@ def transformer_with_key_distances(tmp_path_factory, one_torch_thread):
 def test_transformer_graph_equals_torch_on_random_inputs(which, request):
     import torch
 
-    from keyfill.learn import transformer as T
+    from keyfill.learn.transformer import model as T
 
     folder, _ = request.getfixturevalue(which)
     model = T.load(folder)
@@ -131,9 +132,9 @@ def test_the_graph_metadata_holds_the_contract(transformer):
 
 def test_lamp_graph_equals_torch_on_the_shipped_model_and_random_sequences(lamp_graph):
     from keyfill.characters.lamp import to_variables
-    from keyfill.learn import arnn
-    from keyfill.learn.arnn_onnx import OnnxLampModel
-    from keyfill.learn.lamp_features import LampSequence
+    from keyfill.learn.arnn import model as arnn
+    from keyfill.learn.arnn.onnx import OnnxLampModel
+    from keyfill.learn.lamp_data import LampSequence
 
     torch_model = arnn.load(arnn.DEFAULT_MODEL)
     onnx_model = OnnxLampModel(kx.Graph(lamp_graph))
@@ -156,16 +157,18 @@ def test_lamp_graph_equals_torch_on_the_shipped_model_and_random_sequences(lamp_
 def test_every_lamp_architecture_exports(arch, tmp_path, one_torch_thread):
     import torch
 
-    from keyfill.learn import arnn
-    from keyfill.learn.arnn_onnx import OnnxLampModel
-    from keyfill.learn.lamp_features import LampSequence, Normalizer
+    from keyfill.learn.arnn import model as arnn
+    from keyfill.learn.arnn import network as arnn_network
+    from keyfill.learn.arnn import onnx as arnn_onnx
+    from keyfill.learn.arnn.onnx import OnnxLampModel
+    from keyfill.learn.lamp_data import LampSequence, Normalizer
     from keyfill.learn.modelfile import save_model
 
-    net = arnn.build(arch, torch.Generator().manual_seed(3))
+    net = arnn_network.build(arch, torch.Generator().manual_seed(3))
     normalizer = Normalizer(np.zeros(6), np.ones(6))
     save_model(tmp_path / "m", "arnn", net.state_dict(), arnn.model_config(net, normalizer, {}, {}))
     model = arnn.load(tmp_path / "m")
-    arnn.export_onnx(model, tmp_path / "m", tmp_path / "m.onnx")
+    arnn_onnx.export_onnx(model, tmp_path / "m", tmp_path / "m.onnx")
     rng = np.random.default_rng(4)
     seqs = [LampSequence(rng.normal(size=(n, 6)), [0, n // 2, n - 1]) for n in (5, 33)]
     for a, b in zip(OnnxLampModel(kx.Graph(tmp_path / "m.onnx")).predict(seqs), model.predict(seqs)):

@@ -8,7 +8,7 @@ from synthetic_corpus import walker_motion, walker_skeleton
 
 from keyfill import rotations as R
 from keyfill.errors import UsageError
-from keyfill.learn.baselines import linear
+from keyfill.interpolate import linear
 from keyfill.learn.exact_keys import snap_to_keys
 from keyfill.learn.registry import complete
 from keyfill.motion import Keys

@@ -1,4 +1,4 @@
-"""Foot skating and jitter (keyfill.learn.realism) on hand-made motions, and in the LaFAN1 evaluation."""
+"""Foot skating and jitter (keyfill.learn.protocols.metrics) on hand-made motions, and in the LaFAN1 evaluation."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from synthetic_corpus import walker_skeleton, write_corpus
 
 from keyfill.cli.main import main
-from keyfill.learn import realism
+from keyfill.learn.protocols import metrics as realism
 
 
 def _two_feet(T: int) -> np.ndarray:

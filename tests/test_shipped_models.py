@@ -17,8 +17,8 @@ from conftest import DATA
 
 from keyfill import io
 from keyfill.cli.main import main
-from keyfill.learn import transformer
 from keyfill.learn.gan.model import DEFAULT_MODEL, PARTIAL_MODEL
+from keyfill.learn.transformer import model as transformer
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

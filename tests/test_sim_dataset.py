@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from keyfill.characters.lamp import is_lamp, to_variables
 from keyfill.cli.main import main
 from keyfill.errors import DataError
-from keyfill.sim import runner
 from keyfill.io.hops import read_dataset, read_manifest
-from keyfill.characters.lamp import is_lamp, to_variables
+from keyfill.sim import runner
 
 FAST = ["--iterations", "3"]
 

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from keyfill.characters.lamp import to_variables
 from keyfill.sim.controller import REFERENCE, Controller
 from keyfill.sim.extract import extract
 from keyfill.sim.hops import analyse, energy, link_clearances, satisfactory
-from keyfill.characters.lamp import to_variables
 from keyfill.sim.physics import LampWorld
 from keyfill.sim.search import accept_probability, anneal, run_generator, temperature
 from keyfill.sim.settings import Settings

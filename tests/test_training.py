@@ -94,7 +94,7 @@ def test_resume_across_process_counts(corpus_dir, config, tmp_path):
 
 
 def test_a_checkpoint_of_another_kind_or_configuration_is_refused(corpus_dir, config, tmp_path, capsys):
-    from keyfill.learn.arnn import DEFAULT_MODEL
+    from keyfill.learn.arnn.model import DEFAULT_MODEL
 
     _train(corpus_dir, config, tmp_path / "m", "--epochs", "1")
     before = (tmp_path / "m.log.jsonl").read_bytes()
@@ -128,8 +128,9 @@ def test_a_model_folder_of_an_unknown_kind_lists_the_known_kinds(tmp_path, capsy
                                              "skeleton": {"names": ["a"], "parents": [-1], "offsets": [[0, 0, 0]]}}))
     (folder / WEIGHTS).write_bytes(b"")
     clip = tmp_path / "c.bvh"
-    from keyfill import io
     from synthetic_corpus import walker_motion, walker_skeleton
+
+    from keyfill import io
 
     io.save(walker_motion(walker_skeleton(), 20, np.random.default_rng(0)), clip)
     for args in (["evaluate", str(folder), str(tmp_path)],

@@ -11,9 +11,12 @@ from keyfill import io
 from keyfill import rotations as R
 from keyfill.cli.main import main
 from keyfill.errors import ModelError, UsageError
-from keyfill.learn import transformer as T
 from keyfill.learn.corpus import load_corpus
-from keyfill.learn.train_transformer import (
+from keyfill.learn.transformer import config as TC
+from keyfill.learn.transformer import features as TF
+from keyfill.learn.transformer import model as T
+from keyfill.learn.transformer import network as TN
+from keyfill.learn.transformer.task import (
     TrainConfig,
     TransformerTask,
     learning_rate,
@@ -22,7 +25,7 @@ from keyfill.learn.train_transformer import (
     train,
 )
 
-TINY = T.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0, max_frames=65)
+TINY = TC.ModelConfig(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0, max_frames=65)
 TINY_TRAINING = TrainConfig(epochs=2, batch_size=16, lr=2e-3, warmup_epochs=0.2, decay_every=1, window=65,
                             window_offset=10, val_fraction=0.2, val_lengths=(5, 15))
 
@@ -58,27 +61,27 @@ def trained(corpus, tmp_path_factory):
 
 
 def test_frame_kinds_of_the_three_layouts():
-    K, U, I = T.KEY, T.UNKNOWN, T.IGNORED
-    inbetween = T.frame_kinds(18, np.append(np.arange(10), 15))
+    K, U, I = TF.KEY, TF.UNKNOWN, TF.IGNORED
+    inbetween = TF.frame_kinds(18, np.append(np.arange(10), 15))
     assert inbetween.tolist() == [K] * 10 + [U] * 5 + [K] + [I] * 2
-    infill = T.frame_kinds(9, [0, 4, 8])
+    infill = TF.frame_kinds(9, [0, 4, 8])
     assert infill.tolist() == [K, U, U, U, K, U, U, U, K]
-    blend = T.frame_kinds(8, [0, 1, 5, 6, 7])
+    blend = TF.frame_kinds(8, [0, 1, 5, 6, 7])
     assert blend.tolist() == [K, K, U, U, U, K, K, K]
-    assert T.frame_kinds(6, [2, 4]).tolist() == [I, I, K, U, K, I]
-    assert T.anchor_frame(np.append(np.arange(10), 15)) == 9 and T.anchor_frame([0, 4, 8]) == 0
+    assert TF.frame_kinds(6, [2, 4]).tolist() == [I, I, K, U, K, I]
+    assert TF.anchor_frame(np.append(np.arange(10), 15)) == 9 and TF.anchor_frame([0, 4, 8]) == 0
 
 
 def test_mixture_embedding_selects_position_and_kind_rows():
     torch.manual_seed(0)
-    net = T.build_network(10, TINY)
-    kinds = torch.as_tensor(np.stack([T.frame_kinds(12, [0, 1, 2, 9]), T.frame_kinds(12, [0, 5, 10])]))
+    net = TN.build_network(10, TINY)
+    kinds = torch.as_tensor(np.stack([TF.frame_kinds(12, [0, 1, 2, 9]), TF.frame_kinds(12, [0, 5, 10])]))
     emb = net.embed(kinds)
     for b in range(2):
         for t in range(12):
             want = net.position.weight[t] + net.keyframe.weight[kinds[b, t]]
             assert torch.equal(emb[b, t], want)
-    assert not torch.equal(net.keyframe.weight[T.KEY], net.keyframe.weight[T.UNKNOWN])
+    assert not torch.equal(net.keyframe.weight[TF.KEY], net.keyframe.weight[TF.UNKNOWN])
 
 
 def test_only_key_and_unknown_frames_carry_loss(corpus):
@@ -86,18 +89,18 @@ def test_only_key_and_unknown_frames_carry_loss(corpus):
     model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
     q, r, _, _ = corpus.windows(65, 20)
     x, y, gq, gr, kinds = make_batch(model, q[:4], r[:4], np.append(np.arange(10), 30), 36)
-    assert (kinds[:, :10] == T.KEY).all() and (kinds[:, 10:30] == T.UNKNOWN).all() and (kinds[:, 30] == T.KEY).all()
-    assert (kinds[:, 31:] == T.IGNORED).all()
+    assert (kinds[:, :10] == TF.KEY).all() and (kinds[:, 10:30] == TF.UNKNOWN).all() and (kinds[:, 30] == TF.KEY).all()
+    assert (kinds[:, 31:] == TF.IGNORED).all()
     with torch.no_grad():
         pred = model.network(x, kinds)
-        base = T.losses(model.features, pred, y, gq, gr, kinds, TINY)["total"]
+        base = TN.losses(model.features, pred, y, gq, gr, kinds, TINY)["total"]
         moved = pred.clone()
         moved[:, 31:] += 3.0  # ignored frames: no effect
-        assert torch.equal(T.losses(model.features, moved, y, gq, gr, kinds, TINY)["total"], base)
+        assert torch.equal(TN.losses(model.features, moved, y, gq, gr, kinds, TINY)["total"], base)
         for frame in (5, 20, 30):  # key and unknown frames count
             moved = pred.clone()
             moved[:, frame] += 3.0
-            assert T.losses(model.features, moved, y, gq, gr, kinds, TINY)["total"] > base + 1e-3
+            assert TN.losses(model.features, moved, y, gq, gr, kinds, TINY)["total"] > base + 1e-3
 
 
 def test_sampled_layouts_fit_the_window():
@@ -134,8 +137,8 @@ def test_log_uniform_gap_sampling_trains_short_transitions_more_often():
 
 
 def test_key_distances_count_frames_to_the_keys_on_each_side():
-    kinds = torch.as_tensor(np.stack([T.frame_kinds(12, [0, 1, 2, 7, 10]), T.frame_kinds(12, [3, 4])]))
-    since, until = T.key_distances(kinds, 9)
+    kinds = torch.as_tensor(np.stack([TF.frame_kinds(12, [0, 1, 2, 7, 10]), TF.frame_kinds(12, [3, 4])]))
+    since, until = TN.key_distances(kinds, 9)
     assert since.tolist() == [[0, 0, 0, 1, 2, 3, 4, 0, 1, 2, 0, 1], [9, 9, 9, 0, 0, 1, 2, 3, 4, 5, 6, 7]]
     assert until.tolist() == [[0, 0, 0, 4, 3, 2, 1, 0, 2, 1, 0, 9], [3, 2, 1, 0, 0, 9, 9, 9, 9, 9, 9, 9]]
 
@@ -145,10 +148,10 @@ def test_canonical_frame_round_trip():
     q = R.quat_normalize(rng.normal(size=(3, 20, 4, 4)))
     r = rng.normal(size=(3, 20, 3)) * 100
     keys = np.array([0, 1, 2, 12, 19])
-    turn, shift = T.canonical_transform(q, r, keys, "+Y")
-    cq, cr = T.apply_transform(q, r, turn, shift)
+    turn, shift = TF.canonical_transform(q, r, keys, "+Y")
+    cq, cr = TF.apply_transform(q, r, turn, shift)
     np.testing.assert_allclose(cr[:, keys][..., [0, 2]].mean(1), 0, atol=1e-9)
-    bq, br = T.apply_transform(cq, cr, turn, shift, inverse=True)
+    bq, br = TF.apply_transform(cq, cr, turn, shift, inverse=True)
     np.testing.assert_allclose(br, r, atol=1e-9)
     np.testing.assert_allclose(bq, q, atol=1e-12)
 
@@ -165,7 +168,7 @@ def test_learning_rate_warms_up_then_steps_down():
 @pytest.mark.parametrize("coordinates,residual,steps,factor", [
     ("global", False, 30, 0.3), ("local", False, 30, 0.3), ("global", True, 60, 0.9)])
 def test_a_few_training_steps_reduce_the_loss(corpus, coordinates, residual, steps, factor):
-    cfg = T.ModelConfig(**{**TINY.__dict__, "coordinates": coordinates, "residual": residual})
+    cfg = TC.ModelConfig(**{**TINY.__dict__, "coordinates": coordinates, "residual": residual})
     q, r, _, _ = corpus.windows(65, 20)
     torch.manual_seed(0)
     model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
@@ -174,7 +177,7 @@ def test_a_few_training_steps_reduce_the_loss(corpus, coordinates, residual, ste
     model.network.train()
     history = []
     for _ in range(steps + 1):
-        loss = T.losses(model.features, model.network(x, kinds), y, gq, gr, kinds, cfg)["total"]
+        loss = TN.losses(model.features, model.network(x, kinds), y, gq, gr, kinds, cfg)["total"]
         history.append(float(loss.detach()))
         opt.zero_grad()
         loss.backward()
@@ -199,7 +202,7 @@ def test_training_is_deterministic_and_resumable(corpus, tmp_path):
 
 def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, corpus, tmp_path, capsys):
     folder, model = trained
-    cubic = T.ModelConfig(**{**TINY.__dict__, "prefill": "cubic"})
+    cubic = TC.ModelConfig(**{**TINY.__dict__, "prefill": "cubic"})
     cfg = TrainConfig(**{**TINY_TRAINING.__dict__, "epochs": 1, "lr": 0.0})
     # at learning rate 0 the tuned network is the one it started from; only the pre-fill differs
     tuned = train(corpus, tmp_path / "tuned", cubic, cfg, seed=1, init=folder)
@@ -214,7 +217,7 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     assert np.abs(cr - ir).max() > 1e-3  # the pre-fill reaches the output
     assert T.load(tmp_path / "tuned").config.prefill == "cubic"
     # key-distance embeddings start at zero: a model tuned with them starts as the one without
-    with_distances = T.ModelConfig(**{**TINY.__dict__, "key_distances": True})
+    with_distances = TC.ModelConfig(**{**TINY.__dict__, "key_distances": True})
     distances = train(corpus, tmp_path / "distances", with_distances, cfg, seed=1, init=folder)
     _, dr = distances.complete_windows(q[:2], r[:2], keys)
     _, mr = model.complete_windows(q[:2], r[:2], keys)
@@ -222,9 +225,9 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     assert T.load(tmp_path / "distances").config.key_distances
     assert "since_key.weight" in distances.network.state_dict()
     with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
-        T.ModelConfig(prefill="spline")
+        TC.ModelConfig(prefill="spline")
     with pytest.raises(ModelError, match="rotation_weight must be a number from 0 to 1e"):
-        T.ModelConfig(rotation_weight=-1.0)
+        TC.ModelConfig(rotation_weight=-1.0)
     # a model of another skeleton is refused before any training, naming the difference
     long_legs = tmp_path / "long_legs"
     write_corpus(long_legs, styles=("a",), clips_per_style=2, frames=(90, 100), skeleton=walker_skeleton(leg_length=60.0))
@@ -250,7 +253,7 @@ def test_settings_added_later_keep_older_checkpoints_resumable(corpus, tmp_path)
     assert {"prefill", "rotation_weight", "key_distances"}.isdisjoint(written["architecture"])
     more = TrainConfig(**{**cfg.__dict__, "epochs": 2})
     train(corpus, tmp_path / "m", TINY, more, seed=0, resume=True)
-    velocity = T.ModelConfig(**{**TINY.__dict__, "prefill": "velocity"})
+    velocity = TC.ModelConfig(**{**TINY.__dict__, "prefill": "velocity"})
     with pytest.raises(UsageError, match="prefill"):
         train(corpus, tmp_path / "m", velocity, TrainConfig(**{**cfg.__dict__, "epochs": 3}), seed=0, resume=True)
     log_gaps = TrainConfig(**{**cfg.__dict__, "epochs": 3, "gap_sampling": "log-uniform"})
@@ -271,7 +274,7 @@ def test_relative_loss_divides_each_batch_by_the_prefill_loss(corpus):
 
     _, _, logged_abs, absolute = first_step(False)
     task, (x, y, gq, gr, kinds), logged_rel, relative = first_step(True)
-    prefill = float(T.losses(task.model.features, x, y, gq, gr, kinds, TINY)["total"])
+    prefill = float(TN.losses(task.model.features, x, y, gq, gr, kinds, TINY)["total"])
     assert 0 < prefill and absolute == pytest.approx(logged_abs["total"])
     assert relative == pytest.approx(absolute / prefill, rel=1e-5)
     assert logged_rel == pytest.approx(logged_abs)  # the log stays absolute
@@ -284,8 +287,8 @@ def test_rotation_weight_scales_the_quaternion_loss(corpus):
     x, y, gq, gr, kinds = make_batch(model, q[:4], r[:4], np.append(np.arange(10), 40), 45)
     with torch.no_grad():
         pred = model.network(x, kinds) + 0.01
-        one = T.losses(model.features, pred, y, gq, gr, kinds, TINY)
-        four = T.losses(model.features, pred, y, gq, gr, kinds, T.ModelConfig(**{**TINY.__dict__, "rotation_weight": 4.0}))
+        one = TN.losses(model.features, pred, y, gq, gr, kinds, TINY)
+        four = TN.losses(model.features, pred, y, gq, gr, kinds, TC.ModelConfig(**{**TINY.__dict__, "rotation_weight": 4.0}))
     assert float(one["rotation"]) > 0
     assert float(four["total"] - one["total"]) == pytest.approx(3 * float(one["rotation"]), rel=1e-5)
 
@@ -407,7 +410,7 @@ def test_the_model_is_a_keyfill_model_folder(trained, corpus):
 
 
 def test_loading_a_model_leaves_the_global_random_stream_alone(trained):
-    from keyfill.learn import arnn
+    from keyfill.learn.arnn import model as arnn
 
     torch.manual_seed(7)
     expected = torch.rand(3)
@@ -451,7 +454,7 @@ def test_damaged_or_foreign_models_are_refused(trained, tmp_path):
 
 
 def test_a_model_of_another_kind_is_one_clear_error(trained, tmp_path, capsys):
-    from keyfill.learn.arnn import DEFAULT_MODEL
+    from keyfill.learn.arnn.model import DEFAULT_MODEL
 
     out, _ = trained
     src = tmp_path / "walk.bvh"
@@ -523,7 +526,7 @@ def test_cli_evaluate_a_model(trained, corpus_dir, capsys):
     assert code == 0, capsys.readouterr().err
     res = json.loads(capsys.readouterr().out)["results"]
     assert set(res) == {out.name, "zero-velocity", "interpolation"}
-    from keyfill.learn import benchmark as B
+    from keyfill.learn.protocols import lafan1 as B
 
     proto = B.lafan1([corpus_dir], ["*_calm_*"], fold=True, cache=False)
     lib = B.evaluate({"m": model.benchmark_method()}, proto.test, proto.stats, (5, 15))
@@ -531,14 +534,14 @@ def test_cli_evaluate_a_model(trained, corpus_dir, capsys):
 
 
 def test_output_fk_loss_is_zero_for_the_truth_and_positive_otherwise(corpus):
-    cfg = T.ModelConfig(**{**TINY.__dict__, "fk_weight": 1.0})
+    cfg = TC.ModelConfig(**{**TINY.__dict__, "fk_weight": 1.0})
     torch.manual_seed(0)
     model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
     q, r, _, _ = corpus.windows(65, 20)
     x, y, gq, gr, kinds = make_batch(model, q[:4], r[:4], np.append(np.arange(10), 30), 31)
-    exact = T.losses(model.features, y, y, gq, gr, kinds, cfg)
+    exact = TN.losses(model.features, y, y, gq, gr, kinds, cfg)
     assert float(exact["output_fk"]) < 1e-5 and float(exact["total"]) < 1e-4
-    off = T.losses(model.features, x, y, gq, gr, kinds, cfg)  # the interpolation
+    off = TN.losses(model.features, x, y, gq, gr, kinds, cfg)  # the interpolation
     assert float(off["output_fk"]) > 1e-3
     assert float(off["total"]) == pytest.approx(float(off["position"] + off["rotation"] + 0.01 * off["kinematics"]
                                                       + off["output_fk"]), rel=1e-6)

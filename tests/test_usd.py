@@ -4,9 +4,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, shared_fixtures
 from pxr import Usd, UsdGeom, UsdSkel, UsdValidation, Vt
 
-from conftest import DATA, shared_fixtures
 from keyfill import io
 from keyfill import rotations as R
 from keyfill.errors import FormatError

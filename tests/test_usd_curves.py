@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_edit_character import character
 from test_curves import random_curves
+from test_edit_character import character
 
 from keyfill import io
 from keyfill import rotations as R
-from keyfill.files import quiet_stderr
 from keyfill.edit.fit import fit
 from keyfill.errors import FormatError
+from keyfill.files import quiet_stderr
 from keyfill.io import usd_curves
 
 

@@ -9,21 +9,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import DATA, shared_path
 from PIL import Image, ImageSequence
 
-from conftest import DATA, shared_path
 from keyfill import io
 from keyfill import rotations as R
+from keyfill.characters import lamp
 from keyfill.cli.main import main
 from keyfill.errors import DataError, UsageError
 from keyfill.io import bvh
 from keyfill.motion import Keys, Motion, Skeleton
-from keyfill.characters import lamp
-from keyfill.viz import frame_range, gif
-from keyfill.viz.palette import Palette
 from keyfill.viz import curves as C
-from keyfill.viz import scene
+from keyfill.viz import frame_range, gif, scene
 from keyfill.viz import stick as S
+from keyfill.viz.palette import Palette
 
 WALKER_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
 

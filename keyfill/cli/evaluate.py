@@ -6,7 +6,7 @@ import click
 
 from keyfill.cli.common import emit_json, progress, say
 from keyfill.errors import UsageError
-from keyfill.learn.evaluation import PROTOCOLS
+from keyfill.learn.protocols import PROTOCOLS
 
 
 def _lengths(text: str) -> tuple[int, ...]:
@@ -62,7 +62,7 @@ def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengt
       keyfill evaluate cubic bandai2/data --test-pattern '*_normal_*' --json
       keyfill evaluate arnn data/hops          (lamp models: the keys protocol)
     """
-    from keyfill.learn.evaluation import evaluate as run
+    from keyfill.learn.protocols import evaluate as run
 
     result = run(method_or_model, data, protocol, test_patterns=test_pattern, train_patterns=train_pattern,
                  lengths=_lengths(lengths), fold=fold_root, facing_axis=facing_axis, baselines=baselines,

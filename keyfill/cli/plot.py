@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import click
 
 from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labelled, say

@@ -51,7 +51,8 @@ def simulate(folder, count, seed, iterations, workers, fmt, scheduler, connect_t
       keyfill simulate -o data/hops_bvh --count 20 --format bvh --workers 2
       keyfill simulate -o data/hops --scheduler tcp://10.0.0.5:8786 --json
     """
-    from keyfill.sim.runner import check_arguments, simulate as build
+    from keyfill.sim.runner import check_arguments
+    from keyfill.sim.runner import simulate as build
 
     check_arguments(count, seed, iterations, workers, fmt, max_runs, connect_timeout)
 

@@ -52,9 +52,9 @@ from pathlib import Path
 
 import numpy as np
 
+from keyfill import limits
 from keyfill.curves import Curves
 from keyfill.edit.rig import Point
-from keyfill import limits
 from keyfill.errors import FormatError, KeyfillError
 
 

@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from keyfill import limits
-from keyfill import progress
+from keyfill import limits, progress
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError
 from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton, check_channels

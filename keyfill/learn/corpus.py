@@ -252,6 +252,16 @@ class Corpus:
         hit = [fnmatch.fnmatch(Path(f).name, pattern) != invert for f in self.files]
         return self.subset(np.flatnonzero(hit))
 
+    def select(self, include: Sequence[str] = (), exclude: Sequence[str] = ()) -> "Corpus":
+        """The clips whose file name matches one of ``include`` (all when empty) and none of ``exclude``."""
+        names = [Path(f).name for f in self.files]
+        keep = [i for i, n in enumerate(names) if (not include or any(fnmatch.fnmatch(n, p) for p in include))
+                and not any(fnmatch.fnmatch(n, p) for p in exclude)]
+        if not keep:
+            raise DataError(f"no clip is left after include {list(include)} and exclude {list(exclude)}",
+                            params=("include", "exclude"))
+        return self.subset(keep) if len(keep) < len(names) else self
+
     def windows(self, length: int, offset: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """Sliding windows as the reference benchmark cuts them.
 

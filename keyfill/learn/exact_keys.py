@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from keyfill import rotations as R
-from keyfill.learn.baselines import segment_coordinates
+from keyfill.interpolate import segment_coordinates
 from keyfill.motion import Keys, Motion
 
 

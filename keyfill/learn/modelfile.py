@@ -303,3 +303,15 @@ def load_cached(loader, path: str | os.PathLike, device: str = "cpu"):
 def _load_cached(loader, path: str, device: str, stamp: tuple):
     return loader(path, device)
 
+
+def torch_device(name: str):
+    """``torch.device(name)``, or a :class:`UsageError` when it is not there."""
+    import torch
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError):
+        raise UsageError(f"unknown torch device {name!r}; use cpu, cuda or cuda:N") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise UsageError(f"device {name!r} was asked for, but torch sees no CUDA GPU here; use --device cpu")
+    return dev

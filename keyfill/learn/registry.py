@@ -2,7 +2,9 @@
 
 Each :class:`Method` names the functions that implement it as
 ``"module:attribute"`` strings, imported on first use, so reading the registry
-(``keyfill --help``, ``keyfill info``) loads no torch. A learned method's model
+(``keyfill --help``, ``keyfill info``) loads no torch. The baselines of
+:mod:`keyfill.interpolate` are methods like the learned ones, so
+``complete --method``, ``evaluate`` and the protocols share one vocabulary. A learned method's model
 folders carry its name as their ``kind`` (:mod:`keyfill.learn.modelfile`), so a
 folder is dispatched to its method by :func:`method_for_model`.
 
@@ -11,8 +13,8 @@ A learned method's module provides:
 * ``complete(motion, keys, options) -> Completion`` (:mod:`keyfill.learn.completion`);
 * ``load(path, device) -> model``: a loaded model. The protocol that scores the
   method calls the model's own hook: ``benchmark_method()`` for ``lafan1``
-  (:mod:`keyfill.learn.benchmark`), ``predict(sequences)`` for ``keys``
-  (:mod:`keyfill.learn.lamp_eval`);
+  (:mod:`keyfill.learn.protocols.lafan1`), ``predict(sequences)`` for ``keys``
+  (:mod:`keyfill.learn.protocols.keys`);
 * ``DEFAULT_MODEL``: the folder of the model shipped with keyfill, or None.
 
 Its training module provides ``TRAINING``, a
@@ -38,7 +40,8 @@ class Method:
     Attributes:
         name: the ``--method`` name; for a learned method also the ``kind`` of its model folders.
         summary: one line for ``--help``.
-        complete: ``"module:function"`` implementing ``complete(motion, keys, options) -> Completion``.
+        complete: ``"module:function"`` implementing ``complete(motion, keys, options) -> Completion``; for a
+            baseline (``module`` None) the name of :data:`keyfill.interpolate.BASELINES` it is.
         module: the learned method's module (``load``, ``DEFAULT_MODEL``); None for splines.
         protocol: the benchmark protocol that scores its models (``"lafan1"``, ``"keys"``).
         training: the module whose ``TRAINING`` trains it (``keyfill train NAME``); None if not trainable.
@@ -49,6 +52,7 @@ class Method:
         partial_keys: whether it accepts partial keys (:attr:`keyfill.motion.Keys.partial`); :func:`complete`
             refuses them for the others.
         dna: whether it takes a Motion DNA (``CompleteOptions.dna`` / ``dna_count``).
+        aliases: other names it answers to (``interpolation``: the LaFAN1 benchmark's word for ``linear``).
     """
 
     name: str
@@ -61,15 +65,29 @@ class Method:
     onnx: str | None = None
     partial_keys: bool = False
     dna: bool = False
+    aliases: tuple[str, ...] = ()
 
     @property
     def learned(self) -> bool:
         return self.module is not None
 
     def function(self):
-        """The ``complete`` function."""
+        """The ``complete(motion, keys, options) -> Completion`` function."""
+        if not self.learned:
+            from keyfill.interpolate import BASELINES
+
+            spline = BASELINES[self.complete][0]
+            return lambda motion, keys, options: Completion(spline(motion, keys), {"exact_keys": True})
         module, attr = self.complete.split(":")
         return getattr(importlib.import_module(module), attr)
+
+    def windows(self):
+        """A baseline on windows, ``(skeleton, quats (B, T, J, 4), root (B, T, 3), keys) -> (quats, root)``."""
+        if self.learned:
+            raise UsageError(f"{self.name} is a learned method; its models give their own window function")
+        from keyfill.interpolate import BASELINES
+
+        return BASELINES[self.complete][1]
 
     def implementation(self):
         """The learned method's module."""
@@ -90,27 +108,33 @@ class Method:
 
 
 METHODS: dict[str, Method] = {m.name: m for m in (
-    Method("linear", "lerp of translations, slerp of rotations", "keyfill.learn.baselines:complete_linear"),
-    Method("cubic", "C1 cubic splines (log-map cubic for rotations)", "keyfill.learn.baselines:complete_cubic"),
+    Method("linear", "lerp of translations, slerp of rotations", "linear", aliases=("interpolation",)),
+    Method("cubic", "C1 cubic splines (log-map cubic for rotations)", "cubic"),
+    Method("velocity", "linear, plus the velocity of given frames next to a gap, fading over 3 frames", "velocity"),
+    Method("zero-velocity", "every frame holds the key before it", "zero-velocity"),
     Method("arnn", "keyframe-conditioned recurrent network for the hopping lamp (Zhang & van de Panne 2018)",
-           "keyfill.learn.arnn:complete", module="keyfill.learn.arnn", protocol="keys",
-           training="keyfill.learn.train_arnn", export="keyfill.learn.arnn:export_onnx",
-           onnx="keyfill.learn.arnn_onnx"),
+           "keyfill.learn.arnn.model:complete", module="keyfill.learn.arnn.model", protocol="keys",
+           training="keyfill.learn.arnn.task", export="keyfill.learn.arnn.onnx:export_onnx",
+           onnx="keyfill.learn.arnn.onnx"),
     Method("transformer", "BERT-style motion-completion transformer (Duan et al. 2021)",
-           "keyfill.learn.transformer:complete", module="keyfill.learn.transformer", protocol="lafan1",
-           training="keyfill.learn.train_transformer", export="keyfill.learn.transformer_onnx:export_onnx",
-           onnx="keyfill.learn.transformer_onnx"),
+           "keyfill.learn.transformer.model:complete", module="keyfill.learn.transformer.model", protocol="lafan1",
+           training="keyfill.learn.transformer.task", export="keyfill.learn.transformer.onnx:export_onnx",
+           onnx="keyfill.learn.transformer.onnx"),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
            training="keyfill.learn.gan.task", partial_keys=True, dna=True),
 )}
 
 
+#: every other name of a method -> its name
+ALIASES = {alias: m.name for m in METHODS.values() for alias in m.aliases}
+
+
 def get(name: str) -> Method:
-    """The method called ``name``; a :class:`UsageError` listing the methods otherwise."""
-    if name not in METHODS:
+    """The method called ``name`` (or one of its aliases); a :class:`UsageError` listing the methods otherwise."""
+    if name not in METHODS and name not in ALIASES:
         raise UsageError(f"unknown method {name!r}; methods are: {', '.join(METHODS)}")
-    return METHODS[name]
+    return METHODS[ALIASES.get(name, name)]
 
 
 def learned() -> list[Method]:

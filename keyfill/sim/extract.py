@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from keyfill.characters.lamp import from_variables
 from keyfill.motion import Keys, Motion
 from keyfill.sim.hops import Hops
-from keyfill.characters.lamp import from_variables
 from keyfill.sim.physics import Episode
 from keyfill.sim.settings import Settings
 

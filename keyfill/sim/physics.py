@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
+from keyfill.characters.lamp import Dimensions
 from keyfill.files import quiet_stderr
 from keyfill.sim.controller import Controller
-from keyfill.characters.lamp import Dimensions
 from keyfill.sim.settings import Settings
 
 

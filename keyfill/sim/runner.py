@@ -298,7 +298,6 @@ def simulate(
 
 def _build(folder, job, fmt, count, max_runs, executor, window, on_run) -> Summary:
     from keyfill import io
-
     from keyfill.files import remove_stale
 
     start = time.perf_counter()

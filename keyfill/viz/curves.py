@@ -24,9 +24,9 @@ from typing import Sequence
 
 import numpy as np
 
+from keyfill.characters import lamp
 from keyfill.errors import DataError, UsageError
 from keyfill.motion import POSITION_CHANNELS, Motion
-from keyfill.characters import lamp
 from keyfill.viz import PLOT_SUFFIXES, check_suffix, frame_range, unit_label
 
 #: with more candidate panels than this and no --joints/--channels, only the

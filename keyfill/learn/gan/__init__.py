@@ -19,9 +19,9 @@ Modules (each small, named for what it does):
 * :mod:`~keyfill.learn.gan.ranges`: each joint's Euler order and feasible range from a corpus.
 * :mod:`~keyfill.learn.gan.rcfk`: the range-constrained forward kinematics layer (section 3.3).
 * :mod:`~keyfill.learn.gan.layers`: the modified residual convolution (Eq. 6) and batch regularisation (Eq. 9).
-* :mod:`~keyfill.learn.gan.networks`: generator, Motion DNA encoder, discriminator and path predictor (Table 5).
+* :mod:`~keyfill.learn.gan.network`: generator, Motion DNA encoder, discriminator and path predictor (Table 5).
 * :mod:`~keyfill.learn.gan.losses`: Eqs. 5, 7, 8, 10 and the DNA losses, Eqs. 11-12.
-* :mod:`~keyfill.learn.gan.dense`: the dense keyframe input format (Fig. 4) and the sparse one of partial keys.
+* :mod:`~keyfill.learn.gan.features`: the dense keyframe input format (Fig. 4) and the sparse one of partial keys.
 * :mod:`~keyfill.learn.gan.dna`: Motion DNA data: the bank of representative poses, Appendix D's draws.
 * :mod:`~keyfill.learn.gan.poses`: corpus clips as root paths and root-relative joint positions.
 * :mod:`~keyfill.learn.gan.sampling`: training sequences and key sampling (section 3.7, Appendix C).

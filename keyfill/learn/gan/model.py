@@ -54,8 +54,8 @@ from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
-from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
+from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
 from keyfill.limits import check_count, check_fps
 from keyfill.motion import Skeleton
@@ -77,7 +77,7 @@ def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> d
 
     The skeleton's offsets are converted to metres for the RC-FK layer.
     """
-    from keyfill.learn.gan.networks import Discriminator, Generator, PathPredictor
+    from keyfill.learn.gan.network import Discriminator, Generator, PathPredictor
     from keyfill.learn.gan.rcfk import RCFK
 
     J = skeleton.num_joints
@@ -133,7 +133,7 @@ class GanModel:
         }
 
     def benchmark_method(self, seed: int = 0):
-        """This model as a method of :func:`keyfill.learn.benchmark.evaluate` (the LaFAN1 protocol)."""
+        """This model as a method of :func:`keyfill.learn.protocols.lafan1.evaluate` (the LaFAN1 protocol)."""
 
         def method(skeleton: Skeleton, quats, root, keys):
             return complete_windows(self, skeleton, quats, root, keys, seed)
@@ -162,7 +162,7 @@ class GanModel:
 def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None = "full") -> GanModel:
     """Read a ``"gan"`` model folder (no code is executed); ``stage`` (if given) must match."""
     from keyfill.learn import modelfile
-    from keyfill.learn.transformer import torch_device
+    from keyfill.learn.modelfile import torch_device
 
     dev = torch_device(device)
     tensors, config = modelfile.load_model(path, kind=KIND)
@@ -245,7 +245,7 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     """
     import torch
 
-    from keyfill.learn.gan.networks import GENERATOR_MULTIPLE, joint_channels, root_path
+    from keyfill.learn.gan.network import GENERATOR_MULTIPLE, joint_channels, root_path
 
     cfg = model.config
     key_poses = np.asarray(key_poses)
@@ -330,9 +330,9 @@ def _undriven(model: GanModel, num_joints: int) -> np.ndarray:
 
 def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(rotations, positions)`` of ``motion`` with translations lerped between the keys ``k`` and the
-    rotations of ``joints`` slerped (as :func:`keyfill.learn.baselines.linear`, only where needed:
+    rotations of ``joints`` slerped (as :func:`keyfill.interpolate.linear`, only where needed:
     the other rotations are overwritten by the network, and slerp of every joint costs as much as the networks)."""
-    from keyfill.learn.baselines import segment_coordinates
+    from keyfill.interpolate import segment_coordinates
 
     s, u = segment_coordinates(motion.num_frames, k)
     p0, p1 = motion.positions[k[s]], motion.positions[k[s + 1]]
@@ -471,10 +471,10 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
 
     Returns ``(quats, root)`` of all ``T`` frames with exact keys (the shared smooth correction).
     """
-    from keyfill.learn.benchmark import window_motion
     from keyfill.learn.corpus import bone_difference
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.gan.poses import relative_positions
+    from keyfill.learn.windows import window_motion
     from keyfill.motion import Keys
 
     diff = bone_difference(model.skeleton, skeleton)

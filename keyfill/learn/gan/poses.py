@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from keyfill.kinematics import fk
-from keyfill.learn.facing import horizontal_axes
+from keyfill.learn.windows import horizontal_axes
 
 
 def relative_positions(quats: np.ndarray, offsets: np.ndarray, parents) -> np.ndarray:

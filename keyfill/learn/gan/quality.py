@@ -31,8 +31,8 @@ import itertools
 import numpy as np
 
 from keyfill.errors import DataError
-from keyfill.learn.gan.dense import centre_keys
 from keyfill.learn.gan.dna import build_bank, dna_count, draw_dna
+from keyfill.learn.gan.features import centre_keys
 from keyfill.learn.gan.model import GanModel, generate
 from keyfill.learn.gan.poses import clip_pool, relative_positions
 from keyfill.learn.gan.sampling import body_halves, sample_keys
@@ -93,7 +93,7 @@ def path_errors(model: GanModel, pool, horizons=(1, 64, 128)) -> dict:
     """
     import torch
 
-    from keyfill.learn.gan.networks import joint_channels
+    from keyfill.learn.gan.network import joint_channels
 
     sums = {n: 0.0 for n in horizons}
     counts = {n: 0 for n in horizons}

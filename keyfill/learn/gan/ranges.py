@@ -178,7 +178,7 @@ def snap_in_range(ranges: JointRanges, quats: np.ndarray, key_frames: np.ndarray
     its range is outside, at that key). Frames outside the key range get the first or last key's residual.
     Returns new quaternions; joints not driven are unchanged.
     """
-    from keyfill.learn.baselines import segment_coordinates
+    from keyfill.interpolate import segment_coordinates
 
     k = np.asarray(key_frames, dtype=np.int64)
     ang = range_angles(ranges, quats)  # (T, D, 3)

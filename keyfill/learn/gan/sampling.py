@@ -48,8 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from keyfill.errors import DataError
-from keyfill.learn.gan.dense import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.dna import dna_count, draw_dna
+from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.poses import ClipPool, turn
 
 

@@ -278,7 +278,7 @@ class GanTask(TrainingTask):
         import torch
 
         from keyfill.learn.gan.losses import displacement_loss
-        from keyfill.learn.gan.networks import joint_channels
+        from keyfill.learn.gan.network import joint_channels
 
         net = self.nets["path"]
         dev = next(net.parameters()).device
@@ -298,7 +298,7 @@ class GanTask(TrainingTask):
 
     def generator_outputs(self, G, dense, noise, dna=None, dna_valid=None):
         """``(v, quats, relative (B, T, J, 3), root (B, T, 3))`` of the generator and the frozen path predictor."""
-        from keyfill.learn.gan.networks import joint_channels, root_path
+        from keyfill.learn.gan.network import joint_channels, root_path
 
         v = G(dense, noise, dna=dna, dna_valid=dna_valid)
         quats, rel = _unwrap(G).rcfk(v)
@@ -337,7 +337,7 @@ class GanTask(TrainingTask):
 
         from keyfill.learn.gan import losses as L
         from keyfill.learn.gan.layers import batch_regularisation, clear_statistics
-        from keyfill.learn.gan.networks import joint_channels
+        from keyfill.learn.gan.network import joint_channels
 
         cfg = self.cfg
         G, D = self.nets["generator"], self.nets["discriminator"]
@@ -405,7 +405,7 @@ class GanTask(TrainingTask):
         import torch
 
         from keyfill.learn.gan.losses import displacement_loss
-        from keyfill.learn.gan.networks import joint_channels
+        from keyfill.learn.gan.network import joint_channels
 
         net = self.nets["path"]
         was = net.training
@@ -496,7 +496,6 @@ def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int =
 def _make_task(common, options: dict, progress) -> GanTask:
     """The task of ``keyfill train gan``: the BVH clips in DATA, chosen by --include / --exclude."""
     from keyfill.learn.corpus import load_corpus
-    from keyfill.learn.train_transformer import select_clips
 
     cfg = read_config(options["config"], options["preset"], common.seed)
     if options["dna"] and not cfg.dna:
@@ -506,7 +505,7 @@ def _make_task(common, options: dict, progress) -> GanTask:
         cfg = dataclasses.replace(cfg, partial_keys=True, max_gap=min(cfg.max_gap, SPARSE_RECEPTIVE_FIELD))
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
-    corpus = select_clips(corpus, options["include"], options["exclude"])
+    corpus = corpus.select(options["include"], options["exclude"])
     return GanTask(corpus, cfg, options["stage"], options["path_model"], common.epochs, common.checkpoint_every or 1)
 
 

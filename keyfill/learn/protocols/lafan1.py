@@ -5,7 +5,7 @@ The protocol, as the reference code runs it:
 1. Clips are split by file name into a training and a test set.
 2. Windows: training statistics from windows of 50 frames at offset 20; test
    windows of 65 frames at offset 40 (see :meth:`Corpus.windows`).
-3. Each window is normalised (:func:`keyfill.learn.facing.align_windows`): the root's mean
+3. Each window is normalised (:func:`keyfill.learn.windows.align_windows`): the root's mean
    horizontal (XZ for Y-up) position over the window is subtracted, and the
    window is turned about the up axis so that the root's facing direction on
    frame 9, its local facing axis (``+Y`` in the reference) projected on the
@@ -15,7 +15,7 @@ The protocol, as the reference code runs it:
 5. For a transition length ``n``, frames 0-9 (context) and ``10 + n`` (target)
    are given; a method fills frames ``10 .. 9 + n``. Global positions come from
    forward kinematics of the root position and the constant offsets.
-6. Scores (:mod:`keyfill.learn.metrics`) over the transition frames only: L2Q,
+6. Scores (:mod:`keyfill.learn.protocols.metrics`) over the transition frames only: L2Q,
    L2P (positions normalised by the training statistics) and NPSS.
 
 Baselines: zero-velocity (frame 9 repeated), interpolation (LERP of the root,
@@ -40,13 +40,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
-from keyfill.learn import metrics, realism
-from keyfill.learn.baselines import segment_coordinates
 from keyfill.learn.corpus import Corpus, load_corpus
-from keyfill.learn.facing import align_windows, global_pose
-from keyfill.motion import Motion, Skeleton
+from keyfill.learn.protocols import metrics
+from keyfill.learn.windows import align_windows, global_pose
+from keyfill.motion import Skeleton
 
 N_PAST = 10  #: context frames
 N_FUTURE = 10  #: frames after the transition in the reference's windows (only the first is given)
@@ -102,104 +100,23 @@ class TestSet:
     fps: float = 30.0
 
 
-# --- methods ---------------------------------------------------------------------------
-
-
-def zero_velocity(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
-    """Hold the previous key (for in-betweening: the last context frame) until the next key."""
-    k = np.asarray(keys, dtype=np.int64)
-    s, _ = segment_coordinates(quats.shape[1], k)
-    src = np.where(np.arange(quats.shape[1]) >= k[-1], k[-1], k[s])
-    return quats[:, src].copy(), root[:, src].copy()
-
-
-def _hold_outside(q: np.ndarray, r: np.ndarray, quats: np.ndarray, root: np.ndarray, k: np.ndarray):
-    """Copy the key frames of ``quats``, ``root`` into ``q``, ``r`` (in place) and hold the end keys outside them."""
-    src = np.clip(np.arange(quats.shape[1]), k[0], k[-1])
-    copy = np.union1d(k, np.flatnonzero(src != np.arange(quats.shape[1])))  # keys, and frames that hold one
-    q[:, copy], r[:, copy] = quats[:, src[copy]], root[:, src[copy]]
-    return q, r
-
-
-def interpolation(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
-    """LERP the root and SLERP the local quaternions between the nearest keys.
-
-    For in-betweening this is the protocol's interpolation from the last
-    context frame to the target with weights ``linspace(0, 1, n + 2)[1:-1]``.
-    Frames outside the keys hold the nearest key; key frames are copied. Only
-    key frames are read. ``quats (B, T, J, 4)``, ``root (B, T, 3)``.
-    """
-    k = np.asarray(keys, dtype=np.int64)
-    s, u = segment_coordinates(quats.shape[1], k)
-    a, b = k[s], k[s + 1]
-    r = root[:, a] + u[:, None] * (root[:, b] - root[:, a])
-    q0 = quats[:, a]
-    q = R.quat_slerp(q0, quats[:, b], np.broadcast_to(u[:, None], q0.shape[:-1]))
-    return _hold_outside(q, r, quats, root, k)
-
-
-def _spline_windows(spline, quats: np.ndarray, root: np.ndarray, keys, *args) -> tuple[np.ndarray, np.ndarray]:
-    """``spline(rotations (F, N, 4), positions (F, M, 3), keys, *args)`` of :mod:`keyfill.learn.baselines`
-    on all windows at once (every joint of every window a track), then keys copied and ends held as
-    :func:`interpolation` does."""
-    k = np.asarray(keys, dtype=np.int64)
-    B, T, J, _ = quats.shape
-    q, r = spline(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k, *args)
-    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
-
-
-def cubic(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
-    """keyfill's C1 cubic spline through every given frame (:func:`keyfill.learn.baselines.cubic_arrays`).
-
-    All windows at once; frames outside the keys hold the nearest key and key
-    frames are copied, as in :func:`interpolation`. Only key frames are read.
-    ``quats (B, T, J, 4)``, ``root (B, T, 3)``.
-    """
-    from keyfill.learn.baselines import cubic_arrays
-
-    return _spline_windows(cubic_arrays, quats, root, keys)
-
-
-#: frames over which :func:`velocity` lets the given frames' velocity fade (chosen on held-out styles,
-#: docs/transformer.md)
-VELOCITY_FRAMES = 3.0
-
-
-def velocity(skeleton: Skeleton | None, quats: np.ndarray, root: np.ndarray, keys,
-             frames: float = VELOCITY_FRAMES) -> tuple[np.ndarray, np.ndarray]:
-    """Interpolation that carries the velocity of given frames next to a gap into it, fading over
-    ``frames`` frames (:func:`keyfill.learn.baselines.velocity_arrays`); windows, keys and ends as
-    :func:`cubic`."""
-    from keyfill.learn.baselines import velocity_arrays
-
-    return _spline_windows(velocity_arrays, quats, root, keys, frames)
-
-
-BASELINES: dict[str, Method] = {"zero-velocity": zero_velocity, "interpolation": interpolation, "cubic": cubic,
-                                "velocity": velocity}
-#: method names accepted by :func:`resolve_method` -> baseline
-METHOD_NAMES = {"zero-velocity": "zero-velocity", "linear": "interpolation", "interpolation": "interpolation",
-                "cubic": "cubic", "velocity": "velocity"}
+#: the protocol's names for baselines (the LaFAN1 paper's word for ``linear``), as its tables label them
+LABELS = {"linear": "interpolation"}
 
 
 def resolve_method(name_or_path: str, device: str = "cpu") -> tuple[str, Method]:
-    """``(label, method)`` for a baseline name, a learned method's name (its shipped model) or a model folder."""
-    if name_or_path in METHOD_NAMES:
-        label = METHOD_NAMES[name_or_path]
-        return label, BASELINES[label]
+    """``(label, method)`` for a baseline's name, a learned method's name (its shipped model) or a model folder."""
     from keyfill.learn import registry
 
-    if name_or_path not in registry.METHODS and not Path(name_or_path).exists():
-        raise UsageError(f"{name_or_path!r} is neither a method ({', '.join(sorted(METHOD_NAMES))}) nor a model folder")
+    if name_or_path in registry.METHODS or name_or_path in registry.ALIASES:
+        m = registry.get(name_or_path)
+        if not m.learned:
+            return LABELS.get(m.name, m.name), m.windows()
+    elif not Path(name_or_path).exists():
+        raise UsageError(f"{name_or_path!r} is neither a method ({', '.join(sorted(registry.METHODS))}) "
+                         f"nor a model folder")
     label, _, model = registry.load_model(name_or_path, device)
     return Path(label).name, model.benchmark_method()
-
-
-def window_motion(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, fps: float = 30.0) -> Motion:
-    """A :class:`Motion` of one window: ``quats (T, J, 4)``, ``root (T, 3)``, constant offsets."""
-    pos = np.broadcast_to(skeleton.offsets, root.shape[:-1] + skeleton.offsets.shape).copy()
-    pos[:, 0] = root
-    return Motion(skeleton, fps, quats, pos)
 
 
 # --- scoring -----------------------------------------------------------------------------
@@ -240,7 +157,7 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
     Every frame between the first and the last key that is not a key is hidden
     (NaN) from the methods and scored. Returns ``{method: {"L2Q", "L2P", "NPSS",
     "skate", "jitter"}}``: the protocol's three metrics on the hidden frames, and
-    foot skating (cm/s) and jitter (m/s^3) of :mod:`keyfill.learn.realism` over
+    foot skating (cm/s) and jitter (m/s^3) of :mod:`keyfill.learn.protocols.metrics` over
     the hidden frames and the two frames on each side (:func:`realism_span`).
     """
     keys = np.asarray(keys, dtype=np.int64)
@@ -287,9 +204,9 @@ def realism_scores(test: TestSet, quats: np.ndarray, root: np.ndarray, reference
     skel = test.skeleton
     _, pos = global_pose(quats, root, skel.offsets, skel.parents)
     return {
-        "skate": realism.foot_skating(pos, realism.foot_joints(skel), skel.up_axis, test.fps, skel.meters_per_unit,
+        "skate": metrics.foot_skating(pos, metrics.foot_joints(skel), skel.up_axis, test.fps, skel.meters_per_unit,
                                       reference),
-        "jitter": realism.jitter(pos, test.fps, skel.meters_per_unit),
+        "jitter": metrics.jitter(pos, test.fps, skel.meters_per_unit),
     }
 
 
@@ -425,19 +342,19 @@ def run(
     device: str = "cpu",
     progress=None,
 ):
-    """The LaFAN1 protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.evaluation.Evaluation`.
+    """The LaFAN1 protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.protocols.Evaluation`.
 
     ``method_or_model`` is a baseline (zero-velocity, linear, interpolation, cubic, velocity), a learned method's
     name (its shipped model) or a model folder; the baselines zero-velocity and interpolation are scored
     beside it unless ``baselines`` is False.
     """
-    from keyfill.learn.evaluation import Evaluation
+    from keyfill.learn.protocols import Evaluation
 
     label, method = resolve_method(method_or_model, device)
     methods = {label: method}
     if baselines:
-        for name in ("zero-velocity", "interpolation"):
-            methods.setdefault(name, BASELINES[name])
+        for name in ("zero-velocity", "linear"):
+            methods.setdefault(*resolve_method(name))
     proto = lafan1(data, test_patterns or LAFAN1_TEST_PATTERNS, train_patterns,
                    fold=fold if fold is not None else getattr(method, "folded", None),
                    facing_axis=facing_axis, progress=progress)

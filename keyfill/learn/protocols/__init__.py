@@ -3,9 +3,9 @@
 Protocols (each a ``run(method_or_model, data, **options) -> Evaluation``
 function, imported on first use):
 
-* ``lafan1`` (:func:`keyfill.learn.benchmark.run`): Harvey et al. 2020's
+* ``lafan1`` (:func:`keyfill.learn.protocols.lafan1.run`): Harvey et al. 2020's
   in-betweening benchmark on BVH clips (L2Q, L2P, NPSS);
-* ``keys`` (:func:`keyfill.learn.lamp_eval.run`): the hopping lamp's test
+* ``keys`` (:func:`keyfill.learn.protocols.keys.run`): the hopping lamp's test
   split with all keys and with 1-2 keys deleted (Zhang & van de Panne 2018,
   Tables 1-2).
 
@@ -25,7 +25,7 @@ from typing import Sequence
 from keyfill.errors import UsageError
 
 #: protocol name -> "module:function" running it
-PROTOCOLS = {"lafan1": "keyfill.learn.benchmark:run", "keys": "keyfill.learn.lamp_eval:run"}
+PROTOCOLS = {"lafan1": "keyfill.learn.protocols.lafan1:run", "keys": "keyfill.learn.protocols.keys:run"}
 
 
 @dataclass

@@ -53,10 +53,12 @@ import numpy as np
 import torch
 
 from keyfill.errors import DataError, UsageError
-from keyfill.learn import arnn
+from keyfill.learn.arnn import network
+from keyfill.learn.arnn.features import Batch, delete_keys, make_batch
+from keyfill.learn.arnn.model import KIND, model_config
+from keyfill.learn.lamp_data import LampSequence, Normalizer, read_sequences, split
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs
 from keyfill.learn.training import train as run_training
-from keyfill.learn.lamp_features import Batch, LampSequence, Normalizer, delete_keys, make_batch
 from keyfill.limits import max_frames
 
 #: fractions of the epochs: teacher forcing decays over [0, TF_END); omega rises over [OMEGA_START, OMEGA_END]
@@ -116,8 +118,8 @@ class Settings:
     sizes: dict = field(default_factory=dict)
 
     def check(self) -> "Settings":
-        if self.arch not in arnn.ARCHITECTURES:
-            raise UsageError(f"unknown architecture {self.arch!r}; choose one of {', '.join(arnn.ARCHITECTURES)}")
+        if self.arch not in network.ARCHITECTURES:
+            raise UsageError(f"unknown architecture {self.arch!r}; choose one of {', '.join(network.ARCHITECTURES)}")
         for name in ("epochs", "batch_size", "checkpoint_every"):
             if getattr(self, name) < 1:
                 raise UsageError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
@@ -154,28 +156,6 @@ def loss_terms(pred: torch.Tensor, frames: torch.Tensor, is_key: torch.Tensor, v
     return key_sum, frame_mse, key_mse
 
 
-def split(sequences: list, test_fraction: float = 0.2, val_fraction: float = 0.1) -> dict[str, list]:
-    """Fixed split by position: the last 20 % is ``test``, the 10 % before it ``val``, the rest ``train``.
-
-    For the 300 sequences of ``keyfill simulate --count 300`` this is the
-    paper's 240 training / 60 test sequences, with 30 of the 240 held out to
-    watch training.
-    """
-    n = len(sequences)
-    if n < 3:
-        raise DataError(f"{n} sequences cannot be split into training, held-out and test parts (need 3 or more)")
-    n_test = max(1, round(test_fraction * n))
-    n_val = max(1, round(val_fraction * n))
-    n_train = n - n_test - n_val
-    if n_train < 1:
-        raise DataError(f"{n} sequences leave none for training")
-    return {
-        "train": sequences[:n_train],
-        "val": sequences[n_train: n_train + n_val],
-        "test": sequences[n_train + n_val:],
-    }
-
-
 def _fingerprint(batch: Batch) -> str:
     h = hashlib.sha256()
     for t in (batch.frames, batch.is_key, batch.lengths):
@@ -207,7 +187,7 @@ class ArnnTask(TrainingTask):
     in step across processes.
     """
 
-    kind = arnn.KIND
+    kind = KIND
 
     def __init__(self, train_set: list[LampSequence], val_set: list[LampSequence], settings: Settings,
                  source: str = ""):
@@ -244,7 +224,7 @@ class ArnnTask(TrainingTask):
 
     def build(self, generator):
         self.gen = generator
-        self.net = arnn.build(self.settings.arch, generator, **self.settings.sizes)
+        self.net = network.build(self.settings.arch, generator, **self.settings.sizes)
         return {"net": self.net}
 
     def optimizers(self, nets):
@@ -275,7 +255,7 @@ class ArnnTask(TrainingTask):
     def step(self, batch, update):
         b, is_key, teacher = batch
         omega = self.schedule.omega(update.epoch)
-        pred = arnn.run(self.net, b.frames, is_key, teacher=teacher, generator=self.dropout)
+        pred = network.run(self.net, b.frames, is_key, teacher=teacher, generator=self.dropout)
         key_sum, frame_mse, key_mse = loss_terms(pred, b.frames, is_key, b.valid)
         key_term = key_sum if self.settings.key_loss == "sum" else key_mse
         loss = self.settings.key_weight * omega * key_term + frame_mse
@@ -317,9 +297,9 @@ class ArnnTask(TrainingTask):
             "threads": torch.get_num_threads(),
             "val": {k[4:]: v for k, v in final.items() if k.startswith("val_")},
         }
-        config = arnn.model_config(self.net, self.normalizer, self.settings.sizes, training)
-        path = save_model(output, arnn.KIND, self.net.state_dict(), config)
-        return Result(path, self.settings.epochs, seconds, cpu, training["val"], arnn.num_weights(self.net), None)
+        config = model_config(self.net, self.normalizer, self.settings.sizes, training)
+        path = save_model(output, KIND, self.net.state_dict(), config)
+        return Result(path, self.settings.epochs, seconds, cpu, training["val"], network.num_weights(self.net), None)
 
 
 class _Shard(tuple):
@@ -369,7 +349,7 @@ def train(
     return result
 
 
-def validate(net: arnn.Completer, val: Batch, n_all: int) -> dict:
+def validate(net: network.Completer, val: Batch, n_all: int) -> dict:
     """Table losses of ``net`` (free-running, no dropout) on the held-out batch.
 
     The batch holds the held-out sequences twice: first with all keys, then
@@ -378,7 +358,7 @@ def validate(net: arnn.Completer, val: Batch, n_all: int) -> dict:
     """
     net.eval()
     with torch.no_grad():
-        pred = arnn.run(net, val.frames, val.is_key)
+        pred = network.run(net, val.frames, val.is_key)
     out = {}
     for prefix, sl in (("", slice(0, n_all)), ("deleted_", slice(n_all, None))):
         _, frame, key = loss_terms(pred[sl], val.frames[sl], val.is_key[sl], val.valid[sl])
@@ -395,7 +375,6 @@ def _make_task(common, options: dict, progress) -> ArnnTask:
     """The task of ``keyfill train arnn``: DATA is one ``keyfill simulate`` folder, split by :func:`split`."""
     from dataclasses import replace
 
-    from keyfill.learn.lamp_features import read_sequences
 
     if len(common.data) != 1:
         raise UsageError("keyfill train arnn takes one dataset folder made by 'keyfill simulate'")
@@ -446,7 +425,7 @@ TRAINING = TrainingSpec(
     """,
     options=(
         Option("arch", Settings.arch, "Network: the ARNN, or section 9's no-memory or segregated comparison networks.",
-               choices=arnn.ARCHITECTURES),
+               choices=network.ARCHITECTURES),
         Option("batch_size", Settings.batch_size, "Sequences per gradient step.", type=int),
         Option("lr", Settings.lr, "Adam learning rate.", type=float),
         Option("curriculum", Settings.curriculum, "Scheduled sampling then a rising key weight (section 7.2); "

@@ -5,11 +5,11 @@ Every missing frame is predicted in one forward pass (section 3 of the paper):
 1. Frames are *key* (given), *unknown* (to fill) or *ignored* (padding; no
    loss): :func:`frame_kinds`. Unknown frames are pre-filled (``prefill``): by
    LERP of the root and SLERP of the local rotations between the nearest keys
-   (``"interpolation"``, :func:`keyfill.learn.benchmark.interpolation`), or by
+   (``"interpolation"``, :func:`keyfill.learn.protocols.lafan1.interpolation`), or by
    keyfill's C1 cubic spline through the keys (``"cubic"``,
-   :func:`keyfill.learn.benchmark.cubic`), or by the interpolation plus the
+   :func:`keyfill.learn.protocols.lafan1.cubic`), or by the interpolation plus the
    velocity of the given frames next to the gap, fading over a few frames
-   (``"velocity"``, :func:`keyfill.learn.benchmark.velocity`).
+   (``"velocity"``, :func:`keyfill.learn.protocols.lafan1.velocity`).
 2. Each frame becomes a feature vector (:class:`Features`): in ``global``
    coordinates (the paper's best variant) the normalised global positions and
    the global quaternions of all joints; in ``local`` coordinates the
@@ -49,7 +49,6 @@ refuses anything else without executing code from it.
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import os
 from dataclasses import dataclass, field
@@ -59,228 +58,18 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError
-from keyfill.learn.benchmark import BASELINES
-from keyfill.learn.facing import axis_vector
-from keyfill.learn.transformer_features import (  # noqa: F401 - the layouts and features are part of the model's interface
-    IGNORED,
-    KEY,
-    UNKNOWN,
-    Features,
-    anchor_frame,
-    apply_transform,
-    canonical_transform,
-    frame_kinds,
-)
-from keyfill.limits import check_number
+from keyfill.learn.modelfile import torch_device
+from keyfill.learn.transformer.config import ModelConfig
+from keyfill.learn.transformer.features import IGNORED, Features, apply_transform, canonical_transform, frame_kinds
 from keyfill.motion import Skeleton
 
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
 KIND = "transformer"
 #: the model ``keyfill complete --method transformer`` uses without --model: Bandai-Namco's skeleton
 #: (``normal`` style held out; its MODEL_CARD.md has the command, the data, the figures and the licence)
-DEFAULT_MODEL = Path(__file__).parent / "models" / "bandai2-transformer"
+DEFAULT_MODEL = Path(__file__).parent.parent / "models" / "bandai2-transformer"
 #: ends the error for a motion of another skeleton
 TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transformer CLIPS -o MODEL'"
-
-
-#: the pre-fills a model can be trained with (:attr:`ModelConfig.prefill`)
-PREFILLS = ("interpolation", "cubic", "velocity")
-#: architecture settings added after the first models were written, with the value that behaves as before: at
-#: that value they are left out of a model's ``config.json`` and of what ``--resume`` compares, so older runs
-#: resume and retrain to the same bytes (:meth:`ModelConfig.recorded`)
-LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
-#: each number of a :class:`ModelConfig`: (whole number?, lowest, highest); larger sizes would exhaust memory
-NUMBER_LIMITS = {"layers": (True, 1, 256), "d_model": (True, 1, 16384), "heads": (True, 1, 256),
-                 "ffn": (True, 1, 65536), "max_frames": (True, 1, 100_000), "dropout": (False, 0, 0.99),
-                 "kinematics_weight": (False, 0, 1e6), "fk_weight": (False, 0, 1e6), "rotation_weight": (False, 0, 1e6)}
-
-
-@dataclass(frozen=True)
-class ModelConfig:
-    """Architecture and representation of a :class:`MotionTransformer`.
-
-    Attributes:
-        coordinates: ``"global"`` or ``"local"`` features and prediction.
-        layers, d_model, heads, ffn, dropout: the BERT encoder.
-        max_frames: length of the learnable position embedding (longest window).
-        residual: add the network's output to the pre-filled input.
-        kinematics_weight: weight of the IK loss (global) or FK loss (local), Eq. 15.
-        rotation_weight: weight of the quaternion L1 loss (1: the paper's Eq. 15).
-        fk_weight: global coordinates only: weight of an FK loss on the decoded
-            output (positions by forward kinematics of the predicted rotations and
-            the standard offsets, the positions the benchmark scores); 0 is the paper.
-        facing_axis: the root's local forward axis, for the canonical frame.
-        prefill: how unknown frames are filled before the network corrects them:
-            ``"interpolation"`` (LERP/SLERP, the paper), ``"cubic"`` (C1 spline through the keys) or
-            ``"velocity"`` (the interpolation plus the fading velocity of the given frames beside a gap).
-        key_distances: add learnable embeddings of each frame's distance in frames to the previous and
-            the next key (the "time to arrival" of Harvey et al. 2020), so the network reads a gap's length
-            and its place in it directly. They start at zero: a model fine-tuned with them from one
-            without starts as that model.
-    """
-
-    coordinates: str = "global"
-    layers: int = 8
-    d_model: int = 256
-    heads: int = 8
-    ffn: int = 512
-    dropout: float = 0.1
-    max_frames: int = 65
-    residual: bool = True
-    kinematics_weight: float = 0.01
-    fk_weight: float = 0.0
-    facing_axis: str = "+Y"
-    prefill: str = "interpolation"
-    rotation_weight: float = 1.0
-    key_distances: bool = False
-
-    def __post_init__(self):
-        for name, (whole, low, high) in NUMBER_LIMITS.items():  # before any arithmetic (heads 0, layers 1e9)
-            check_number(name, getattr(self, name), low, high, whole=whole, error=ModelError)
-        if self.coordinates not in ("global", "local"):
-            raise ModelError(f"coordinates must be 'global' or 'local', not {self.coordinates!r}")
-        if self.d_model % self.heads:
-            raise ModelError(f"d_model {self.d_model} is not a multiple of heads {self.heads}")
-        axis_vector(self.facing_axis)
-        if self.prefill not in PREFILLS:
-            raise ModelError(f"prefill must be one of {', '.join(PREFILLS)}, not {self.prefill!r}")
-        for name in ("residual", "key_distances"):
-            if not isinstance(getattr(self, name), bool):
-                raise ModelError(f"{name} must be true or false, not {getattr(self, name)!r}")
-
-    def recorded(self) -> dict:
-        """The settings a model file and a checkpoint record: all but later ones at their old value."""
-        return {k: v for k, v in dataclasses.asdict(self).items() if LATER_ARCHITECTURE.get(k, ...) != v}
-
-    def fill(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
-        """Windows ``quats (B, T, J, 4)``, ``root (B, T, 3)`` pre-filled between ``keys`` (only keys are read)."""
-        return BASELINES[self.prefill](None, quats, root, keys)
-
-
-# --- the network -------------------------------------------------------------------------
-
-
-def _torch_module():
-    import torch
-    from torch import nn
-
-    class MotionTransformer(nn.Module):
-        """Conv1d -> + mixture embedding -> BERT encoder -> Conv1d (section 3.1)."""
-
-        def __init__(self, features: int, cfg: ModelConfig):
-            super().__init__()
-            self.cfg = cfg
-            self.input = nn.Conv1d(features, cfg.d_model, kernel_size=3, padding=1)
-            self.position = nn.Embedding(cfg.max_frames, cfg.d_model)
-            self.keyframe = nn.Embedding(3, cfg.d_model)
-            if cfg.key_distances:
-                self.since_key = nn.Embedding(cfg.max_frames, cfg.d_model)
-                self.until_key = nn.Embedding(cfg.max_frames, cfg.d_model)
-                nn.init.zeros_(self.since_key.weight)
-                nn.init.zeros_(self.until_key.weight)
-            layer = nn.TransformerEncoderLayer(
-                cfg.d_model, cfg.heads, cfg.ffn, cfg.dropout, activation="gelu", batch_first=True
-            )
-            self.encoder = nn.TransformerEncoder(layer, cfg.layers, enable_nested_tensor=False)
-            self.output = nn.Conv1d(cfg.d_model, features, kernel_size=3, padding=1)
-            if cfg.residual:  # start as the interpolation it corrects
-                nn.init.zeros_(self.output.weight)
-                nn.init.zeros_(self.output.bias)
-
-        def embed(self, kinds):
-            """The mixture embedding ``(B, T, d_model)`` of frame kinds ``(B, T)``."""
-            T = kinds.shape[-1]
-            pos = torch.arange(T, device=kinds.device)
-            out = self.position(pos) + self.keyframe(kinds)
-            if self.cfg.key_distances:
-                since, until = key_distances(kinds, self.cfg.max_frames - 1)
-                out = out + self.since_key(since) + self.until_key(until)
-            return out
-
-        def forward(self, x, kinds):
-            """``x (B, T, F)`` pre-filled features, ``kinds (B, T)`` -> ``(B, T, F)`` completed features."""
-            T = x.shape[1]
-            if T > self.cfg.max_frames:
-                raise ModelError(f"{T} frames do not fit this model's {self.cfg.max_frames}-frame window")
-            h = self.input(x.transpose(1, 2)).transpose(1, 2) + self.embed(kinds)
-            h = self.encoder(h)
-            y = self.output(h.transpose(1, 2)).transpose(1, 2)
-            return x + y if self.cfg.residual else y
-
-    return MotionTransformer
-
-
-def key_distances(kinds, limit: int):
-    """``(since, until)``, each ``(B, T)`` int64: frames from the last key at or before each frame and to the
-    next key at or after it (0 on a key), ``limit`` where there is none or it is farther (torch)."""
-    import torch
-
-    T = kinds.shape[-1]
-    t = torch.arange(T, device=kinds.device)
-    d = t[:, None] - t[None, :]  # (T, T): frame i minus frame j
-    key = (kinds == KEY)[:, None, :]  # (B, 1, T): frame j is a key
-    far = torch.full((), limit, dtype=d.dtype, device=d.device)
-    since = torch.where(key & (d >= 0), d, far).amin(-1).clamp(max=limit)
-    until = torch.where(key & (d <= 0), -d, far).amin(-1).clamp(max=limit)
-    return since, until
-
-
-def build_network(features: int, cfg: ModelConfig):
-    """A fresh :class:`MotionTransformer` torch module (weights from torch's current generator)."""
-    return _torch_module()(features, cfg)
-
-
-# --- losses ----------------------------------------------------------------------
-
-
-def losses(feat: Features, pred, target, gt_quats, gt_root, kinds, cfg: ModelConfig) -> dict:
-    """The training losses (Eqs. 12-15) over key and unknown frames (torch).
-
-    Args:
-        pred, target: ``(B, T, F)`` predicted and true features.
-        gt_quats, gt_root: the true local pose ``(B, T, J, 4)``, ``(B, T, 3)``.
-        kinds: ``(B, T)`` frame kinds; IGNORED frames carry no loss.
-
-    Returns ``{"total", "position", "rotation", "kinematics"[, "output_fk"]}`` (scalars).
-    """
-    import torch
-
-    w = (kinds != IGNORED).to(pred.dtype)  # (B, T)
-    norm = w.sum().clamp(min=1)
-    p_pos, p_q = feat.split(pred)
-    t_pos, t_q = feat.split(target)
-    std = feat._stats(pred)[1]
-    pos_l = ((p_pos - t_pos).abs() / std).mean(-1)
-    rot_l = (p_q - t_q).abs().mean((-1, -2))
-    scale = float(np.mean(feat.pos_std))
-    if feat.coordinates == "global":
-        # IK loss: bone offsets recovered from the predicted global pose (Eq. 14).
-        J = feat.num_joints
-        gp = p_pos.reshape(p_pos.shape[:-1] + (J, 3))
-        par = torch.as_tensor(feat.parents[1:], device=pred.device)
-        local = R.quat_rotate(R.quat_conjugate(p_q[..., par, :]), gp[..., 1:, :] - gp[..., par, :])
-        off = torch.as_tensor(feat.offsets[1:], dtype=pred.dtype, device=pred.device)
-        kin_l = (local - off).abs().mean((-1, -2)) / scale
-    else:
-        # FK loss: global positions of the predicted local pose (Eq. 13).
-        _, gp = feat.global_pose(p_q, p_pos)
-        _, tp = feat.global_pose(gt_quats, gt_root)
-        kin_l = (gp - tp).abs().mean((-1, -2)) / scale
-    out = {
-        "position": (pos_l * w).sum() / norm,
-        "rotation": (rot_l * w).sum() / norm,
-        "kinematics": (kin_l * w).sum() / norm,
-    }
-    out["total"] = out["position"] + cfg.rotation_weight * out["rotation"] + cfg.kinematics_weight * out["kinematics"]
-    if cfg.fk_weight and feat.coordinates == "global":
-        # FK of the decoded output: what the model's user (and L2P) gets.
-        dq, droot = feat.decode(pred)
-        _, gp_out = feat.global_pose(dq, droot)
-        _, gp_true = feat.global_pose(gt_quats, gt_root)
-        fk_l = (gp_out - gp_true).abs().mean((-1, -2)) / scale
-        out["output_fk"] = (fk_l * w).sum() / norm
-        out["total"] = out["total"] + cfg.fk_weight * out["output_fk"]
-    return out
 
 
 # --- a trained model -----------------------------------------------------------------
@@ -295,7 +84,7 @@ class CompletionModel:
         skeleton: the skeleton it serves (names, parents, constant offsets).
         features: the feature encoding (with normalisation statistics).
         network: the torch module, or an exported graph runner that takes numpy arrays (``numpy_io``;
-            :class:`keyfill.learn.transformer_onnx.GraphNetwork`).
+            :class:`keyfill.learn.transformer.onnx.GraphNetwork`).
         folded: whether its corpus folded a static top joint into the hips.
         info: training summary (epochs, data, final validation scores).
     """
@@ -354,7 +143,7 @@ class CompletionModel:
         return R.quat_normalize(pq), pr
 
     def benchmark_method(self):
-        """This model as a method of :func:`keyfill.learn.benchmark.evaluate`."""
+        """This model as a method of :func:`keyfill.learn.protocols.lafan1.evaluate`."""
 
         def method(skeleton: Skeleton, quats, root, keys):
             diff = self.skeleton.difference(skeleton, atol=1e-2 * float(np.abs(skeleton.offsets).max()))
@@ -396,6 +185,8 @@ def features_for(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std) -> Fea
 
 def new_model(skeleton: Skeleton, cfg: ModelConfig, pos_mean, pos_std, folded: bool, info=None) -> CompletionModel:
     """A freshly initialised :class:`CompletionModel` (weights from torch's current generator)."""
+    from keyfill.learn.transformer.network import build_network
+
     feat = features_for(skeleton, cfg, pos_mean, pos_std)
     return CompletionModel(cfg, skeleton, feat, build_network(feat.size, cfg), folded, dict(info or {}))
 
@@ -414,21 +205,6 @@ def config_parts(config: dict):
     stats = {"pos_mean": bounded_array(st["pos_mean"], "the position means", n),
              "pos_std": bounded_array(st["pos_std"], "the position deviations", n, above=0.0)}
     return cfg, skel, stats, bool(config["folded_root"]), config.get("training")
-
-
-def torch_device(name: str):
-    """``torch.device(name)``, or a :class:`UsageError` when it is not there."""
-    import torch
-
-    from keyfill.errors import UsageError
-
-    try:
-        dev = torch.device(name)
-    except (RuntimeError, ValueError):
-        raise UsageError(f"unknown torch device {name!r}; use cpu, cuda or cuda:N") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise UsageError(f"device {name!r} was asked for, but torch sees no CUDA GPU here; use --device cpu")
-    return dev
 
 
 def load(path: str | os.PathLike, device: str = "cpu") -> CompletionModel:
@@ -502,7 +278,7 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
     depends on its batch in float32 rounding only. Without, every window is
     completed alone, in order (what one ``keyfill complete`` does).
     """
-    from keyfill.learn.baselines import linear
+    from keyfill.interpolate import linear
     from keyfill.learn.corpus import model_hierarchy
     from keyfill.motion import Keys
 
@@ -595,5 +371,3 @@ def complete_many(jobs, options):
     from keyfill.learn.modelfile import load_cached
 
     return complete_many_with(load_cached(load, options.model or DEFAULT_MODEL, options.device), jobs, options)
-
-

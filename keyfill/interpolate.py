@@ -1,10 +1,14 @@
-"""Spline in-betweening: ``linear`` and ``cubic``.
+"""The in-betweening baselines that need no learning: ``linear``, ``cubic``, ``velocity``, ``zero-velocity``.
 
-Both fill every frame from the key frames alone; frames at keys are copied from
+Each fills every frame from the key frames alone; frames at keys are copied from
 the input unchanged (bit-identical), frames before the first key or after the
-last hold that key.
+last hold that key. Each comes twice, on one :class:`~keyfill.motion.Motion`
+(``keyfill complete --method NAME``) and on windows of many clips at once,
+``(skeleton, quats (B, T, J, 4), root (B, T, 3), keys) -> (quats, root)`` (the
+benchmark protocols); :data:`BASELINES` lists both by the method's name.
 
-* ``linear``: lerp of translations, shortest-path slerp of rotations.
+* ``linear``: lerp of translations, shortest-path slerp of rotations (the
+  LaFAN1 benchmark's "interpolation").
 * ``cubic``: C1 cubic Hermite curves through the keys with Catmull-Rom style
   tangents for uneven key spacing (at key ``i``, the slopes of the two
   neighbouring segments weighted by the length of the other one; one-sided
@@ -14,6 +18,10 @@ last hold that key.
   ``log(q_i^-1 q_i+1)`` whose end tangents are the key angular velocities
   (mapped through the inverse right Jacobian of SO(3)), so the angular
   velocity is continuous across keys.
+* ``velocity``: the interpolation plus the velocity of given frames next to a
+  gap, fading over :data:`VELOCITY_FRAMES` frames (where two keys are
+  consecutive frames, their difference is a velocity the gap starts or ends with).
+* ``zero-velocity``: every frame holds the last key before it.
 """
 
 from __future__ import annotations
@@ -21,8 +29,11 @@ from __future__ import annotations
 import numpy as np
 
 from keyfill import rotations as R
-from keyfill.learn.completion import Completion
 from keyfill.motion import Keys, Motion
+
+#: frames over which :func:`velocity` lets the given frames' velocity fade (chosen on held-out styles,
+#: docs/transformer.md)
+VELOCITY_FRAMES = 3.0
 
 
 def segment_coordinates(num_frames: int, key_frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -171,11 +182,90 @@ def cubic(motion: Motion, keys: Keys) -> Motion:
     return _keep_keys(rot, pos, motion, keys)
 
 
-def complete_linear(motion: Motion, keys: Keys, options) -> Completion:
-    """``keyfill complete --method linear`` (:func:`linear`; ``options`` has nothing it uses)."""
-    return Completion(linear(motion, keys), {"exact_keys": True})
+def velocity(motion: Motion, keys: Keys, frames: float | None = None) -> Motion:
+    """The interpolation plus the velocity of given frames next to each gap, fading over ``frames`` frames
+    (:data:`VELOCITY_FRAMES` by default; :func:`velocity_arrays`)."""
+    frames = VELOCITY_FRAMES if frames is None else frames
+    rot, pos = velocity_arrays(motion.rotations, motion.positions, keys.frames, frames)
+    return _keep_keys(rot, pos, motion, keys)
 
 
-def complete_cubic(motion: Motion, keys: Keys, options) -> Completion:
-    """``keyfill complete --method cubic`` (:func:`cubic`; ``options`` has nothing it uses)."""
-    return Completion(cubic(motion, keys), {"exact_keys": True})
+def hold(motion: Motion, keys: Keys) -> Motion:
+    """Zero velocity: every frame holds the last key at or before it (frames before the first key hold it)."""
+    k = keys.frames
+    s, _ = segment_coordinates(motion.num_frames, k)
+    src = np.where(np.arange(motion.num_frames) >= k[-1], k[-1], k[s])
+    return _keep_keys(motion.rotations[src], motion.positions[src], motion, keys)
+
+
+# --- the same baselines on windows of many clips at once (the benchmark protocols) ---------------
+
+def hold_windows(skeleton, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """Hold the previous key (for in-betweening: the last context frame) until the next key."""
+    k = np.asarray(keys, dtype=np.int64)
+    s, _ = segment_coordinates(quats.shape[1], k)
+    src = np.where(np.arange(quats.shape[1]) >= k[-1], k[-1], k[s])
+    return quats[:, src].copy(), root[:, src].copy()
+
+
+def _hold_outside(q: np.ndarray, r: np.ndarray, quats: np.ndarray, root: np.ndarray, k: np.ndarray):
+    """Copy the key frames of ``quats``, ``root`` into ``q``, ``r`` (in place) and hold the end keys outside them."""
+    src = np.clip(np.arange(quats.shape[1]), k[0], k[-1])
+    copy = np.union1d(k, np.flatnonzero(src != np.arange(quats.shape[1])))  # keys, and frames that hold one
+    q[:, copy], r[:, copy] = quats[:, src[copy]], root[:, src[copy]]
+    return q, r
+
+
+def linear_windows(skeleton, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """LERP the root and SLERP the local quaternions between the nearest keys.
+
+    For in-betweening this is the protocol's interpolation from the last
+    context frame to the target with weights ``linspace(0, 1, n + 2)[1:-1]``.
+    Frames outside the keys hold the nearest key; key frames are copied. Only
+    key frames are read. ``quats (B, T, J, 4)``, ``root (B, T, 3)``.
+    """
+    k = np.asarray(keys, dtype=np.int64)
+    s, u = segment_coordinates(quats.shape[1], k)
+    a, b = k[s], k[s + 1]
+    r = root[:, a] + u[:, None] * (root[:, b] - root[:, a])
+    q0 = quats[:, a]
+    q = R.quat_slerp(q0, quats[:, b], np.broadcast_to(u[:, None], q0.shape[:-1]))
+    return _hold_outside(q, r, quats, root, k)
+
+
+def _spline_windows(spline, quats: np.ndarray, root: np.ndarray, keys, *args) -> tuple[np.ndarray, np.ndarray]:
+    """``spline(rotations (F, N, 4), positions (F, M, 3), keys, *args)`` of :mod:`keyfill.interpolate`
+    on all windows at once (every joint of every window a track), then keys copied and ends held as
+    :func:`linear_windows` does."""
+    k = np.asarray(keys, dtype=np.int64)
+    B, T, J, _ = quats.shape
+    q, r = spline(quats.transpose(1, 0, 2, 3).reshape(T, B * J, 4), root.transpose(1, 0, 2), k, *args)
+    return _hold_outside(q.reshape(T, B, J, 4).transpose(1, 0, 2, 3), r.transpose(1, 0, 2), quats, root, k)
+
+
+def cubic_windows(skeleton, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """keyfill's C1 cubic spline through every given frame (:func:`cubic_arrays`).
+
+    All windows at once; frames outside the keys hold the nearest key and key
+    frames are copied, as in :func:`linear_windows`. Only key frames are read.
+    ``quats (B, T, J, 4)``, ``root (B, T, 3)``.
+    """
+    return _spline_windows(cubic_arrays, quats, root, keys)
+
+
+def velocity_windows(skeleton, quats: np.ndarray, root: np.ndarray, keys,
+                     frames: float = VELOCITY_FRAMES) -> tuple[np.ndarray, np.ndarray]:
+    """Interpolation that carries the velocity of given frames next to a gap into it, fading over
+    ``frames`` frames (:func:`velocity_arrays`); windows, keys and ends as
+    :func:`cubic_windows`."""
+    return _spline_windows(velocity_arrays, quats, root, keys, frames)
+
+
+#: every baseline by its method name (``keyfill complete --method``, ``keyfill evaluate``, the protocols):
+#: ``(motion function, windows function)``; :mod:`keyfill.learn.registry` registers each as a method
+BASELINES = {
+    "zero-velocity": (hold, hold_windows),
+    "linear": (linear, linear_windows),
+    "cubic": (cubic, cubic_windows),
+    "velocity": (velocity, velocity_windows),
+}

@@ -64,7 +64,7 @@ def centre_keys(key_poses: np.ndarray, up_axis: str = "Y", coords=None) -> tuple
     subtracted. With partial keys (``coords (K, J, 3)`` bool) each ground axis is
     centred on the keys that give the root's coordinate on it (not moved when none does).
     """
-    from keyfill.learn.facing import horizontal_axes
+    from keyfill.learn.windows import horizontal_axes
 
     h = list(horizontal_axes(up_axis))
     shift = np.zeros(3)

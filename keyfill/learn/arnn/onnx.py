@@ -1,8 +1,8 @@
 """The lamp ARNN family run from an exported step graph with onnxruntime: no torch.
 
 :class:`OnnxLampModel` has the ``predict(sequences)`` of a torch
-:class:`keyfill.learn.arnn.LampModel`: the same numpy encoding and key
-conditioning (:mod:`keyfill.learn.lamp_features`), then the step graph run
+:class:`keyfill.learn.arnn.model.LampModel`: the same numpy encoding and key
+conditioning (:mod:`keyfill.learn.arnn.features`), then the step graph run
 once per frame over the whole batch, each step fed the previous output and
 state. :func:`complete_graph` is ``keyfill complete --method arnn --runtime onnx``.
 """
@@ -12,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from keyfill.errors import ModelError
-from keyfill.learn.lamp_features import LampSequence, Normalizer, batch_arrays, conditioning, origin
+from keyfill.learn.arnn.features import batch_arrays, conditioning
+from keyfill.learn.arnn.model import KIND
+from keyfill.learn.lamp_data import NUM_VARIABLES, LampSequence, Normalizer, origin
 
 
 class OnnxLampModel:
@@ -30,7 +32,7 @@ class OnnxLampModel:
             raise ModelError(f"{graph.path}: damaged lamp model metadata ({e})") from None
 
     def predict(self, sequences: list[LampSequence]) -> list[np.ndarray]:
-        """As :meth:`keyfill.learn.arnn.LampModel.predict`."""
+        """As :meth:`keyfill.learn.arnn.model.LampModel.predict`."""
         frames, is_key, _, lengths = batch_arrays(sequences, self.normalizer)
         x_prev, x_next, t_rel, _ = conditioning(frames, is_key)
         B, T = is_key.shape
@@ -52,7 +54,7 @@ class OnnxLampModel:
 
 def complete_graph(jobs, options, graph):
     """``keyfill complete --method arnn`` through the graph: a Completion or the error, per job."""
-    from keyfill.learn.lamp_features import complete_lamp_many
+    from keyfill.learn.arnn.model import complete_lamp_many
 
     name = "lamp-arnn"  # the built-in model's name, as the torch path reports it
     results = complete_lamp_many(jobs, options, lambda: OnnxLampModel(graph), name)
@@ -62,3 +64,39 @@ def complete_graph(jobs, options, graph):
             if options.model is None:
                 r.info["model"] = graph.path
     return results
+
+
+#: what a lamp step graph takes and gives (written into its metadata; docs/onnx.md explains the loop)
+STEP_CONTRACT = {
+    "graph": "one step of the autoregressive loop: frame t from frame t-1, the keys around t and a state",
+    "inputs": {
+        "y_prev": ["batch", 6, "float32", "encoded frame t-1 (frame 0: the first key)"],
+        "key_before": ["batch", 6, "float32", "encoded key X_K at or before t-1 (the last key before t)"],
+        "key_after": ["batch", 6, "float32", "encoded key X_K+1 at or after t"],
+        "t_rel": ["batch", 1, "float32", "(t - T_K) / (T_K+1 - T_K), 1 on a key's own frame"],
+        "state": ["batch", 2, "state_size", "float32", "recurrent state: zeros at t = 1, then state_out"],
+    },
+    "outputs": {
+        "y": ["batch", 6, "float32", "encoded frame t"],
+        "state_out": ["batch", 2, "state_size", "float32", "the state for frame t+1"],
+    },
+    "encoding": "variables base_x, base_y (m), base/leg/neck/head angle (rad); relative: base_x minus the first "
+                "key's, angles less the whole turns of the first key's; then (v - normalizer.mean) / normalizer.std",
+}
+
+
+def export_onnx(model, folder, path) -> None:
+    """Write ``model`` (loaded from the model folder ``folder``) as a step graph to ``path`` (atomically)."""
+    import torch
+
+    from keyfill.learn.arnn.network import StepGraph, state_size
+    from keyfill.learn.modelfile import read_config
+    from keyfill.learn.onnx import export_module, metadata
+
+    H = state_size(model.net)
+    args = (torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES),
+            torch.ones(2, 1), torch.zeros(2, 2, H))
+    batch = torch.export.Dim("batch")
+    contract = {**STEP_CONTRACT, "state_size": H}
+    export_module(StepGraph(model.net), args, path, list(STEP_CONTRACT["inputs"]), list(STEP_CONTRACT["outputs"]),
+                  tuple({0: batch} for _ in STEP_CONTRACT["inputs"]), metadata(KIND, folder, read_config(folder), contract))

@@ -2,7 +2,7 @@
 
 Three architectures share one interface (:class:`Completer`): given the first
 key ``y0 (B, 6)`` and, for frames ``1 .. T-1``, the surrounding keys and the
-relative time (:func:`keyfill.learn.lamp_features.conditioning`), they predict
+relative time (:func:`keyfill.learn.arnn.features.conditioning`), they predict
 frames ``1 .. T-1`` one after the other, each from the previous prediction.
 
 * :class:`ARNN` (section 6, Figure 6): ``Y'_{t-1}``, ``X_K`` and ``X_{K+1}``
@@ -25,28 +25,22 @@ about the same number of weights (the paper adjusts them "to produce a fair
 comparison"). In training, a batch is either teacher-forced (the previous
 *true* frame is the input, so the GRUs run fused over whole sequences) or
 free-running (the network's own predictions, one step at a time), as chosen by
-the scheduled-sampling curriculum (:mod:`keyfill.learn.train_arnn`).
+the scheduled-sampling curriculum (:mod:`keyfill.learn.arnn.task`).
 
-:func:`complete` is the ``keyfill complete --method arnn`` method.
+Trained models are loaded and used by :mod:`keyfill.learn.arnn.model`.
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
-import numpy as np
 import torch
 from torch import nn
 
-from keyfill.errors import ModelError, UsageError
-from keyfill.learn.lamp_features import (
-    NUM_VARIABLES, LampSequence, Normalizer, conditioning, make_batch, origin,
-)
+from keyfill.errors import UsageError
+from keyfill.learn.arnn.features import conditioning
+from keyfill.learn.lamp_data import NUM_VARIABLES
 
-#: the model that ``keyfill complete --method arnn`` uses for lamp files without --model
-DEFAULT_MODEL = Path(__file__).parent / "models" / "lamp-arnn"
-KIND = "arnn"
 ARCHITECTURES = ("arnn", "no-memory", "segregated")
 #: drop probabilities after GRU layer 1, GRU layer 2, feed-forward layer 1, feed-forward layer 2
 DROPOUT = (0.1, 0.05, 0.2, 0.1)
@@ -128,7 +122,7 @@ class Completer(nn.Module):
         Args:
             y0: ``(B, 6)`` the first key (frame 0).
             x_prev, x_next, t_rel: ``(B, T-1, 6)``, ``(B, T-1, 6)``, ``(B, T-1, 1)`` from
-                :func:`~keyfill.learn.lamp_features.conditioning`.
+                :func:`~keyfill.learn.arnn.features.conditioning`.
             teacher: ``(B, T-1, 6)`` true frames ``0 .. T-2`` to feed instead of the
                 predictions (teacher forcing), or None to run free.
             generator: random generator for dropout.
@@ -279,129 +273,11 @@ def num_weights(net: nn.Module) -> int:
     return sum(p.numel() for p in net.parameters())
 
 
-# --- using a trained model ---------------------------------------------------------------------------
-
-
-class LampModel:
-    """A trained network with its normalisation statistics and config."""
-
-    def __init__(self, net: Completer, normalizer: Normalizer, config: dict, path: str = ""):
-        self.net = net.eval()
-        self.normalizer = normalizer
-        self.config = config
-        self.path = path
-
-    @property
-    def arch(self) -> str:
-        return self.net.arch
-
-    def predict(self, sequences: list[LampSequence]) -> list[np.ndarray]:
-        """Complete each sequence from its keys: a list of ``(T, 6)`` arrays (m, rad), first to last key.
-
-        Only the key frames of each sequence's ``values`` are read.
-        """
-        batch = make_batch(sequences, self.normalizer)
-        with torch.inference_mode():
-            pred = run(self.net, batch.frames, batch.is_key)
-        out = []
-        for b, s in enumerate(sequences):
-            n = int(batch.lengths[b])
-            z = np.concatenate([batch.frames[b, :1].numpy(), pred[b, : n - 1].numpy()]).astype(np.float64)
-            out.append(self.normalizer.decode(z, origin(s.values[s.keys[0]])))
-        return out
-
-
 def run(net: Completer, frames: torch.Tensor, is_key: torch.Tensor, teacher: bool = False, generator=None):
     """Predictions ``(B, T-1, 6)`` for frames ``1 .. T-1`` of a batch (keys ``is_key``; teacher forcing optional)."""
     x_prev, x_next, t_rel, _ = conditioning(frames, is_key)
     return net(frames[:, 0], x_prev, x_next, t_rel, teacher=frames[:, :-1] if teacher else None,
                generator=generator)
-
-
-def model_config(net: Completer, normalizer: Normalizer, sizes: dict, training: dict) -> dict:
-    """The ``config.json`` content of a lamp model (see :mod:`keyfill.learn.modelfile`)."""
-    from keyfill.learn.modelfile import skeleton_to_json
-    from keyfill.characters.lamp import VARIABLE_NAMES, lamp_skeleton
-
-    return {
-        "arch": net.arch,
-        "sizes": sizes,
-        "variables": list(VARIABLE_NAMES),
-        "normalizer": normalizer.to_json(),
-        "skeleton": skeleton_to_json(lamp_skeleton()),
-        "weights": num_weights(net),
-        "training": training,
-    }
-
-
-def load(path: str | Path, device: str = "cpu") -> LampModel:
-    """Read a lamp model folder; :class:`ModelError` for anything that is not an intact ARNN-family model.
-
-    The lamp networks run on the CPU (``device`` must be ``"cpu"``).
-    """
-    if device != "cpu":
-        raise UsageError("the lamp networks run on the CPU (--device cpu)")
-    from keyfill.learn.modelfile import build_for_loading, load_model, load_state
-
-    tensors, config = load_model(path, kind=KIND)
-    try:
-        arch = config["arch"]
-        sizes = dict(config.get("sizes", {}))
-        normalizer = Normalizer.from_json(config["normalizer"])
-        net = build_for_loading(lambda: build(arch, **sizes))
-    except (KeyError, TypeError, ValueError, UsageError) as e:
-        raise ModelError(f"{path}: damaged ARNN model config ({e})") from None
-    load_state(net, tensors, path)
-    return LampModel(net, normalizer, config, str(path))
-
-
-def complete(motion, keys, options):
-    """``keyfill complete --method arnn``: fill a lamp motion's frames between ``keys`` with a trained model.
-
-    Key angles are read within ``[-pi, pi)`` (:func:`~keyfill.learn.lamp_features.wrap_angles`).
-    Frames before the first and after the last key hold the frames there. With
-    ``options.exact_keys`` the small residual at the keys is removed by
-    :func:`keyfill.learn.exact_keys.snap_to_keys` and its size reported.
-    """
-    result = complete_many([(motion, keys)], options)[0]
-    if isinstance(result, Exception):
-        raise result
-    return result
-
-
-def complete_many(jobs, options):
-    """:func:`complete` for many ``(motion, keys)``: the model is loaded once and runs them as one batch.
-
-    Returns a :class:`~keyfill.learn.completion.Completion` or the
-    :class:`~keyfill.errors.KeyfillError` of each job. One job's result
-    depends on the jobs batched with it only in float32 rounding (about 1e-7).
-    """
-    from keyfill.learn.lamp_features import complete_lamp_many
-    from keyfill.learn.modelfile import load_cached
-
-    path = DEFAULT_MODEL if options.model is None else Path(options.model)
-    return complete_lamp_many(jobs, options, lambda: load_cached(load, path), DEFAULT_MODEL.name)
-
-
-# --- ONNX export ------------------------------------------------------------------------------------
-
-#: what a lamp step graph takes and gives (written into its metadata; docs/onnx.md explains the loop)
-STEP_CONTRACT = {
-    "graph": "one step of the autoregressive loop: frame t from frame t-1, the keys around t and a state",
-    "inputs": {
-        "y_prev": ["batch", 6, "float32", "encoded frame t-1 (frame 0: the first key)"],
-        "key_before": ["batch", 6, "float32", "encoded key X_K at or before t-1 (the last key before t)"],
-        "key_after": ["batch", 6, "float32", "encoded key X_K+1 at or after t"],
-        "t_rel": ["batch", 1, "float32", "(t - T_K) / (T_K+1 - T_K), 1 on a key's own frame"],
-        "state": ["batch", 2, "state_size", "float32", "recurrent state: zeros at t = 1, then state_out"],
-    },
-    "outputs": {
-        "y": ["batch", 6, "float32", "encoded frame t"],
-        "state_out": ["batch", 2, "state_size", "float32", "the state for frame t+1"],
-    },
-    "encoding": "variables base_x, base_y (m), base/leg/neck/head angle (rad); relative: base_x minus the first "
-                "key's, angles less the whole turns of the first key's; then (v - normalizer.mean) / normalizer.std",
-}
 
 
 class StepGraph(nn.Module):
@@ -423,17 +299,3 @@ class StepGraph(nn.Module):
 def state_size(net: Completer) -> int:
     """``H`` of the packed state ``(B, 2, H)`` of :class:`StepGraph` (1 for the memoryless network)."""
     return 1 if isinstance(net, NoMemory) else net.gru1.hidden_size
-
-
-def export_onnx(model: LampModel, folder, path) -> None:
-    """Write ``model`` (loaded from the model folder ``folder``) as a step graph to ``path`` (atomically)."""
-    from keyfill.learn.modelfile import read_config
-    from keyfill.learn.onnx import export_module, metadata
-
-    H = state_size(model.net)
-    args = (torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES), torch.zeros(2, NUM_VARIABLES),
-            torch.ones(2, 1), torch.zeros(2, 2, H))
-    batch = torch.export.Dim("batch")
-    contract = {**STEP_CONTRACT, "state_size": H}
-    export_module(StepGraph(model.net), args, path, list(STEP_CONTRACT["inputs"]), list(STEP_CONTRACT["outputs"]),
-                  tuple({0: batch} for _ in STEP_CONTRACT["inputs"]), metadata(KIND, folder, read_config(folder), contract))

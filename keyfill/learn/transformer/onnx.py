@@ -3,7 +3,7 @@
 ``keyfill export`` writes the whole network with :func:`export_onnx`; ``keyfill
 complete --method transformer --runtime onnx`` runs it with :func:`complete_graph`:
 the same numpy pre- and post-processing as the torch path
-(:mod:`keyfill.learn.transformer_features`), the network replaced by the graph.
+(:mod:`keyfill.learn.transformer.features`), the network replaced by the graph.
 The contract an engine follows is :data:`CONTRACT` (and docs/onnx.md).
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from keyfill.errors import KeyfillError, ModelError
-from keyfill.learn.transformer import KIND, CompletionModel, complete_many_with, config_parts, features_for
+from keyfill.learn.transformer.model import KIND, CompletionModel, complete_many_with, config_parts, features_for
 
 #: what a transformer graph takes and gives (written into its metadata; docs/onnx.md)
 CONTRACT = {

@@ -16,7 +16,7 @@ Windows (65 frames at offset 20 by default) come from the training clips of a
 :class:`~keyfill.learn.corpus.Corpus`; half of them are mirrored left-right
 where the skeleton allows; each is put in the model's canonical
 frame for its layout, the unknown frames are pre-filled, and the losses of
-:func:`keyfill.learn.transformer.losses` are minimised with Adam. The learning
+:func:`keyfill.learn.transformer.network.losses` are minimised with Adam. The learning
 rate warms up linearly over the first epochs, then decays by a constant factor
 every few epochs (the paper: 50 warm-up epochs, x0.75 every 200 of 1,000).
 
@@ -32,7 +32,6 @@ weights and dropout from torch's generator seeded inside
 from __future__ import annotations
 
 import dataclasses
-import fnmatch
 import glob
 import math
 import os
@@ -42,26 +41,19 @@ from pathlib import Path
 
 import numpy as np
 
+from keyfill import interpolate
 from keyfill.errors import DataError, ModelError, UsageError
 from keyfill.files import read_json_object
-from keyfill.learn import benchmark
 from keyfill.learn.corpus import Corpus, find_mirror
-from keyfill.learn.facing import align_windows, global_pose
-from keyfill.learn.modelfile import load_state
+from keyfill.learn.modelfile import load_state, torch_device
+from keyfill.learn.protocols import lafan1
 from keyfill.learn.training import Option, TrainingSpec, TrainingTask, check_outputs, side_files
 from keyfill.learn.training import train as run_training
-from keyfill.learn.transformer import (
-    KIND,
-    CompletionModel,
-    ModelConfig,
-    apply_transform,
-    canonical_transform,
-    frame_kinds,
-    load,
-    losses,
-    new_model,
-    torch_device,
-)
+from keyfill.learn.transformer.config import ModelConfig
+from keyfill.learn.transformer.features import apply_transform, canonical_transform, frame_kinds
+from keyfill.learn.transformer.model import KIND, CompletionModel, load, new_model
+from keyfill.learn.transformer.network import losses
+from keyfill.learn.windows import align_windows, global_pose
 from keyfill.limits import check_number
 
 LAYOUTS = ("inbetween", "infill", "blend")
@@ -69,7 +61,7 @@ GAP_SAMPLING = ("uniform", "log-uniform")
 #: training settings added after the first checkpoints were written, with the value that behaves as before: at
 #: that value they are left out of what --resume compares and of the settings a model records, so an older
 #: checkpoint still resumes and an older run retrains to the same files (as
-#: :data:`keyfill.learn.transformer.LATER_ARCHITECTURE` for the model's settings)
+#: :data:`keyfill.learn.transformer.model.LATER_ARCHITECTURE` for the model's settings)
 LATER_TRAINING = {"gap_sampling": "uniform", "relative_loss": False}
 
 
@@ -130,7 +122,7 @@ class TrainConfig:
             check_number(f"training setting 'layouts.{name}'", share, 0, 1e6)
         if not sum(self.layouts.values()) > 0:
             raise UsageError("the layouts' shares must not all be 0")
-        longest = self.window - benchmark.N_PAST - 1
+        longest = self.window - lafan1.N_PAST - 1
         if not self.val_lengths:
             raise UsageError("val_lengths must list at least one transition length")
         for length in self.val_lengths:
@@ -146,7 +138,7 @@ class TrainConfig:
 #: transitions must also fit a training window after its 10 context frames and target key
 _TRAIN_NUMBERS = {
     "epochs": (True, 1, 1_000_000, True), "batch_size": (True, 1, 1_000_000, True),
-    "window": (True, 2 * benchmark.N_PAST + 1, 100_000, True), "window_offset": (True, 1, 100_000, True),
+    "window": (True, 2 * lafan1.N_PAST + 1, 100_000, True), "window_offset": (True, 1, 100_000, True),
     "lr": (False, 0, 10, True), "warmup_epochs": (False, 0, 1e6, True), "decay_every": (False, 0, 1e6, False),
     "decay": (False, 0, 1, False), "weight_decay": (False, 0, 1e3, True), "val_fraction": (False, 0, 0.9, True),
     "grad_clip": (False, 0, 1e6, True),
@@ -167,18 +159,6 @@ def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfi
     except (TypeError, ModelError, UsageError) as e:
         raise UsageError(f"{path}: {e}") from None
     return model, train
-
-
-def select_clips(corpus: Corpus, include=(), exclude=()) -> Corpus:
-    """The clips whose file name matches one of ``include`` (all when empty) and none of ``exclude``."""
-    names = [Path(f).name for f in corpus.files]
-    keep = [
-        i for i, n in enumerate(names)
-        if (not include or any(fnmatch.fnmatch(n, p) for p in include)) and not any(fnmatch.fnmatch(n, p) for p in exclude)
-    ]
-    if not keep:
-        raise DataError(f"no clip is left after --include {list(include)} and --exclude {list(exclude)}")
-    return corpus.subset(keep) if len(keep) < len(names) else corpus
 
 
 def initial_model(path: str | os.PathLike, corpus: Corpus) -> CompletionModel:
@@ -220,7 +200,7 @@ def sample_layout(rng: np.random.Generator, layouts: dict, max_frames: int,
     names = list(layouts)
     p = np.asarray([layouts[n] for n in names], dtype=np.float64)
     name = names[int(rng.choice(len(names), p=p / p.sum()))]
-    past = benchmark.N_PAST
+    past = lafan1.N_PAST
     if name == "inbetween":
         n = draw_gap(rng, 5, max_frames - past - 1, gap_sampling)
         extra = int(rng.integers(0, min(5, max_frames - past - 1 - n) + 1))
@@ -276,7 +256,7 @@ class Split:
 
     quats: np.ndarray
     root: np.ndarray
-    validation: benchmark.Protocol | None
+    validation: lafan1.Protocol | None
     info: dict
 
 
@@ -297,7 +277,7 @@ def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str) 
         names = [glob.escape(Path(f).name) for f in val.files]
         merged = corpus.subset(np.concatenate([train_idx, val_idx]))
         try:
-            validation = benchmark.prepare(merged, names, facing_axis=facing_axis)
+            validation = lafan1.prepare(merged, names, facing_axis=facing_axis)
         except DataError:
             validation = None  # validation clips too short for the protocol's windows
     info = {
@@ -362,7 +342,7 @@ class TransformerTask(TrainingTask):
 
     def build(self, generator):
         up = self.corpus.skeleton.up_axis
-        aq, ar = align_windows(self.data.quats, self.data.root, self.model_cfg.facing_axis, up, benchmark.N_PAST - 1)
+        aq, ar = align_windows(self.data.quats, self.data.root, self.model_cfg.facing_axis, up, lafan1.N_PAST - 1)
         _, gpos = global_pose(aq, ar, self.corpus.skeleton.offsets, self.corpus.skeleton.parents)
         flat = gpos.reshape(-1, gpos.shape[-2] * 3)
         mean, std = (flat.mean(0), flat.std(0)) if self.init is None else (self.init.features.pos_mean,
@@ -427,7 +407,7 @@ class TransformerTask(TrainingTask):
     def validate(self, epoch):
         record = {}
         if self.data.validation is not None:
-            res = benchmark.evaluate({"model": self.model.benchmark_method(), "interpolation": benchmark.interpolation},
+            res = lafan1.evaluate({"model": self.model.benchmark_method(), "interpolation": interpolate.linear_windows},
                                      self.data.validation.test, self.data.validation.stats, self.cfg.val_lengths)
             for n_, scores in res["model"].items():
                 for m, v in scores.items():
@@ -502,7 +482,7 @@ def _make_task(common, options: dict, progress) -> TransformerTask:
         raise UsageError("the transformer writes a checkpoint after every epoch; --checkpoint-every does not apply")
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
-    return TransformerTask(select_clips(corpus, options["include"], options["exclude"]), model_cfg, train_cfg,
+    return TransformerTask(corpus.select(options["include"], options["exclude"]), model_cfg, train_cfg,
                            common.seed, init=options["init"])
 
 
@@ -514,7 +494,7 @@ def _started(task: TransformerTask) -> str:
 
 
 def _epoch_line(row: dict) -> str:
-    vals = " ".join(f"L2P@{n} {row[f'val_L2P_{n}_vs_interp']:.3f}" for n in benchmark.LENGTHS
+    vals = " ".join(f"L2P@{n} {row[f'val_L2P_{n}_vs_interp']:.3f}" for n in lafan1.LENGTHS
                     if f"val_L2P_{n}_vs_interp" in row)
     return f"epoch {row['epoch']}: loss {row['loss_total']:.4f}" + (f", vs interpolation {vals}" if vals else "")
 

@@ -21,7 +21,7 @@ each key's angles within ``[-pi, pi)`` (:func:`keys_as_read`); the
 rotations themselves, so between two keys more than half a turn apart they
 turn the short way. ``cubic-variables`` is the animator's spline: a C1 cubic
 through each animation variable (keys read like the ARNN's, tangents as in
-:func:`keyfill.learn.baselines.cubic`).
+:func:`keyfill.interpolate.cubic`).
 
 Methods: the spline baselines (``linear``, ``cubic``; they go through
 :func:`keyfill.learn.registry.complete` like ``keyfill complete`` does, and hit
@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from keyfill.errors import DataError
-from keyfill.learn.lamp_features import LampSequence, Normalizer, wrap_angles
+from keyfill.learn.lamp_data import LampSequence, Normalizer, wrap_angles
 
 CONDITIONS = ("all_keys", "deleted_keys")
 
@@ -116,9 +116,9 @@ def score(sequences: list[LampSequence], predictions: list[np.ndarray], normaliz
 
 def spline_predictions(method: str, sequences: list[LampSequence]) -> list[np.ndarray]:
     """Completions by a spline baseline through the ``Motion`` pipeline of ``keyfill complete``."""
+    from keyfill.characters.lamp import from_variables, to_variables
     from keyfill.learn.registry import complete
     from keyfill.motion import Keys
-    from keyfill.characters.lamp import from_variables, to_variables
 
     out = []
     for s in sequences:
@@ -133,7 +133,7 @@ def variable_spline_predictions(sequences: list[LampSequence]) -> list[np.ndarra
 
     Tangents at inner keys are the segment slopes averaged with the other
     segment's length as weight, at the end keys the end segment's slope (the
-    rule of :func:`keyfill.learn.baselines.cubic`).
+    rule of :func:`keyfill.interpolate.cubic`).
     """
     from scipy.interpolate import CubicHermiteSpline
 
@@ -151,16 +151,16 @@ def variable_spline_predictions(sequences: list[LampSequence]) -> list[np.ndarra
 
 
 def model_predictions(model, sequences: list[LampSequence], exact_keys: bool = False) -> list[np.ndarray]:
-    """Completions by a trained lamp model (a :class:`keyfill.learn.arnn.LampModel`).
+    """Completions by a trained lamp model (a :class:`keyfill.learn.arnn.model.LampModel`).
 
     With ``exact_keys`` the residual at the keys is removed as ``keyfill complete`` does.
     """
     preds = model.predict(sequences)
     if not exact_keys:
         return preds
+    from keyfill.characters.lamp import from_variables, to_variables
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.motion import Keys
-    from keyfill.characters.lamp import from_variables, to_variables
 
     out = []
     for s, p in zip(sequences, preds):
@@ -218,8 +218,7 @@ def protocol(method_or_model: str, folder, baselines: bool = True, seed: int = 0
     ``cubic-variables``. Returns the
     reports and a summary of the data.
     """
-    from keyfill.learn.lamp_features import read_sequences
-    from keyfill.learn.train_arnn import split
+    from keyfill.learn.lamp_data import read_sequences, split
 
     sequences = read_sequences(folder)
     parts = split(sequences)
@@ -239,12 +238,12 @@ def protocol(method_or_model: str, folder, baselines: bool = True, seed: int = 0
 
 
 def run(method_or_model: str, data, baselines: bool = True, **lafan1_options):
-    """The keys protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.evaluation.Evaluation`.
+    """The keys protocol as ``keyfill evaluate`` runs it: an :class:`~keyfill.learn.protocols.Evaluation`.
 
     ``data`` is one folder made by ``keyfill simulate``; ``lafan1_options`` (test patterns, lengths, ...) do not apply.
     """
     from keyfill.errors import UsageError
-    from keyfill.learn.evaluation import Evaluation
+    from keyfill.learn.protocols import Evaluation
 
     if len(data) != 1:
         raise UsageError("the keys protocol takes one dataset folder made by 'keyfill simulate'")

@@ -7,7 +7,7 @@
   at the origin (:func:`anchor_frame`), and back.
 * :class:`Features`: poses ``(quats (..., J, 4), root (..., 3))`` <-> the
   normalised feature vectors the network reads and writes (global or local
-  coordinates, see :class:`keyfill.learn.transformer.ModelConfig`).
+  coordinates, see :class:`keyfill.learn.transformer.model.ModelConfig`).
 
 numpy and torch arrays both work (:mod:`keyfill.rotations` is generic); this
 module imports no torch.
@@ -21,7 +21,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.kinematics import fk
-from keyfill.learn.facing import axis_vector, facing_rotation, horizontal_axes
+from keyfill.learn.windows import axis_vector, facing_rotation, horizontal_axes
 
 KEY, UNKNOWN, IGNORED = 0, 1, 2
 

@@ -1,6 +1,6 @@
-"""Facing and the canonical frame: turning poses about the up axis and global poses of windows.
+"""Windows of clips: facing and the canonical frame, global poses, a window as a :class:`Motion`.
 
-Shared by the LaFAN1 protocol (:mod:`keyfill.learn.benchmark`), which turns
+Shared by the LaFAN1 protocol (:mod:`keyfill.learn.protocols.lafan1`), which turns
 each test window to face +X at its last context frame, and by the learned
 methods, which see windows in such a canonical frame. Quaternions are
 ``(w, x, y, z)``; positions are in the units of the motion (cm for Bandai).
@@ -13,6 +13,7 @@ import numpy as np
 from keyfill import rotations as R
 from keyfill.errors import UsageError
 from keyfill.kinematics import fk
+from keyfill.motion import Motion, Skeleton
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
@@ -90,3 +91,10 @@ def global_pose(quats: np.ndarray, root: np.ndarray, offsets: np.ndarray, parent
     pos = np.broadcast_to(offsets, root.shape[:-1] + offsets.shape).copy()
     pos[..., 0, :] = root
     return fk(quats, pos, parents)
+
+
+def window_motion(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, fps: float = 30.0) -> Motion:
+    """A :class:`Motion` of one window: ``quats (T, J, 4)``, ``root (T, 3)``, constant offsets."""
+    pos = np.broadcast_to(skeleton.offsets, root.shape[:-1] + skeleton.offsets.shape).copy()
+    pos[:, 0] = root
+    return Motion(skeleton, fps, quats, pos)

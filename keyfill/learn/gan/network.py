@@ -13,7 +13,7 @@ Lengths: the generator and the discriminator take ``T`` a multiple of 64, the
 path predictor a multiple of 16 (:func:`pad_frames` pads by repeating the last frame).
 
 * :class:`Generator`: ``(B, 6 J, T)`` dense keys (positions and distance mask,
-  :mod:`keyfill.learn.gan.dense`) -> ``(B, 6 + 3 D, T)`` RC-FK values. Six
+  :mod:`keyfill.learn.gan.features`) -> ``(B, 6 + 3 D, T)`` RC-FK values. Six
   stride-2 layers encode to ``T / 64`` latent steps; per-step noise
   (``noise_dim`` channels) and a per-sequence style vector (``style_dim``
   channels; the Motion DNA hook, zero when not given) are joined to every latent

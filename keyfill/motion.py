@@ -120,6 +120,39 @@ class Skeleton:
     def num_joints(self) -> int:
         return len(self.names)
 
+    def to_json(self, hierarchy_only: bool = False) -> dict:
+        """This skeleton as JSON (what a model folder's ``config.json`` records of the skeleton it serves).
+
+        ``names``, ``parents`` and ``offsets`` (in the skeleton's units); unless ``hierarchy_only``, also
+        ``channels`` (per joint, its BVH channel names), ``up_axis`` and ``meters_per_unit``. End sites
+        are not recorded. :meth:`from_json` reads either form back.
+        """
+        out = {"names": list(self.names), "parents": [int(p) for p in self.parents], "offsets": self.offsets.tolist()}
+        if not hierarchy_only:
+            out.update({"channels": [list(c) for c in self.channels], "up_axis": self.up_axis,
+                        "meters_per_unit": self.meters_per_unit})
+        return out
+
+    @classmethod
+    def from_json(cls, data: dict) -> Skeleton:
+        """The skeleton :meth:`to_json` wrote, in either form (a hierarchy only: no channels, Y up, cm).
+
+        A ``KeyError`` when the full form lacks a field; a :class:`DataError` when the values do not make a
+        skeleton."""
+        names = data["names"]
+        if "channels" not in data:
+            return cls(names=tuple(names), parents=data["parents"], offsets=data["offsets"],
+                       channels=tuple(() for _ in names))
+        channels = data["channels"]
+        if not (isinstance(channels, list) and all(isinstance(c, list) and all(isinstance(n, str) for n in c)
+                                                   for c in channels)):
+            raise DataError("skeleton channels must be a list of lists of channel names")
+        if not isinstance(data["up_axis"], str) or type(data["meters_per_unit"]) not in (int, float):
+            raise DataError("skeleton up_axis must be a string and meters_per_unit a number")
+        return cls(names=tuple(names), parents=data["parents"], offsets=data["offsets"],
+                   channels=tuple(tuple(c) for c in channels), up_axis=data["up_axis"],
+                   meters_per_unit=data["meters_per_unit"])
+
     def index(self, name: str) -> int:
         """Index of joint ``name``; the error lists the valid names."""
         try:

@@ -16,7 +16,7 @@ from keyfill.interpolate import linear
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.gan.model import complete, complete_motion, load_model
 from keyfill.learn.gan.task import GanTask
-from keyfill.learn.modelfile import save_model, skeleton_to_json
+from keyfill.learn.modelfile import save_model
 from keyfill.motion import Keys
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -98,7 +98,7 @@ def test_another_skeleton(models):
 
 
 def test_model_folder_of_another_kind_or_stage(models, motion, tmp_path):
-    save_model(tmp_path / "tf", "transformer", {"w": torch.zeros(1)}, {"skeleton": skeleton_to_json(motion.skeleton)})
+    save_model(tmp_path / "tf", "transformer", {"w": torch.zeros(1)}, {"skeleton": motion.skeleton.to_json(hierarchy_only=True)})
     with pytest.raises(ModelError, match="'transformer' model, not a 'gan' model"):
         complete(motion, KEYS, CompleteOptions(model=str(tmp_path / "tf")))
     with pytest.raises(ModelError, match="stage 'path'"):

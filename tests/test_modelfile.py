@@ -18,7 +18,6 @@ from keyfill.learn.modelfile import (
     load_model,
     load_state,
     save_model,
-    skeleton_to_json,
 )
 
 
@@ -35,7 +34,7 @@ def _net():
 def test_round_trip_and_replace(tmp_path, skeleton):
     net = _net()
     path = tmp_path / "m"
-    save_model(path, "toy", net.state_dict(), {"skeleton": skeleton_to_json(skeleton), "hidden": 3})
+    save_model(path, "toy", net.state_dict(), {"skeleton": skeleton.to_json(hierarchy_only=True), "hidden": 3})
     tensors, config = load_model(path, kind="toy")
     assert config["hidden"] == 3 and config["kind"] == "toy" and config["format"] == "keyfill-model"
     other = torch.nn.Sequential(torch.nn.Linear(4, 3), torch.nn.Linear(3, 2))
@@ -43,7 +42,7 @@ def test_round_trip_and_replace(tmp_path, skeleton):
     x = torch.randn(5, 4)
     assert torch.equal(other(x), net(x))
     # Replacing keeps exactly one model and no temporary folders.
-    save_model(path, "toy", net.state_dict(), {"skeleton": skeleton_to_json(skeleton), "hidden": 4})
+    save_model(path, "toy", net.state_dict(), {"skeleton": skeleton.to_json(hierarchy_only=True), "hidden": 4})
     assert load_model(path / CONFIG)[1]["hidden"] == 4
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m"]
 
@@ -51,7 +50,7 @@ def test_round_trip_and_replace(tmp_path, skeleton):
 def test_model_files_get_the_modes_of_new_files(tmp_path, skeleton):
     umask = os.umask(0o022)
     try:
-        path = save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton_to_json(skeleton)})
+        path = save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton.to_json(hierarchy_only=True)})
     finally:
         os.umask(umask)
     assert stat.S_IMODE(path.stat().st_mode) == 0o755
@@ -59,7 +58,7 @@ def test_model_files_get_the_modes_of_new_files(tmp_path, skeleton):
 
 
 def test_refuses_other_skeleton_and_kind(tmp_path, skeleton):
-    save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton_to_json(skeleton)})
+    save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton.to_json(hierarchy_only=True)})
     _, config = load_model(tmp_path / "m")
     check_skeleton(config, skeleton)
     other = bvh.read(DATA / "bvhtoolbox_test_freebvh_mixamo.bvh").skeleton
@@ -82,7 +81,7 @@ def test_refuses_foreign_damaged_and_truncated_files(tmp_path, skeleton):
     with pytest.raises(ModelError, match="not a keyfill model"):
         load_model(tmp_path / "plain")
 
-    save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton_to_json(skeleton)})
+    save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton.to_json(hierarchy_only=True)})
     w = tmp_path / "m" / WEIGHTS
     data = w.read_bytes()
     w.write_bytes(data[: len(data) // 2])
@@ -102,7 +101,7 @@ def test_refuses_foreign_damaged_and_truncated_files(tmp_path, skeleton):
 
 
 def test_weights_that_do_not_fit(tmp_path, skeleton):
-    save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton_to_json(skeleton)})
+    save_model(tmp_path / "m", "toy", _net().state_dict(), {"skeleton": skeleton.to_json(hierarchy_only=True)})
     tensors, _ = load_model(tmp_path / "m")
     with pytest.raises(ModelError, match="do not fit"):
         load_state(torch.nn.Linear(4, 2), tensors, tmp_path / "m")

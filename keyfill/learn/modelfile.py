@@ -79,7 +79,7 @@ def bounded_array(values, what: str, shape: tuple | None = None, above: float | 
 
 
 def _check_skeleton_json(want, folder) -> None:
-    """Raise :class:`ModelError` unless ``want`` is a skeleton as :func:`skeleton_to_json` writes it."""
+    """Raise :class:`ModelError` unless ``want`` is a skeleton as :meth:`Skeleton.to_json` writes it."""
     from keyfill.limits import max_abs, max_joints
 
     if not isinstance(want, dict):
@@ -98,24 +98,9 @@ def _check_skeleton_json(want, folder) -> None:
         raise ModelError(f"{folder}: the model config's skeleton offsets are not {J} finite 3-vectors")
 
 
-def skeleton_to_json(skeleton: Skeleton) -> dict:
-    """The parts of ``skeleton`` a model depends on, as JSON."""
-    return {
-        "names": list(skeleton.names),
-        "parents": [int(p) for p in skeleton.parents],
-        "offsets": skeleton.offsets.tolist(),
-    }
-
-
 def check_skeleton(config: dict, skeleton: Skeleton, path: str | os.PathLike = "the model") -> None:
     """Raise :class:`ModelError` unless ``skeleton`` is the one the model was trained for."""
-    want = config["skeleton"]
-    model_sk = Skeleton(
-        names=tuple(want["names"]),
-        parents=np.array(want["parents"]),
-        offsets=np.array(want["offsets"]),
-        channels=tuple(() for _ in want["names"]),
-    )
+    model_sk = Skeleton.from_json({k: config["skeleton"][k] for k in ("names", "parents", "offsets")})
     diff = model_sk.difference(skeleton, atol=1e-4 * max(1.0, float(np.abs(model_sk.offsets).max(initial=0))))
     if diff is not None:
         raise ModelError(f"{path}: the model was made for another skeleton ({diff})")
@@ -127,7 +112,7 @@ def save_model(path: str | os.PathLike, kind: str, tensors: dict, config: dict) 
     Args:
         kind: architecture family, e.g. ``"arnn"``.
         tensors: name -> torch tensor (a ``state_dict``).
-        config: JSON-ready settings; must include ``"skeleton"`` (see :func:`skeleton_to_json`).
+        config: JSON-ready settings; must include ``"skeleton"`` (:meth:`Skeleton.to_json`).
     """
     from safetensors.torch import save_file
 

@@ -62,14 +62,13 @@ def model_config(net: Completer, normalizer: Normalizer, sizes: dict, training: 
     """The ``config.json`` content of a lamp model (see :mod:`keyfill.learn.modelfile`)."""
     from keyfill.characters.lamp import VARIABLE_NAMES, lamp_skeleton
     from keyfill.learn.arnn.network import num_weights
-    from keyfill.learn.modelfile import skeleton_to_json
 
     return {
         "arch": net.arch,
         "sizes": sizes,
         "variables": list(VARIABLE_NAMES),
         "normalizer": normalizer.to_json(),
-        "skeleton": skeleton_to_json(lamp_skeleton()),
+        "skeleton": lamp_skeleton().to_json(hierarchy_only=True),
         "weights": num_weights(net),
         "training": training,
     }

@@ -118,12 +118,9 @@ class GanModel:
 
     def model_config(self) -> dict:
         """The ``config.json`` content of this model."""
-        from keyfill.learn.modelfile import skeleton_to_json
-
         s = self.skeleton
         return {
-            "skeleton": {**skeleton_to_json(s), "channels": [list(c) for c in s.channels],
-                         "up_axis": s.up_axis, "meters_per_unit": s.meters_per_unit},
+            "skeleton": s.to_json(),
             "folded_root": bool(self.folded),
             "fps": float(self.fps),
             "stage": self.stage,
@@ -169,10 +166,7 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
     folder = modelfile.model_folder(path)
     try:
         cfg = GanConfig.from_json(config["gan"])
-        s = config["skeleton"]
-        skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
-                        channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
-                        meters_per_unit=s["meters_per_unit"])
+        skel = Skeleton.from_json(config["skeleton"])
         ranges = JointRanges.from_json(config["ranges"])
         fps = float(config["fps"])
         if problem := check_fps(fps):

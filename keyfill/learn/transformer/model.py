@@ -158,13 +158,10 @@ class CompletionModel:
 
     def model_config(self) -> dict:
         """The ``config.json`` content of this model (see :mod:`keyfill.learn.modelfile`)."""
-        from keyfill.learn.modelfile import skeleton_to_json
-
         s = self.skeleton
         return {
             "architecture": self.config.recorded(),
-            "skeleton": {**skeleton_to_json(s), "channels": [list(c) for c in s.channels],
-                         "up_axis": s.up_axis, "meters_per_unit": s.meters_per_unit},
+            "skeleton": s.to_json(),
             "folded_root": self.folded,
             "statistics": {"pos_mean": self.features.pos_mean.tolist(), "pos_std": self.features.pos_std.tolist()},
             "training": self.info,
@@ -196,10 +193,7 @@ def config_parts(config: dict):
     from keyfill.learn.modelfile import bounded_array
 
     cfg = ModelConfig(**config["architecture"])
-    s = config["skeleton"]
-    skel = Skeleton(names=s["names"], parents=s["parents"], offsets=s["offsets"],
-                    channels=[tuple(c) for c in s["channels"]], up_axis=s["up_axis"],
-                    meters_per_unit=s["meters_per_unit"])
+    skel = Skeleton.from_json(config["skeleton"])
     n = (skel.num_joints * 3,)
     st = config["statistics"]
     stats = {"pos_mean": bounded_array(st["pos_mean"], "the position means", n),

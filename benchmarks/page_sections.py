@@ -1,0 +1,388 @@
+"""The figures part of each section of docs/benchmarks.md, one function per kind of record (``make_page.py``).
+
+Every function takes a record's ``figures`` (see :mod:`results`) and returns Markdown lines. Figures a record
+lacks (``None``, as in records transcribed from an older page) print as ``-``.
+"""
+
+from __future__ import annotations
+
+LENGTHS = ("5", "15", "30", "45")
+METRICS = ("L2Q", "L2P", "NPSS")
+# JSON objects are written with sorted keys, so the order of rows lives here
+BVH_ROWS = ("keyfill read", "numpy loadtxt (floor)", "bvhio readAsBvh", "bvh Bvh() + floats", "keyfill write",
+            "bvhio writeBvh")
+SPLIT = ("start-up (keyfill complete --help)", "read (io.load)", "compute (complete, cubic)", "write (io.save)",
+         "rest (end to end minus the above)")
+VIZ_ROWS = ("preview GIF side (CLI)", "preview GIF 3d (CLI)", "plot PNG, 6 panels (CLI)", "plot SVG, 6 panels (CLI)",
+            "plot PDF, 6 panels (CLI)", "plot PNG, 3 files x 6 panels (CLI)", "start-up + read (keyfill info, CLI)",
+            "preview GIF side (library)", "matplotlib FuncAnimation + PillowWriter (peer)")
+CONFIGS = ("alone", "pin low", "pin high", "contact low", "contact high", "pin + contact")
+METHODS = ("real", "zero-velocity", "interpolation", "linear", "cubic", "velocity", "gan", "transformer")
+LAYOUTS = ("in-filling, key every 5", "in-filling, key every 10", "in-filling, key every 15",
+           "blending, 10 + gap 15 + 10", "blending, 10 + gap 30 + 10")
+KEY_KINDS = {"full": "whole keys", "root": "root-only keys (5.1)", "half": "half-body keys (5.2)",
+             "plane": "2-D keys (5.3)"}
+
+
+def in_order(mapping: dict, preferred=()) -> list:
+    """The keys of ``mapping``: those in ``preferred`` in its order, then the others (numbers by value)."""
+    rest = sorted((k for k in mapping if k not in preferred), key=lambda k: (not k.isdigit(), int(k) if k.isdigit()
+                                                                             else 0, k))
+    return [k for k in preferred if k in mapping] + rest
+
+
+def num(value, digits: int = 2, scale: float = 1.0) -> str:
+    """``value * scale`` with ``digits`` decimals (thousands separated), or ``-`` when it is missing."""
+    return "-" if value is None else f"{value * scale:,.{digits}f}"
+
+
+def sci(value) -> str:
+    """``value`` in two-digit scientific notation, or ``-``."""
+    return "-" if value is None else f"{value:.1e}"
+
+
+def verdict(met: bool) -> str:
+    """``met`` or a bold ``missed``."""
+    return "met" if met else "**missed**"
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return lines + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+
+
+def median_best(timing: dict | None, digits: int = 1) -> str:
+    """``median (best)`` of a ``{"median", "best"}`` timing in ms."""
+    if not timing:
+        return "-"
+    best = timing.get("best")
+    return num(timing.get("median"), digits) + ("" if best is None else f" ({num(best, digits)})")
+
+
+# --- files and the command line ------------------------------------------------------------------------------
+
+
+def bvh_io(f: dict) -> list[str]:
+    """BVH read and write rows."""
+    size = "" if f.get("bytes") is None else f"{f['bytes'] / 1e6:.1f} MB, "
+    lines = [(f"File `{f.get('file')}`: {size}{num(f.get('frames'), 0)} frames, {f.get('joints')} joints, "
+             f"{f.get('channels')} channels; medians of {f.get('repeat')} runs in one process."), ""]
+    rows = [[name, num(r.get("seconds"), 3), num(r.get("cpu_seconds"), 3), num(r.get("mb_per_s"), 1),
+             num(r.get("x_keyfill_read"), 2)] for name, r in ((n, f["rows"][n]) for n in in_order(f["rows"],
+                                                                                                 BVH_ROWS))]
+    return lines + table(["reader / writer", "wall s", "CPU s", "MB/s", "x keyfill read"], rows)
+
+
+def complete(f: dict) -> list[str]:
+    """``keyfill complete --method cubic`` end to end and its split."""
+    inp = f["input"]
+    size = "" if inp.get("bytes") is None else f", {inp['bytes'] / 1e6:.1f} MB in, {f['output_bytes'] / 1e6:.1f} MB out"
+    lines = [(f"`{f['timed_command']}`: {num(inp['frames'], 0)} frames, {inp['joints']} joints, "
+             f"{num(inp['keys'], 0)} keys{size}; a subprocess per run, medians of {f['repeat']}."), ""]
+    rows = [["end to end", num(f["end_to_end_seconds"], 3), num(f.get("end_to_end_cpu_seconds"), 3)],
+            ["first run (cold file cache)", num(f.get("first_run_seconds"), 3), ""]]
+    cpu = f.get("split_cpu_seconds") or {}
+    split = f["split_seconds"]
+    rows += [[name, num(split[name], 3), num(cpu.get(name), 3) if name in cpu else ""]
+             for name in in_order(split, SPLIT)]
+    lines += table(["", "wall s", "CPU s"], rows)
+    if f.get("end_to_end_runs"):
+        lines += ["", "End-to-end runs (s): " + ", ".join(num(t, 2) for t in f["end_to_end_runs"]) + "."]
+    return lines
+
+
+def blender_interop(f: dict) -> list[str]:
+    """Worst bone-head deviation per fixture and format."""
+    formats = sorted({r["format"] for r in f["rows"]}, key=("bvh", "usda", "usdc").index)
+    by_file: dict[str, dict] = {}
+    for r in f["rows"]:
+        by_file.setdefault(r["file"], {"frames x joints": f"{r['frames']} x {r['joints']}"})[r["format"]] = r
+    header = ["fixture", "frames x joints"] + [f"{fmt.upper()}: worst (units) / height" for fmt in formats]
+    rows = [[name, v["frames x joints"]] + [f"{sci(v[fmt]['worst'])} / {sci(v[fmt]['relative'])}" for fmt in formats]
+            for name, v in by_file.items()]
+    return [f"Blender {f['blender']}; bound {f['bound']:g} of the skeleton's rest height.", ""] + table(header, rows)
+
+
+def convert_memory(f: dict) -> list[str]:
+    """Peak memory of ``keyfill convert`` per output format."""
+    lines = [(f"A {f['file_mb']} MiB BVH ({num(f['frames'], 0)} frames, CMU skeleton); the fixed overhead (a 4-frame "
+             f"file) is {f['overhead_mb']} MiB; medians of {f['repeat']}."), ""]
+    rows = [[f"`.{fmt}`", num(r["peak_mb"], 0), num(r["peak_over_file"], 1), num(r["peak_minus_overhead_over_file"], 1),
+             num(r["seconds"], 0), num(r["output_mb"], 0)] for fmt, r in f["outputs"].items()]
+    return lines + table(["convert to", "peak RSS MiB", "/ file", "beyond the overhead / file", "wall s",
+                          "output MiB"], rows)
+
+
+def viz(f: dict) -> list[str]:
+    """``keyfill preview`` and ``plot`` timings; the in-process split of a GIF in one sentence."""
+    res = f["results"]
+    rows = []
+    for name in (n for n in VIZ_ROWS if n in res):
+        r = res[name]
+        size = "" if r.get("bytes") is None else f"{r['bytes'] / 1000:,.0f} kB"
+        goal = f"< {r['goal_s']:g} s" if "goal_s" in r else ""
+        rows.append([name, num(r.get("seconds")), num(r.get("cpu_seconds")), size, goal])
+    split = "; ".join(f"{name.strip()} {num(r['cpu_seconds'])} CPU-s" for name, r in res.items()
+                      if name.startswith("  "))
+    lines = [f"Medians of {f['repeat']} runs." + (f" Where the library's GIF goes: {split}." if split else "")]
+    lines += [""] + table(["what", "wall s", "CPU s", "output", "goal"], rows)
+    peer = res.get("matplotlib FuncAnimation + PillowWriter (peer)", {})
+    if peer.get("keyfill_speedup_cpu"):
+        lines += ["", (f"keyfill's GIF takes {peer['keyfill_speedup_cpu']:.1f}x less CPU than matplotlib's own "
+                      "animation route for the same frames.")]
+    return lines
+
+
+# --- the lamp ------------------------------------------------------------------------------------------------
+
+
+def simulate(f: dict) -> list[str]:
+    """Where the simulator's speed comes from (sections 1-5 of the script)."""
+    c, r, e, a, t = f["control"], f["resets"], f["early_stop"], f["annealing"], f["time_step"]
+    rows = [["keyfill's PD torques (TORQUE_CONTROL) vs pybullet POSITION_CONTROL",
+             f"{num(c['torque_us_per_step'], 1)} vs {num(c['position_us_per_step'], 1)} us per step"],
+            ["`restoreState` per episode vs a new connection and world", (f"{num(r['restore_us'], 0)} us vs "
+             f"{num(r['rebuild_ms'], 0)} ms")],
+            ["early termination of falls", (f"{num(e['stopped']['ms'], 0)} ms ({num(e['stopped']['steps'], 0)} steps) "
+             f"vs {num(e['full']['ms'], 0)} ms ({num(e['full']['steps'], 0)} steps) per fallen episode")],
+            [f"annealing, {a['iterations']} iterations per run, one process",
+             f"{num(a['median_s_per_run'], 1)} s per run, {num(a['episodes_per_s'], 0)} episodes/s"]]
+    ref = t["reference"]
+    rows += [[f"time step 1/{s['hz']} s, {s['iterations']} solver iterations", (f"{num(s['ms_per_episode'], 1)} ms "
+              f"per episode; median error of hop distance {num(s['distance_error_cm'], 1)} cm, of height "
+              f"{num(s['height_error_mm'], 1)} mm against 1/{ref['hz']} s, {ref['iterations']} iterations")]
+             for s in t["rows"] if s["iterations"] == t["shipped_iterations"]]
+    return table(["choice", "measured"], rows)
+
+
+def simulate_dataset(f: dict) -> list[str]:
+    """A full dataset build, in one sentence."""
+    rate = f.get("acceptance_rate")
+    return [(f"{num(f['sequences'], 0)} sequences from {num(f.get('runs'), 0)} runs "
+            f"({'-' if rate is None else f'{100 * rate:.0f} %'} accepted) with {f['workers']} workers, "
+            f"{f['iterations']} annealing iterations per run: {num(f['wall_s'], 1, 1 / 60)} min wall, "
+            f"{num(f.get('cpu_s'), 1, 1 / 60)} CPU-min, {num(f.get('episodes'), 0)} episodes, "
+            f"{num(f.get('episodes_per_s_per_core'), 0)} episodes/s per core, "
+            f"{num(f.get('sequences_per_hour'), 0)} sequences/hour.")]
+
+
+def arnn_tables(f: dict) -> list[str]:
+    """Tables 1-2 of Zhang & van de Panne 2018: keyfill's rows."""
+    cubic = next(r for r in f["rows"] if r["label"] == "cubic")
+    rows = []
+    for r in f["rows"]:
+        cells = [r["label"]]
+        for part in ("all_keys", "deleted_keys"):
+            s = r[part]
+            cells += [num(s["key"], 5), num(s["frame"], 5), num(s["total"], 5),
+                      num(s["frame"] / cubic[part]["frame"], 2)]
+        train = ""
+        if r.get("epochs"):
+            cpu = "" if r.get("train_cpu_minutes") is None else f"{r['train_cpu_minutes']} CPU-min, "
+            train = f"{r['epochs']} epochs, {cpu}{r['train_minutes']} min wall"
+        rows.append(cells + [train])
+    header = ["method", "key", "frame", "total", "frame / cubic", "key (1-2 deleted)", "frame (1-2 deleted)",
+              "total (1-2 deleted)", "frame / cubic (1-2 deleted)", "training"]
+    return [(f"{f['test_sequences']} test sequences of `{f['data']}`; losses on the standardised variables; "
+            f"key deletions drawn with seed {f['seed']}."), ""] + table(header, rows)
+
+
+def arnn_inference(f: dict) -> list[str]:
+    """ARNN inference timings, medians (best)."""
+    return [(f"{f['frames']} frames, {f['keys']} keys, {f['threads']} torch thread(s), model "
+            f"`{f['model'] or 'built-in'}`; medians in ms (best): the network alone (`predict`) "
+            f"{median_best(f['network_ms'], 2)}, the whole method (`complete(..., \"arnn\")`) "
+            f"{median_best(f['complete_ms'], 2)}, cubic in the same run {median_best(f['cubic_ms'], 2)}, loading the "
+            f"model folder {median_best(f['load_ms'], 2)}, `keyfill complete --method arnn` as a new process "
+            f"{median_best(f['cli_ms'], 0)}.")]
+
+
+# --- editing -------------------------------------------------------------------------------------------------
+
+
+def _qp_cell(cell: dict) -> str:
+    text = f"{num(cell['median_ms'], 1)} / {num(cell['median_cpu_ms'], 1)} ({cell['paper_ms']:g})"
+    text = text if cell["met"] else f"**{text}**"
+    return text + (f" {cell['failed']} unreached" if cell["failed"] else "")
+
+
+def tangent_qp(f: dict) -> list[str]:
+    """Table 3 of Ciccone et al. 2019: every configuration, length and DOF count."""
+    dofs = in_order({d: 0 for by_len in f["bandai"].values() for cells in by_len.values() for d in cells})
+    rows = []
+    for config in in_order(f["bandai"], CONFIGS):
+        by_length = f["bandai"][config]
+        rows += [[config, length] + [_qp_cell(by_length[length][d]) for d in dofs] for length in in_order(by_length)]
+    for row in rows:  # the lamp's cells beside the Bandai walk's "alone" rows
+        row.append(_qp_cell(f["lamp"][row[1]]) if row[0] == "alone" and row[1] in f["lamp"] else "-")
+    tangents = "unified tangents" if f["unified"] else "the paper's segment-only tangents"
+    return [(f"Cells: median wall-clock / CPU ms per edit over {f['edits']} edits (the paper's ms, Mosek on an "
+            f"i7-4930K); **bold**: above a tenth of the goal's figure; \"unreached\": edits that stopped short of "
+            f"the target. {tangents.capitalize()}; solver {f['solver']}."), ""] + table(
+        ["configuration", "frames"] + [f"{d} DOF" for d in dofs] + ["lamp, 24 DOF"], rows)
+
+
+# --- the transformer -----------------------------------------------------------------------------------------
+
+
+def _scores(by_length: dict, metric: str, digits: int) -> list[str]:
+    return [num(by_length[n].get(metric), digits) if n in by_length else "-" for n in LENGTHS]
+
+
+def _ratio(f: dict, method: str, metric: str, n: str) -> float:
+    scores = f["inbetweening"]
+    return scores[method][n][metric] / scores["interpolation"][n][metric]
+
+
+def transformer_quality(f: dict) -> list[str]:
+    """The LaFAN1 table, its ratios against SSMCT and Qin et al., and other key layouts."""
+    p = f["protocol"]
+    lines = [(f"LaFAN1 protocol on Bandai-Namco dataset-2: {num(p['test_windows'], 0)} test windows of the "
+             f"{p['test_clips']} held-out `normal` clips, statistics from {num(p['train_windows'], 0)} windows of "
+             f"{num(p['train_clips'], 0)} clips of the other styles; transitions of 5-45 frames."), ""]
+    header = ["method"] + [f"{m} {n}" for m in METRICS for n in LENGTHS] + ["skating cm/s", "jitter m/s^3"]
+    rows = []
+    for method in in_order(f["inbetweening"], METHODS):
+        by_length = f["inbetweening"][method]
+        realism = [" / ".join(num(by_length[n].get(k), 1 if k == "skate" else 0) for n in LENGTHS)
+                   for k in ("skate", "jitter")]
+        rows.append([method] + _scores(by_length, "L2Q", 4) + _scores(by_length, "L2P", 4)
+                    + _scores(by_length, "NPSS", 5) + realism)
+    lines += table(header, rows) + ["", ("Ratios to interpolation (the papers' data is LaFAN1, so ratios, not "
+                                        "values, are compared; SSMCT's 45-frame goal is its 30-frame ratio):"), ""]
+    return lines + _ratio_table(f) + [""] + _layouts_table(f)
+
+
+def _ratio_table(f: dict) -> list[str]:
+    rows = []
+    for m in METRICS:
+        for n in LENGTHS:
+            mine = _ratio(f, "transformer", m, n)
+            ssmct = f["ssmct"][m][n]
+            qin = f["qin"][m].get(n)
+            rows.append([m, n, num(mine, 3), num(_ratio(f, "cubic", m, n), 3), num(ssmct, 3), verdict(mine <= ssmct),
+                         num(qin, 2), "" if qin is None else verdict(mine <= qin)])
+    return table(["metric", "frames", "transformer", "cubic", "SSMCT", "SSMCT goal", "Qin et al. 2022", "Qin goal"],
+                 rows)
+
+
+def _layouts_table(f: dict) -> list[str]:
+    methods = [m for m in ("cubic", "velocity", "transformer") if m in next(iter(f["layouts"].values()))]
+    rows = []
+    for name in in_order(f["layouts"], LAYOUTS):
+        res = f["layouts"][name]
+        rows.append([name] + [", ".join(num(res[m][metric] / res["interpolation"][metric], 3) for m in methods)
+                              for metric in METRICS])
+    return ([("Other key layouts of the same windows (every frame between the first and last key that is not a key "
+             "is scored):"), ""]
+            + table(["layout"] + [f"{metric} / interp: {', '.join(methods)}" for metric in METRICS], rows))
+
+
+def transformer(f: dict) -> list[str]:
+    """Inference speed per thread count and batch."""
+    rows = [[r["threads"], f"{r['batch']} x 30", num(r["network_ms"], 1), num(r["complete_ms"], 1),
+             num(r.get("onnx_complete_ms"), 1), num(r["goal_ms"], 0), num(r["paper_ms"], 0)] for r in f["results"]]
+    rate = f.get("matmul_gflops_1_thread")
+    return [(f"Model: {f['model']}; {f['frames']} frames in (10 context, 30 to fill, 1 key); medians of "
+            f"{f['repeat']} calls; one thread's float32 matrix products: "
+            f"{'-' if rate is None else f'{rate:.0f}'} GFLOP/s."), ""] + table(
+        ["torch threads", "batch x frames", "network ms", "complete ms", "onnxruntime ms (1 thread)", "goal ms",
+         "paper ms (i7-8700K)"], rows)
+
+
+# --- the gan -------------------------------------------------------------------------------------------------
+
+
+def gan_speed(f: dict) -> list[str]:
+    """gan inference per length and thread count."""
+    by_frames: dict[int, dict] = {}
+    for r in f["rows"]:
+        by_frames.setdefault(r["frames"], {"keys": r["keys"]})[r["threads"]] = r
+    threads = sorted({r["threads"] for r in f["rows"]})
+    rows = [[num(n, 0), v["keys"]] + [median_best(v[t]["complete_ms"]) if t in v else "-" for t in threads]
+            for n, v in sorted(by_frames.items())]
+    load = f["rows"][0]["load_ms"]
+    return [(f"Keys every {f['gap']} frames and on the last; medians of {f['repeat']} calls (best in brackets); "
+            f"loading the model folder: {median_best(load, 0)} ms."), ""] + table(
+        ["frames", "keys"] + [f"{t} thread{'s' * (t > 1)} ms" for t in threads], rows)
+
+
+def _sampled_rows(s: dict, paper: dict) -> list[list[str]]:
+    rows = []
+    for kind in in_order(s["key_errors"], tuple(KEY_KINDS)):
+        e = s["key_errors"][kind]
+        rows.append([f"key error before post-processing, {KEY_KINDS.get(kind, kind)}: joints / root (cm)",
+                     f"{num(e['joints_cm'], 1)} / {num(e['root_cm'], 0)}",
+                     f"{paper['key_joints_cm']} / {paper['key_root_cm']}" if kind == "full" and "key_joints_cm" in paper
+                     else ""])
+    if "dna_error_1_cm" in s:
+        rows += [["DNA error, Eq. 11 / Eq. 12 (cm)", f"{num(s['dna_error_1_cm'], 2)} / {num(s['dna_error_2_cm'], 2)}",
+                  f"{paper['dna_error_1_cm']} / {paper['dna_error_2_cm']}"]]
+    v = s["variety_cm"]
+    rows.append(["variety through the same keys: 4 noise seeds / 4 DNAs (cm)",
+                 f"{num(v['seeds'], 1)} / {num(v.get('dnas'), 2)}", ""])
+    return rows
+
+
+def gan_quality(f: dict) -> list[str]:
+    """Table 2 (path predictor), Table 4 (key errors) and realism of one gan model."""
+    p, s, paper = f["path_cm"], f["sampled"], f["paper"]
+    rows = [["path predictor error per frame / after 64 / after 128 frames (cm)",
+             f"{num(p['1'])} / {num(p['64'], 1)} / {num(p['128'], 1)}",
+             f"{paper['path_cm_per_frame']} per frame, {paper['path_cm_2s']} after 2.1 s (60 fps)"]]
+    lines = [f"{s['sequences']} key layouts of {num(s['frames'], 0)} frames over the held-out `normal` clips.", ""]
+    lines += table(["figure", "measured", "paper"], rows + _sampled_rows(s, paper))
+    realism = []
+    for gap in in_order(f["realism"]):
+        by_method = f["realism"][gap]
+        realism += [[gap, m, r["clips"], num(r["foot_skating_cm_s"], 1), num(r["jitter_m_s3"], 1),
+                     num(r["range_violations_pct"], 2), num(r["bone_error_cm"], 2)]
+                    for m, r in ((m, by_method[m]) for m in in_order(by_method, METHODS))]
+    return lines + ["", "Realism of whole completed clips, keys every 30 or 60 frames:", ""] + table(
+        ["keys every", "method", "clips", "foot skating cm/s", "jitter m/s^3", "range violations %", "bone error cm"],
+        realism)
+
+
+def gan_dna(f: dict) -> list[str]:
+    """Motion DNA and partial-key figures."""
+    return [(f"{f['sequences']} key layouts of {num(f['frames'], 0)} frames over {f.get('clips') or '-'} held-out "
+            "clips."), ""] + table(["figure", "measured", "paper"], _sampled_rows(f, f["paper"]))
+
+
+# --- batch and ONNX ------------------------------------------------------------------------------------------
+
+
+def batch(f: dict) -> list[str]:
+    """Batch against single calls; ONNX start-up, latency and parity."""
+    lines = []
+    if "batch" in f:
+        b = f["batch"]
+        lines += [(f"`{b['batch_command']}` on {num(b['files'], 0)} lamp files, beside {b['single_sample']} single "
+                  "calls:"), ""] + table(["", "wall", "per file"], [
+            ["one batch command", f"{num(b['batch_wall_s'], 1)} s ({num(b['batch_cpu_s'], 1)} CPU-s)",
+             f"{num(b['batch_per_file_s'], 3)} s"],
+            ["single calls (median, best)", f"{num(b['single_median_s'])} s, {num(b['single_best_s'])} s",
+             f"{num(b['single_median_s'])} s"],
+            ["ratio", "", f"{num(b['ratio'], 0)}x"]]) + [""]
+    s, lat = f["startup"], f["latency"]
+    rows = [[f"start-up of `keyfill complete --method {m}` (s)", num(s[f"{m}_torch"]["median_s"]),
+             num(s[f"{m}_onnx"]["median_s"]), num(s[f"{m}_onnx_over_torch"])] for m in ("arnn", "transformer")]
+    rows += [[f"1 x 30 frames, {m} network, one thread (ms; best)", median_best(lat[f"{m}_1x30_torch_ms"]),
+              median_best(lat[f"{m}_1x30_onnx_ms"]), num(lat[f"{m}_1x30_onnx_ms"]["median"]
+                                                         / lat[f"{m}_1x30_torch_ms"]["median"])]
+             for m in ("transformer", "arnn")]
+    lines += table(["", "torch", "onnxruntime", "onnx / torch"], rows)
+    return lines + ["", (f"Parity, onnxruntime against torch: transformer {sci(lat['transformer_parity_relative'])} of "
+                        f"the output's largest magnitude, ARNN {sci(lat['arnn_parity_relative_to_std'])} of the "
+                        "variables' standard deviation.")]
+
+
+# --- checks that are no benchmark script ---------------------------------------------------------------------
+
+
+def checks(goals: list[dict]) -> list[str]:
+    """Goals checked by tests, training runs and make targets, each with its own command and machine."""
+    rows = [[g["issue"], g["goal"], f"`{g['command']}`" if g.get("command") else "", f"{g['date']}, {g['machine']}",
+             g["measured"], verdict(g["met"])] for g in goals]
+    return table(["issue", "goal", "command", "measured on", "measured", ""], rows)

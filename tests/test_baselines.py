@@ -114,3 +114,40 @@ def test_snap_to_keys_is_exact_smooth_and_reports(walk):
     corr = fixed.positions - noisy.positions
     res = walk.positions[20] - noisy.positions[20]
     assert np.abs(corr[21] - res).max() < 0.02 * np.abs(res).max() + 1e-9
+
+
+# --- one vocabulary: every baseline is a method of complete, evaluate and the protocols -------------------
+
+
+@pytest.mark.parametrize("name", ["linear", "interpolation", "cubic", "velocity", "zero-velocity"])
+def test_every_baseline_completes_a_motion_as_its_window_form_does(walk, name):
+    from keyfill.learn import registry
+    from keyfill.learn.protocols import lafan1
+
+    keys = Keys([0, 10, 11, 33, 60, 68])
+    out = registry.complete(walk, keys, name).motion
+    _, windows = lafan1.resolve_method(name)
+    q, r = windows(walk.skeleton, walk.rotations[None], walk.positions[None, :, 0], keys.frames)
+    np.testing.assert_allclose(R.quat_mul(out.rotations, R.quat_conjugate(q[0]))[..., 0] ** 2, 1.0, atol=1e-9)
+    np.testing.assert_allclose(out.positions[:, 0], r[0], atol=1e-9)
+    assert np.array_equal(out.rotations[keys.frames], walk.rotations[keys.frames])
+
+
+def test_hold_repeats_the_key_before_each_frame(walk):
+    from keyfill.interpolate import hold
+
+    out = hold(walk, Keys([5, 20, 68]))
+    assert np.array_equal(out.rotations[:20], np.broadcast_to(walk.rotations[5], out.rotations[:20].shape))
+    assert np.array_equal(out.positions[20:68], np.broadcast_to(walk.positions[20], out.positions[20:68].shape))
+
+
+def test_complete_cli_takes_every_method_name_evaluate_takes(tmp_path):
+    from keyfill.cli.main import main
+    from keyfill.learn import registry
+
+    names = [m.name for m in registry.METHODS.values() if not m.learned] + list(registry.ALIASES)
+    for name in names:
+        out = tmp_path / f"{name}.bvh"
+        assert main(["-q", "complete", str(DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"), "--key-every", "10",
+                     "--method", name, "-o", str(out)]) == 0
+        assert out.is_file()

@@ -19,7 +19,7 @@ from keyfill.cli.common import (
     say,
 )
 from keyfill.errors import UsageError
-from keyfill.learn.registry import METHODS
+from keyfill.learn.registry import ALIASES, METHODS
 
 
 @click.command()
@@ -29,7 +29,7 @@ from keyfill.learn.registry import METHODS
                    "(OUTDIR/).")
 @keys_options
 @partial_keys_options
-@click.option("--method", type=click.Choice(sorted(METHODS)), default="cubic", show_default=True,
+@click.option("--method", type=click.Choice(sorted([*METHODS, *ALIASES])), default="cubic", show_default=True,
               help="In-betweening method.")
 @click.option("--model", type=click.Path(exists=True),
               help="Model folder for a learned method (default: the model shipped for it, if any), or a graph file "

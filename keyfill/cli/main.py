@@ -128,6 +128,13 @@ def _progress_bar(description: str, total: int, unit: str):
                     unit_scale=unit.strip() == "B", leave=False)
 
 
+def _note(message: str) -> None:
+    """The CLI's listener of :func:`keyfill.progress.note`: one line on stderr, silent with ``-q``."""
+    from keyfill.cli.common import say
+
+    say(f"keyfill: note: {' '.join(message.split())}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (also used by ``python -m keyfill``)."""
     args = list(sys.argv[1:] if argv is None else argv)
@@ -135,11 +142,13 @@ def main(argv: list[str] | None = None) -> int:
     from keyfill import progress
 
     progress.listen(_progress_bar)
+    progress.listen_notes(_note)
     try:
         with _signals_as_interrupts():
             return _main(args, debug)
     finally:
         progress.listen(None)
+        progress.listen_notes(None)
 
 
 def _main(args: list[str], debug: bool) -> int:

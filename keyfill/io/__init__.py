@@ -44,7 +44,7 @@ class Format:
 
 
 _USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
-_GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.io.gltf:write", "template": True}
+_GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.io.gltf_write:write", "template": True}
 #: format name -> :class:`Format`, in the order messages list them
 FORMATS = {f.name: f for f in (
     Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text"),

@@ -1,0 +1,238 @@
+"""Writing glTF 2.0 (``.glb``, ``.gltf``): the mapping of :mod:`keyfill.io.gltf`, the other way.
+
+What keyfill writes from a motion: one node per joint (its name, its rest
+offset as translation, in metres), a scene of the roots, one skin of all
+joints with inverse bind matrices of the rest pose (identity rotations, as in
+BVH), and one animation with a LINEAR sampler per animated channel (times
+``i / fps`` s, shared by all samplers; a rotation channel for each joint with
+rotation channels or whose rotation moves, a translation channel for each with
+position channels or whose translation moves). Translations are turned into
+metres and a Z-up skeleton's roots into Y-up; the skin's and the animation's
+``extras.keyfill`` record the source units, up axis, channel layout, End
+Sites, frame rate and keys, so that reading gives back what was written.
+The document is built with pygltflib; one binary buffer holds the data (the
+``.glb``'s BIN chunk; beside a ``.gltf`` as ``.bin``, or in it as a ``data:``
+URI).
+
+With ``template`` (a glTF file whose chosen skin has the motion's joints, see
+:func:`keyfill.io.gltf.read`), the output is that file with the motion as its
+animation: meshes, materials, textures, other nodes and other animations are
+kept; the buffers and images the template refers to are put into the one
+buffer of the output, so it does not depend on files beside the template.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import urllib.parse
+from pathlib import Path
+
+import numpy as np
+
+from keyfill import limits
+from keyfill import rotations as R
+from keyfill.errors import DataError, FormatError, UsageError
+from keyfill.io.gltf import EXTRAS, Z_TO_Y, pick, rig_of
+from keyfill.io.gltf_buffers import IMAGE_TYPES, BufferWriter, glb_bytes, load_document, resolve_uri
+from keyfill.kinematics import fk
+from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
+
+#: ``sidecar`` default of :func:`write`: the buffer goes to ``<stem>.bin`` beside a ``.gltf``
+BESIDE = "beside"
+
+
+def from_source(rot: np.ndarray, pos: np.ndarray, rest: np.ndarray, above: dict, scale: float, mpu: float,
+                up: str) -> None:
+    """In place, the inverse of :func:`keyfill.io.gltf.to_source`: from ``mpu`` and ``up`` to glTF's metres and
+    Y axis, then into the frame of the nodes ``above`` each root (``{root: (rotation (4,), translation (3,))}``)
+    whose uniform scale is ``scale``. ``rot (F, J, 4)``, ``pos (F, J, 3)``, ``rest (J, 3)``."""
+    if up == "Z":
+        for j in above:
+            rot[:, j] = R.quat_mul(Z_TO_Y, rot[:, j])
+            pos[:, j] = R.quat_rotate(Z_TO_Y, pos[:, j])
+            rest[j] = R.quat_rotate(Z_TO_Y, rest[j])
+    k = mpu / scale
+    pos *= k
+    rest *= k
+    for j, (q, t) in above.items():
+        back = R.quat_conjugate(q)
+        rot[:, j] = R.quat_mul(back, rot[:, j])
+        pos[:, j] = R.quat_rotate(back, pos[:, j] - t / scale)
+        rest[j] = R.quat_rotate(back, rest[j] - t / scale)
+
+
+def _layout(motion: Motion) -> dict:
+    sk = motion.skeleton
+    return {"metersPerUnit": float(sk.meters_per_unit), "upAxis": sk.up_axis,
+            "channels": [" ".join(c) for c in sk.channels],
+            "endSites": [[int(j), *map(float, o)] for j, o in sk.end_sites]}
+
+
+def _timing(motion: Motion) -> dict:
+    out = {"fps": float(motion.fps)}
+    if motion.keys is not None:
+        out["keys"] = motion.keys.to_list()
+        if motion.keys.partial:
+            out["keyGiven"] = motion.keys.given
+            out["keyMask"] = motion.keys.joint_mask(motion.num_joints).astype(int).ravel().tolist()
+    return out
+
+
+def _animation(writer: BufferWriter, motion: Motion, rot, pos, rest_rot, rest_pos, nodes: list[int]):
+    """The pygltflib Animation of ``rot (F, J, 4)`` and ``pos (F, J, 3)`` (glTF frame) for joint ``nodes``."""
+    from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
+
+    times = (np.arange(motion.num_frames) / motion.fps).astype(np.float32)
+    if np.any(np.diff(times) <= 0):
+        raise DataError(f"{motion.num_frames} frames at {motion.fps:g} fps: the frame times cannot be told apart "
+                        "in glTF's 32-bit float times")
+    anim = Animation(name="keyfill", extras={EXTRAS: _timing(motion)})
+    time_acc = writer.add(times[:, None], "SCALAR", bounds=True)
+    chans = motion.skeleton.channels
+    for j, node in enumerate(nodes):
+        rotates = any(c in ROTATION_CHANNELS for c in chans[j]) or np.abs(R.quat_angle(rot[:, j], rest_rot[j])).max(
+            initial=0.0) > 1e-9
+        moves = any(c in POSITION_CHANNELS for c in chans[j]) or np.abs(pos[:, j] - rest_pos[j]).max(
+            initial=0.0) > 1e-9 * max(1.0, float(np.abs(rest_pos).max()))
+        for path, values, kind, on in (("translation", pos[:, j], "VEC3", moves),
+                                       ("rotation", rot[:, j][:, [1, 2, 3, 0]], "VEC4", rotates)):
+            if not on:
+                continue
+            anim.samplers.append(AnimationSampler(input=time_acc, output=writer.add(values, kind),
+                                                  interpolation="LINEAR"))
+            anim.channels.append(AnimationChannel(sampler=len(anim.samplers) - 1,
+                                                  target=AnimationChannelTarget(node=node, path=path)))
+    return anim
+
+
+def _fresh(motion: Motion) -> tuple[dict, bytes]:
+    """The JSON and binary buffer of a glTF file holding ``motion`` alone."""
+    from pygltflib import GLTF2, Asset, Buffer, Node, Scene, Skin
+
+    from keyfill import __version__
+
+    sk = motion.skeleton
+    J = sk.num_joints
+    roots = [j for j in range(J) if sk.parents[j] < 0]
+    rot, pos, rest = motion.rotations.copy(), motion.positions.copy(), sk.offsets.copy()
+    ident = np.tile([1.0, 0.0, 0.0, 0.0], (J, 1))
+    from_source(rot, pos, rest, {r: (ident[0], np.zeros(3)) for r in roots}, 1.0, sk.meters_per_unit, sk.up_axis)
+    gltf = GLTF2(asset=Asset(generator=f"keyfill {__version__}"), scene=0)
+    writer = BufferWriter(gltf)
+    kids: dict[int, list[int]] = {}
+    for j in range(J):
+        kids.setdefault(int(sk.parents[j]), []).append(j)
+    gltf.nodes = [Node(name=sk.names[j], translation=[float(v) for v in rest[j]], children=kids.get(j, []))
+                  for j in range(J)]
+    gltf.scenes = [Scene(nodes=roots)]
+    world = fk(ident, rest, sk.parents)[1]
+    ibm = np.tile(np.eye(4), (J, 1, 1))
+    ibm[:, :3, 3] = -world
+    gltf.skins = [Skin(joints=list(range(J)), inverseBindMatrices=writer.add(ibm.transpose(0, 2, 1).reshape(J, 16),
+                                                                            "MAT4"),
+                       skeleton=roots[0] if len(roots) == 1 else None, extras={EXTRAS: _layout(motion)})]
+    gltf.animations = [_animation(writer, motion, rot, pos, ident, rest, list(range(J)))]
+    gltf.buffers = [Buffer(byteLength=len(writer.data))]
+    return json.loads(gltf.gltf_to_json()), bytes(writer.data)
+
+
+def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
+    """The JSON and buffer of ``template`` with ``motion`` as the animation of its skin."""
+    from pygltflib import GLTF2
+
+    from keyfill import __version__
+
+    doc = load_document(template, template)
+    rig = rig_of(doc, None)
+    sk = motion.skeleton
+    if rig.names != list(sk.names) or not np.array_equal(rig.parents, sk.parents):
+        raise UsageError(f"{template}: its skin's joints are not those of the motion, so its meshes cannot be "
+                         "kept; write to a file of another format, or read the motion from this file")
+    raw = doc.json
+    blob = bytearray()
+    bases = []
+    for i, data in enumerate(doc.buffers):
+        if data is None:
+            raise FormatError(f"buffer {i} has no data keyfill can read (an extension's?); its meshes cannot be "
+                              "kept", template)
+        blob += b"\0" * (-len(blob) % 8)
+        bases.append(len(blob))
+        blob += data
+    for i, view in enumerate(raw.get("bufferViews", [])):
+        if not 0 <= view.get("buffer", -1) < len(bases):
+            raise FormatError(f"bufferView {i} names buffer {view.get('buffer')!r}, which does not exist", template)
+        view["byteOffset"] = view.get("byteOffset", 0) + bases[view["buffer"]]
+        view["buffer"] = 0
+    scratch = GLTF2()
+    writer = BufferWriter(scratch)  # the images and the animation, appended to the template's views below
+    embedded = []
+    for i, image in enumerate(raw.get("images", [])):
+        uri = image.get("uri")
+        if uri is None or uri.startswith("data:"):
+            continue
+        source = resolve_uri(doc.folder, uri, template, f"image {i}")
+        mime = image.get("mimeType") or IMAGE_TYPES.get(source.suffix.lower())
+        if mime is None:
+            raise FormatError(f"image {i} ({uri[:60]!r}) is of no image type glTF knows", template)
+        image.update(bufferView=writer.add_bytes(source.read_bytes()), mimeType=mime)
+        del image["uri"]
+        embedded.append(image)
+    rot, pos, rest = motion.rotations.copy(), motion.positions.copy(), sk.offsets.copy()
+    from_source(rot, pos, rest, rig.above, rig.scale, sk.meters_per_unit, sk.up_axis)
+    scratch.animations = [_animation(writer, motion, rot, pos, rig.rest_rot, rig.rest_pos, rig.nodes)]
+    part = json.loads(scratch.gltf_to_json())
+    views, accessors = raw.setdefault("bufferViews", []), raw.setdefault("accessors", [])
+    offset_views, offset_acc = len(views), len(accessors)
+    start = len(blob) + (-len(blob) % 8)
+    blob += b"\0" * (start - len(blob)) + writer.data
+    for view in part.get("bufferViews", []):
+        view["byteOffset"] = view.get("byteOffset", 0) + start
+        views.append(view)
+    for image in embedded:
+        image["bufferView"] += offset_views
+    for acc in part.get("accessors", []):
+        acc["bufferView"] += offset_views
+        accessors.append(acc)
+    anim = part["animations"][0]
+    for sampler in anim["samplers"]:
+        sampler["input"] += offset_acc
+        sampler["output"] += offset_acc
+    anims = raw.setdefault("animations", [])
+    if anims:
+        anims[pick(anims, None, "animation", template)] = anim
+    else:
+        anims.append(anim)
+    skin = raw["skins"][rig.skin]
+    skin["extras"] = {**(skin["extras"] if isinstance(skin.get("extras"), dict) else {}), EXTRAS: _layout(motion)}
+    raw["asset"]["generator"] = f"keyfill {__version__}"
+    raw["buffers"] = [{"byteLength": len(blob)}]
+    return raw, bytes(blob)
+
+
+def write(motion: Motion, path: str | Path, sidecar=BESIDE, template: str | Path | None = None) -> None:
+    """Write ``motion`` to ``path`` as glTF, binary for ``.glb`` (not atomic; see :func:`keyfill.io.save`).
+
+    Args:
+        sidecar: where a ``.gltf``'s buffer goes: :data:`BESIDE` (``<stem>.bin``
+            next to ``path``), ``(file to write, name the .gltf gives it)``, or
+            None: embedded in the ``.gltf`` as a ``data:`` URI.
+        template: a glTF file whose meshes, materials and other content to keep
+            (see the module docstring).
+    """
+    limits.check_values(motion)
+    if motion.num_frames == 0:
+        raise DataError("the motion has no frames; a glTF animation needs at least one")
+    path = Path(path)
+    doc, blob = _fresh(motion) if template is None else _with_template(motion, Path(template))
+    if path.suffix.lower() == ".glb":
+        path.write_bytes(glb_bytes(json.dumps(doc, separators=(",", ":"), allow_nan=False), blob))
+        return
+    if sidecar is None:
+        uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
+    else:
+        target, name = (path.with_suffix(".bin"), path.with_suffix(".bin").name) if sidecar == BESIDE else sidecar
+        Path(target).write_bytes(blob)
+        uri = urllib.parse.quote(name)
+    doc["buffers"] = [{"uri": uri, "byteLength": len(blob)}]
+    path.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n", encoding="utf-8")

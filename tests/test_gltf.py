@@ -398,6 +398,8 @@ def _mutate(case: str, doc: dict, binary: bytes, tmp_path: Path):
         doc["bufferViews"][0]["byteLength"] = 10**9
     elif case == "counts disagree":
         doc["accessors"][_sampler(doc)["input"]]["count"] -= 1
+    elif case == "bind matrices disagree":
+        doc["accessors"][doc["skins"][0]["inverseBindMatrices"]]["count"] -= 1
     elif case == "nan in the binary":
         doc, binary = _nan_in_binary(doc, binary)
     elif case == "skin without joints":
@@ -429,6 +431,7 @@ BAD_JSON = {
     "view outside its buffer": "runs past the end of buffer 0",
     "counts disagree": "has 68 times and 69 values",
     "nan in the binary": "holds a value that is not finite",
+    "bind matrices disagree": "skin 0 has 55 joints and 54 inverse bind matrices",
     "skin without joints": "skin 0 has no joints",
     "cycle": "is its own ancestor",
     "two parents": "is a child of two nodes",

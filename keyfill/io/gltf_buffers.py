@@ -170,7 +170,7 @@ def load_document(path: Path, label) -> Document:
     else:
         text_bytes = data
     try:
-        text = text_bytes.decode("utf-8")
+        text = text_bytes.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise FormatError("not glTF: the JSON is not UTF-8 text", label) from None
     raw = _strict_json(text, label)

@@ -20,6 +20,10 @@ Measured, each the median of ``--repeat`` runs in this one process:
 
 MB/s is the input file's size (for writers: the written file's size) over the
 median time. Goals (issue 2): read >= 40 MB/s and >= 5x bvhio; write >= 20 MB/s.
+The run is recorded in ``benchmarks/results/bvh_io.json`` (``results.py``; not with
+``--no-record``); its figures are the file (``file``, ``bytes``, ``frames``, ``joints``,
+``channels``), ``repeat`` and ``rows``: per reader or writer ``seconds``, ``cpu_seconds``,
+``mb_per_s`` and ``x_keyfill_read`` (its time over keyfill's read).
 
     .venv/bin/python benchmarks/bench_bvh_io.py               # 5 repetitions
     .venv/bin/python benchmarks/bench_bvh_io.py --repeat 9 --json
@@ -28,9 +32,6 @@ median time. Goals (issue 2): read >= 40 MB/s and >= 5x bvhio; write >= 20 MB/s.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import statistics
 import sys
 import tarfile
@@ -38,7 +39,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from timing import cpu_name
+import results
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS_TAR = ROOT.parent / "shared" / "data" / "corpora" / "bandai_namco_motiondataset1.tar.xz"
@@ -138,14 +139,6 @@ def median_time(fn, repeat: int) -> tuple[float, object]:
     return wall, result
 
 
-def machine() -> str:
-    return f"{os.cpu_count()}-core {platform.machine()} ({cpu_name()}), Python {platform.python_version()}, numpy {np.__version__}"
-
-
-def load_average() -> str:
-    return " ".join(f"{x:.2f}" for x in os.getloadavg())
-
-
 def numpy_floor(raw: bytes) -> np.ndarray:
     """Only the numbers: ``np.loadtxt`` of the lines after ``Frame Time:`` (no checks, no rotations)."""
     start = raw.index(b"\n", raw.index(b"Frame Time:")) + 1
@@ -201,8 +194,6 @@ def run(repeat: int, with_bvh: bool, out_dir: Path) -> dict:
     read = rows["keyfill read"]
     for r in rows.values():
         r["x_keyfill_read"] = r["seconds"] / read["seconds"]
-    ratio = rows["bvhio readAsBvh"]["seconds"] / read["seconds"]
-    write_mbs = rows["keyfill write"]["mb_per_s"]
     return {
         "file": str(path.relative_to(ROOT)),
         "bytes": size,
@@ -211,40 +202,47 @@ def run(repeat: int, with_bvh: bool, out_dir: Path) -> dict:
         "channels": motion.skeleton.num_channels,
         "repeat": repeat,
         "rows": rows,
-        "goals": {
-            "read_mb_per_s": {"value": read["mb_per_s"], "goal": READ_GOAL_MBS, "met": read["mb_per_s"] >= READ_GOAL_MBS},
-            "bvhio_over_keyfill": {"value": ratio, "goal": BVHIO_GOAL_RATIO, "met": ratio >= BVHIO_GOAL_RATIO},
-            "write_mb_per_s": {"value": write_mbs, "goal": WRITE_GOAL_MBS, "met": write_mbs >= WRITE_GOAL_MBS},
-        },
     }
+
+
+def goals(figures: dict) -> list[dict]:
+    """The three goals of issue 2, judged by wall time."""
+    rows = figures["rows"]
+    read, write = rows["keyfill read"]["mb_per_s"], rows["keyfill write"]["mb_per_s"]
+    ratio = rows["bvhio readAsBvh"]["x_keyfill_read"]
+    return [results.goal(2, f"BVH read at least {READ_GOAL_MBS:g} MB/s", f"{read:.1f} MB/s", read >= READ_GOAL_MBS),
+            results.goal(2, f"BVH read at least {BVHIO_GOAL_RATIO:g}x as fast as bvhio", f"{ratio:.1f}x",
+                         ratio >= BVHIO_GOAL_RATIO),
+            results.goal(2, f"BVH write at least {WRITE_GOAL_MBS:g} MB/s", f"{write:.1f} MB/s",
+                         write >= WRITE_GOAL_MBS)]
 
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5, help="runs per measurement; the median is reported (default 5)")
     parser.add_argument("--no-bvh", action="store_true", help="skip the slow 'bvh' package")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    parser.add_argument("--json", action="store_true", help="print the record as JSON on stdout")
+    results.add_option(parser)
     args = parser.parse_args(argv)
-    load_before = load_average()
+    bench = results.Run()
     try:
         BENCH_DIR.mkdir(parents=True, exist_ok=True)
-        result = run(args.repeat, not args.no_bvh, BENCH_DIR)
+        figures = run(args.repeat, not args.no_bvh, BENCH_DIR)
     except Skipped as e:
         print(f"bench_bvh_io: skipped: {e}", file=sys.stderr)
         return 0
-    result["machine"] = machine()
-    result["load_average"] = {"before": load_before, "after": load_average()}
+    record = bench.record("bvh_io", figures, goals(figures), write=not args.no_record)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(results.dumps(record), end="")
         return 0
-    print(f"{result['file']}: {result['bytes'] / 1e6:.1f} MB, {result['frames']} frames, "
-          f"{result['joints']} joints, {result['channels']} channels; median of {args.repeat}")
+    print(f"{figures['file']}: {figures['bytes'] / 1e6:.1f} MB, {figures['frames']} frames, "
+          f"{figures['joints']} joints, {figures['channels']} channels; median of {args.repeat}")
     print(f"{'':24s} {'seconds':>8s} {'cpu s':>7s} {'MB/s':>7s} {'x keyfill read':>15s}")
-    for name, r in result["rows"].items():
+    for name, r in figures["rows"].items():
         print(f"{name:24s} {r['seconds']:8.3f} {r['cpu_seconds']:7.3f} {r['mb_per_s']:7.1f} {r['x_keyfill_read']:15.2f}")
-    for name, g in result["goals"].items():
-        print(f"goal {name}: {g['value']:.1f} (goal >= {g['goal']:g}) {'met' if g['met'] else 'MISSED'}")
-    print(f"machine: {result['machine']}; load average before {load_before}, after {result['load_average']['after']}")
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    print(results.summary(record))
     return 0
 
 

@@ -11,6 +11,9 @@ compared with the goal (under 1 s); the cold first run is reported too.
 The split comes from the same work done in this process with library calls
 (``io.load``, ``learn.registry.complete``, ``io.save``; medians too), and the
 start-up from ``keyfill complete --help`` (interpreter, imports, click).
+The run is recorded in ``benchmarks/results/complete.json`` (``results.py``; not
+with ``--no-record``): ``timed_command``, ``input``, ``end_to_end_seconds`` (and
+its CPU time and runs), ``first_run_seconds`` and the ``split_seconds``.
 
     .venv/bin/python benchmarks/bench_complete.py
     .venv/bin/python benchmarks/bench_complete.py --repeat 9 --json
@@ -19,7 +22,6 @@ start-up from ``keyfill complete --help`` (interpreter, imports, click).
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import subprocess
 import sys
@@ -28,7 +30,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_bvh_io import Skipped, concatenated_bvh, load_average, machine, median_times
+import results
+from bench_bvh_io import Skipped, concatenated_bvh, median_times
 
 GOAL_SECONDS = 1.0
 FRAMES = 10_000
@@ -45,7 +48,7 @@ def timed_run(cmd: list[str]) -> tuple[float, float]:
     """Wall time and CPU time (user + system of the child) of running ``cmd``, in seconds."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, check=False, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
@@ -84,8 +87,9 @@ def run(repeat: int, out_dir: Path) -> dict:
     lib_out = out_dir / "library.bvh"
     t_write, c_write, _ = median_times(lambda: io.save(result.motion, lib_out), repeat)
     t_e2e, t_startup = float(np.median(e2e)), float(np.median(startup))
+    shown = {str(src): results.repo_path(str(src)), str(dst): "OUT"}
     return {
-        "command": " ".join(["keyfill"] + cmd[len(keyfill_command()):]),
+        "timed_command": " ".join(["keyfill"] + [shown.get(a, a) for a in cmd[len(keyfill_command()):]]),
         "input": {"frames": motion.num_frames, "joints": motion.num_joints, "bytes": src.stat().st_size,
                   "keys": len(keys)},
         "output_bytes": dst.stat().st_size,
@@ -107,29 +111,36 @@ def run(repeat: int, out_dir: Path) -> dict:
             "compute (complete, cubic)": c_compute,
             "write (io.save)": c_write,
         },
-        "goal": {"seconds": GOAL_SECONDS, "met": t_e2e < GOAL_SECONDS},
     }
+
+
+def goals(figures: dict) -> list[dict]:
+    """Issue 2's goal: under a second end to end (the median)."""
+    seconds = figures["end_to_end_seconds"]
+    return [results.goal(2, f"`keyfill complete --method cubic`, {FRAMES:,} frames, 22 joints: under "
+                            f"{GOAL_SECONDS:g} s end to end", f"{seconds:.3f} s (median of {figures['repeat']})",
+                         seconds < GOAL_SECONDS)]
 
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5, help="runs per measurement; the median is reported (default 5)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    parser.add_argument("--json", action="store_true", help="print the record as JSON on stdout")
+    results.add_option(parser)
     args = parser.parse_args(argv)
-    load_before = load_average()
+    bench = results.Run()
     try:
         with tempfile.TemporaryDirectory() as tmp:
             result = run(args.repeat, Path(tmp))
     except Skipped as e:
         print(f"bench_complete: skipped: {e}", file=sys.stderr)
         return 0
-    result["machine"] = machine()
-    result["load_average"] = {"before": load_before, "after": load_average()}
+    record = bench.record("complete", result, goals(result), write=not args.no_record)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(results.dumps(record), end="")
         return 0
     inp = result["input"]
-    print(f"{result['command']}")
+    print(f"{result['timed_command']}")
     print(f"input: {inp['frames']} frames, {inp['joints']} joints, {inp['bytes'] / 1e6:.1f} MB, {inp['keys']} keys; "
           f"output {result['output_bytes'] / 1e6:.1f} MB; median of {args.repeat}")
     print(f"end to end: {result['end_to_end_seconds']:.3f} s, CPU {result['end_to_end_cpu_seconds']:.3f} s "
@@ -139,9 +150,9 @@ def main(argv: list[str]) -> int:
     for name, seconds in result["split_seconds"].items():
         cpu = result["split_cpu_seconds"].get(name)
         print(f"  {name:36s} {seconds:7.3f} {'' if cpu is None else f'{cpu:7.3f}'}")
-    goal = result["goal"]
-    print(f"goal: under {goal['seconds']:g} s: {'met' if goal['met'] else 'MISSED'}")
-    print(f"machine: {result['machine']}; load average before {load_before}, after {result['load_average']['after']}")
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    print(results.summary(record))
     return 0
 
 

@@ -5,7 +5,10 @@ Writes a BVH of about ``--mb`` megabytes (the CMU skeleton of tests/data, 31 joi
 a random walk of angles printed with 6 decimals, 120 fps), then runs ``python -m keyfill convert
 big.bvh big.usda`` (and ``big.bvh big2.bvh``) ``--repeat`` times as child processes and reports the
 median of their peak resident set size (``wait4``'s ``ru_maxrss``) and wall time, next to the peak
-of converting a one-frame file (the fixed overhead: Python, numpy, USD).
+of converting a one-frame file (the fixed overhead: Python, numpy, USD). The run is recorded in
+``benchmarks/results/convert_memory.json`` (``results.py``; not with ``--no-record``): ``file_mb``
+(MiB), ``frames``, ``overhead_mb``, ``repeat``, ``keyfill`` (the checkout run) and ``outputs``, per
+format ``peak_mb``, ``peak_over_file``, ``peak_minus_overhead_over_file``, ``seconds``, ``output_mb``.
 
     python benchmarks/bench_convert_memory.py --mb 150 --repeat 3
     python benchmarks/bench_convert_memory.py --mb 150 --keyfill /path/to/older/checkout   # before/after
@@ -14,9 +17,7 @@ of converting a one-frame file (the fixed overhead: Python, numpy, USD).
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -25,7 +26,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+import results
 
+GOAL_RATIO = 4.0
 ROOT = Path(__file__).resolve().parent.parent
 CMU = ROOT / "tests" / "data" / "cmu_02_03_cgspeed_first4frames.bvh"
 
@@ -65,49 +68,70 @@ def run_child(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, int]:
     return usage.ru_maxrss / 1024, seconds, proc.returncode
 
 
+def measure(megabytes: float, repeat: int, keyfill: Path, formats: list[str]) -> dict:
+    """The figures of the module docstring: a generated BVH converted by ``keyfill``'s checkout."""
+    env = {**os.environ, "PYTHONPATH": str(keyfill.resolve()), "OPENBLAS_NUM_THREADS": "1"}
+    with tempfile.TemporaryDirectory(prefix="keyfill-bench-") as tmp:
+        tmp = Path(tmp)
+        big = tmp / "big.bvh"
+        frames = write_big_bvh(big, megabytes)
+        size_mb = big.stat().st_size / 2**20
+        small = tmp / "small.bvh"
+        small.write_text(CMU.read_text())
+        base = [run_child([sys.executable, "-m", "keyfill", "convert", str(small), str(tmp / "s.usda")], env, tmp)[0]
+                for _ in range(repeat)]
+        overhead = statistics.median(base)
+        outputs = {}
+        for fmt in formats:
+            out = tmp / f"out.{fmt}"
+            runs = [run_child([sys.executable, "-m", "keyfill", "convert", str(big), str(out)], env, tmp)
+                    for _ in range(repeat)]
+            peak = statistics.median(r[0] for r in runs)
+            outputs[fmt] = {
+                "peak_mb": round(peak, 1),
+                "peak_over_file": round(peak / size_mb, 2),
+                "peak_minus_overhead_over_file": round((peak - overhead) / size_mb, 2),
+                "seconds": round(statistics.median(r[1] for r in runs), 1),
+                "output_mb": round(out.stat().st_size / 2**20, 1),
+            }
+    return {"file_mb": round(size_mb, 1), "frames": frames, "overhead_mb": round(overhead, 1), "repeat": repeat,
+            "keyfill": results.repo_path(str(keyfill)), "outputs": outputs}
+
+
+def goals(figures: dict) -> list[dict]:
+    """Issue 15's goal, for USD output: the peak beyond the fixed overhead at most 4x the file."""
+    usd = figures["outputs"].get("usda")
+    if usd is None:
+        return []
+    ratio = usd["peak_minus_overhead_over_file"]
+    return [results.goal(15, f"`keyfill convert` of a {figures['file_mb']:.0f} MiB BVH to USD: peak memory at most "
+                             f"{GOAL_RATIO:g}x the file plus a fixed overhead",
+                         f"{usd['peak_mb']:,.0f} MiB: {ratio:.1f}x the file beyond the {figures['overhead_mb']} MiB "
+                         f"overhead ({usd['peak_over_file']:.1f}x all included)", ratio <= GOAL_RATIO)]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--mb", type=float, default=150.0)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--keyfill", type=Path, default=ROOT, help="the checkout whose keyfill to run")
     ap.add_argument("--to", default="usda,bvh", help="output formats to time (usda, bvh)")
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(ap)
     args = ap.parse_args()
-    env = {**os.environ, "PYTHONPATH": str(args.keyfill.resolve()), "OPENBLAS_NUM_THREADS": "1"}
-    with tempfile.TemporaryDirectory(prefix="keyfill-bench-") as tmp:
-        tmp = Path(tmp)
-        big = tmp / "big.bvh"
-        frames = write_big_bvh(big, args.mb)
-        size_mb = big.stat().st_size / 2**20
-        small = tmp / "small.bvh"
-        small.write_text(CMU.read_text())
-        results = {"file_mb": round(size_mb, 1), "load_before": os.getloadavg()[0], "frames": frames, "machine": f"{platform.machine()}, "
-                   f"{os.cpu_count()} cores, Python {platform.python_version()}", "keyfill": str(args.keyfill)}
-        base = [run_child([sys.executable, "-m", "keyfill", "convert", str(small), str(tmp / "s.usda")], env, tmp)[0]
-                for _ in range(args.repeat)]
-        results["overhead_mb"] = round(statistics.median(base), 1)
-        for fmt in args.to.split(","):
-            out = tmp / f"out.{fmt}"
-            runs = [run_child([sys.executable, "-m", "keyfill", "convert", str(big), str(out)], env, tmp)
-                    for _ in range(args.repeat)]
-            peak = statistics.median(r[0] for r in runs)
-            results["load_after"] = os.getloadavg()[0]
-            results[fmt] = {
-                "peak_mb": round(peak, 1),
-                "peak_over_file": round(peak / size_mb, 2),
-                "peak_minus_overhead_over_file": round((peak - results["overhead_mb"]) / size_mb, 2),
-                "seconds": round(statistics.median(r[1] for r in runs), 1),
-                "output_mb": round(out.stat().st_size / 2**20, 1),
-            }
+    bench = results.Run()
+    figures = measure(args.mb, args.repeat, args.keyfill, args.to.split(","))
+    record = bench.record("convert_memory", figures, goals(figures), write=not args.no_record)
     if args.json:
-        print(json.dumps(results, indent=2))
+        print(results.dumps(record), end="")
         return
-    print(f"convert of a {results['file_mb']} MB BVH ({frames} frames) on {results['machine']}; "
-          f"fixed overhead (a 4-frame file) {results['overhead_mb']} MB; medians of {args.repeat}")
-    for fmt in args.to.split(","):
-        r = results[fmt]
-        print(f"  -> .{fmt}: peak {r['peak_mb']} MB = {r['peak_over_file']}x the file "
-              f"({r['peak_minus_overhead_over_file']}x beyond the overhead), {r['seconds']} s, output {r['output_mb']} MB")
+    print(f"convert of a {figures['file_mb']} MiB BVH ({figures['frames']} frames); fixed overhead (a 4-frame file) "
+          f"{figures['overhead_mb']} MiB; medians of {args.repeat}; {results.summary(record)}")
+    for fmt, r in figures["outputs"].items():
+        print(f"  -> .{fmt}: peak {r['peak_mb']} MiB = {r['peak_over_file']}x the file "
+              f"({r['peak_minus_overhead_over_file']}x beyond the overhead), {r['seconds']} s, output {r['output_mb']} MiB")
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
 
 
 if __name__ == "__main__":

@@ -15,19 +15,23 @@ The motion is a held-out Bandai-Namco clip (``--clip``) repeated to ``N``
 frames, with keys every ``--gap`` frames and on the last frame (only key frames
 are read, so the content does not change the time). Threads: 1 and 2.
 
+The run is recorded in ``benchmarks/results/gan_speed-<model folder>.json`` (``results.py``; not
+with ``--no-record``): ``model``, ``gap``, ``repeat`` and ``rows``, one per thread count and length
+with ``keys``, ``complete_ms`` and ``load_ms`` (each ``median`` and ``best``).
+
     .venv/bin/python benchmarks/bench_gan_speed.py data/models/bandai2-gan --json
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
+from pathlib import Path
 
 import numpy as np
+import results
 import torch
-from timing import cpu_name, timed_ms
+from timing import timed_ms
 
 from keyfill import io
 from keyfill.errors import DataError
@@ -35,6 +39,17 @@ from keyfill.learn.corpus import bvh_files, locate
 from keyfill.learn.exact_keys import snap_to_keys
 from keyfill.learn.gan.model import complete_motion, load_model
 from keyfill.motion import Keys
+
+GOAL_FRAMES, GOAL_MS = 2048, 200.0
+
+
+def goals(rows: list[dict]) -> list[dict]:
+    """Issue 12's goal: 2,048 frames in at most 0.2 s on one thread, the model loaded."""
+    ms = next((r["complete_ms"]["median"] for r in rows if r["threads"] == 1 and r["frames"] == GOAL_FRAMES), None)
+    if ms is None:
+        return []
+    return [results.goal(12, f"gan inference of {GOAL_FRAMES:,} frames at most {GOAL_MS / 1000:g} s (one thread, "
+                             "model loaded)", f"{ms:.1f} ms", ms <= GOAL_MS)]
 
 
 def main(argv=None) -> int:
@@ -44,8 +59,10 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", default="512,1024,2048,4096")
     ap.add_argument("--gap", type=int, default=300, help="frames between keys")
     ap.add_argument("--repeat", type=int, default=20)
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(ap)
     args = ap.parse_args(argv)
+    bench = results.Run()
     try:
         clip = args.clip or str(bvh_files([locate("bandai2")], "*_walk_normal_*")[0])
     except DataError as e:
@@ -67,17 +84,19 @@ def main(argv=None) -> int:
 
             rows.append({"threads": threads, "frames": n, "keys": len(keys),
                          "complete_ms": timed_ms(run, args.repeat, warmup=2), "load_ms": load})
-    report = {"machine": cpu_name(), "cpus": os.cpu_count(),
-              "load_average": os.getloadavg()[0], "torch": torch.__version__, "rows": rows}
+    figures = {"model": args.model, "gap": args.gap, "repeat": args.repeat, "rows": rows}
+    record = bench.record(f"gan_speed-{Path(args.model).name}", figures, goals(rows), write=not args.no_record)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(results.dumps(record), end="")
         return 0
-    print(f"{report['machine']}, {report['cpus']} CPUs, load {report['load_average']:.2f}, torch {report['torch']}")
+    print(results.summary(record))
     print("threads  frames  keys  complete ms (best)  load ms")
     for r in rows:
         c = r["complete_ms"]
         print(f"{r['threads']:>7} {r['frames']:>7} {r['keys']:>5} {c['median']:>11.1f} ({c['best']:.1f}) "
               f"{r['load_ms']['median']:>8.1f}")
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
     return 0
 
 

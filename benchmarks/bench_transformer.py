@@ -24,6 +24,12 @@ from the ``--model`` folder) adds ``complete`` through onnxruntime, as
 this CPU's one-thread float32 matrix-product rate (``timing.matmul_gflops``):
 the network's time follows it, and it varies between days on one VM kind.
 
+The run is recorded in ``benchmarks/results/transformer-<model folder>.json`` (``transformer.json``
+for the random paper-size model; ``results.py``; not with ``--no-record``): ``model``, ``frames``,
+``repeat``, ``matmul_gflops_1_thread`` and ``results``, one row per thread count and batch with
+``network_ms``, ``complete_ms``, ``onnx_complete_ms`` (with ``--onnx``), ``goal_ms``, ``paper_ms`` and
+``complete_vs_paper``. The goals are judged with torch's default threads.
+
     .venv/bin/python benchmarks/bench_transformer.py
     .venv/bin/python benchmarks/bench_transformer.py --model data/models/bandai2-transformer --repeat 200 --json
     .venv/bin/keyfill export transformer -o /tmp/transformer.onnx
@@ -34,14 +40,13 @@ the network's time follows it, and it varies between days on one VM kind.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import sys
+from pathlib import Path
 
 import numpy as np
+import results
 import torch
-from timing import cpu_name, matmul_gflops, timed_ms
+from timing import matmul_gflops, timed_ms
 
 from keyfill import rotations as R
 from keyfill.learn.transformer import config as TC
@@ -62,17 +67,27 @@ def bandai_like_skeleton() -> Skeleton:
     return Skeleton([f"j{i}" for i in range(22)], parents, offsets, [()] * 22)
 
 
+def goals(rows: list[dict], threads: int) -> list[dict]:
+    """Issues 6 and 14: 1 x 30 and 10 x 30 frames within their budgets, with ``threads`` torch threads."""
+    ms = {r["batch"]: r["complete_ms"] for r in rows if r["threads"] == threads}
+    return [results.goal("6, 14", f"transformer inference at most {GOAL_MS[1]:g} ms for 1 x 30 frames and "
+                                  f"{GOAL_MS[10]:g} ms for 10 x 30 (torch's default threads)",
+                         f"{ms[1]:.1f} ms and {ms[10]:.1f} ms ({threads} thread{'s' * (threads > 1)})",
+                         all(ms[b] <= GOAL_MS[b] for b in GOAL_MS))]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--model", help="a trained model folder (default: paper-size model with random weights)")
     ap.add_argument("--repeat", type=int, default=100, help="timed calls per figure (default 100)")
     ap.add_argument("--onnx", help="also time complete through this exported graph of --model (onnxruntime)")
-    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    ap.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(ap)
     args = ap.parse_args(argv)
     if args.onnx and not args.model:
         ap.error("--onnx needs the --model folder the graph was exported from")
 
-    load_before = os.getloadavg()
+    bench = results.Run()
     if args.model:
         model = T.load(args.model)
     else:
@@ -89,7 +104,7 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(1)
     frames = 10 + 30 + 1
     keys = np.append(np.arange(10), 40)
-    results = {}
+    timings = {}
     default_threads = torch.get_num_threads()
     for threads in sorted({default_threads, 1}, reverse=True):
         torch.set_num_threads(threads)
@@ -106,29 +121,28 @@ def main(argv=None) -> int:
             def complete(q=q, r=r):
                 model.complete_windows(q, r, keys)
 
-            results[(threads, batch)] = {
+            timings[(threads, batch)] = {
                 "network_ms": timed_ms(network, args.repeat)["median"],
                 "complete_ms": timed_ms(complete, args.repeat)["median"],
             }
             if args.onnx and threads == 1:
-                results[(threads, batch)]["onnx_complete_ms"] = timed_ms(
+                timings[(threads, batch)]["onnx_complete_ms"] = timed_ms(
                     lambda q=q, r=r: graph_model.complete_windows(q, r, keys), args.repeat)["median"]
     torch.set_num_threads(default_threads)
-    load_after = os.getloadavg()
     report = {
-        "machine": f"{cpu_name()} ({platform.machine()}), {os.cpu_count()} logical CPUs, torch {torch.__version__}",
         "matmul_gflops_1_thread": matmul_gflops(),
-        "load_before": load_before,
-        "load_after": load_after,
         "model": args.model or "paper size (8 x 256, FFN 512, 8 heads), random weights",
         "frames": frames,
+        "repeat": args.repeat,
         "results": [{"threads": t, "batch": b, **v, "goal_ms": GOAL_MS[b], "paper_ms": PAPER_MS[b],
-                     "complete_vs_paper": v["complete_ms"] / PAPER_MS[b]} for (t, b), v in results.items()],
+                     "complete_vs_paper": v["complete_ms"] / PAPER_MS[b]} for (t, b), v in timings.items()],
     }
+    name = f"transformer-{Path(args.model).name}" if args.model else "transformer"
+    record = bench.record(name, report, goals(report["results"], default_threads), write=not args.no_record)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(results.dumps(record), end="")
         return 0
-    print(f"machine: {report['machine']}; load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
+    print(results.summary(record))
     print(f"float32 matrix products on one thread: {report['matmul_gflops_1_thread']:.0f} GFLOP/s")
     print(f"model: {report['model']}; in-betweening of 30 frames ({frames} frames in), median of {args.repeat}")
     print(f"{'threads':>7} {'batch':>5} {'network ms':>11} {'complete ms':>12} {'goal ms':>8} {'paper ms':>9} {'vs paper':>9}")
@@ -137,6 +151,8 @@ def main(argv=None) -> int:
               f"{row['goal_ms']:>8.0f} {row['paper_ms']:>9.0f} {row['complete_vs_paper']:>9.2f}")
         if "onnx_complete_ms" in row:
             print(f"{'onnx':>7} {row['batch']:>5} {'':>11} {row['onnx_complete_ms']:>12.2f} {row['goal_ms']:>8.0f}")
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
     return 0
 
 

@@ -25,6 +25,11 @@ Measured, each the median of ``--repeat`` runs:
   (``FuncAnimation`` updating the same stick-figure line data every frame,
   saved with ``PillowWriter``) for the same frames, size and camera.
 
+The run is recorded in ``benchmarks/results/viz.json`` (``results.py``; not with
+``--no-record``): ``repeat`` and ``results``, per row ``seconds``, ``cpu_seconds`` and,
+where they apply, ``bytes``, ``goal_s``, ``ms_per_frame`` and ``keyfill_speedup_cpu``.
+The goals are judged by wall time.
+
     .venv/bin/python benchmarks/bench_viz.py
     .venv/bin/python benchmarks/bench_viz.py --repeat 7 --json
 """
@@ -32,7 +37,6 @@ Measured, each the median of ``--repeat`` runs:
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import statistics
 import subprocess
@@ -41,7 +45,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_bvh_io import BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, load_average, machine, median_times
+import results
+from bench_bvh_io import BENCH_DIR, Skipped, bandai1_clips, concatenated_bvh, median_times
 
 GIF_GOAL_S = 10.0
 PLOT_GOAL_S = 3.0
@@ -178,24 +183,32 @@ def run(repeat: int) -> dict:
     return rows
 
 
+def goals(rows: dict) -> list[dict]:
+    """Issue 7's goals, by wall time: the side-view GIF and the PNG plot through the CLI."""
+    gif, plot = rows["preview GIF side (CLI)"]["seconds"], rows["plot PNG, 6 panels (CLI)"]["seconds"]
+    return [results.goal(7, f"{GIF_FRAMES}-frame, 22-joint GIF under {GIF_GOAL_S:g} s", f"{gif:.2f} s",
+                         gif < GIF_GOAL_S),
+            results.goal(7, f"`plot` of {PLOT_FRAMES:,} frames under {PLOT_GOAL_S:g} s", f"{plot:.2f} s",
+                         plot < PLOT_GOAL_S)]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=5, help="runs per measurement (median reported)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    parser.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(parser)
     args = parser.parse_args()
-    load_before = load_average()
+    bench = results.Run()
     try:
         rows = run(args.repeat)
     except Skipped as e:
         print(f"skipped: {e}")
         return 0
-    result = {"machine": machine(), "load_average_before": load_before, "load_average_after": load_average(),
-              "repeat": args.repeat, "results": rows}
+    record = bench.record("viz", {"repeat": args.repeat, "results": rows}, goals(rows), write=not args.no_record)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(results.dumps(record), end="")
         return 0
-    print(f"machine: {result['machine']}")
-    print(f"load average before/after: {load_before} / {result['load_average_after']}; medians of {args.repeat} runs")
+    print(f"{results.summary(record)}; medians of {args.repeat} runs")
     print(f"  {'':48} {'wall s':>7} {'cpu s':>7}")
     for name, row in rows.items():
         goal = ""

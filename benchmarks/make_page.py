@@ -169,7 +169,8 @@ def provenance(record: dict) -> list[str]:
     lines = [f"* Reproduce: `{record['command']}`"] if record.get("command") else []
     if record["source"] == "run":
         at = f"at commit {record['commit'][:10]}" if record.get("commit") else "outside git"
-        at += " (with uncommitted changes in keyfill/)" if record.get("dirty") else ""
+        dirty = record.get("dirty") or []
+        at += f" with uncommitted changes in {len(dirty)} file{'s' * (len(dirty) > 1)} of keyfill/" if dirty else ""
         source = f"written by `{record['script']}` {at} in {S.num(record.get('wall_seconds'), 0)} s"
     else:
         source = record["source"]

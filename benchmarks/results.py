@@ -6,7 +6,7 @@ A record says what ran and where, and holds the figures and the goals they are j
       "name": "bvh_io",                      # the file's stem: the script's stem without "bench_", plus a part
       "script": "benchmarks/bench_bvh_io.py",
       "command": ".venv/bin/python benchmarks/bench_bvh_io.py --repeat 7",    # as run, from the repo root
-      "commit": "<40 hex>", "dirty": false,  # keyfill's commit; dirty: uncommitted changes under keyfill/
+      "commit": "<40 hex>", "dirty": [],     # keyfill's commit, and the files under keyfill/ that differ from it
       "date": "2026-12-01T18:49:35Z",        # UTC, when the run ended
       "machine": {"cpu": "AMD EPYC", "cores": 2, "python": "3.11.7", "numpy": "2.4.6", ...},
       "load_average": {"before": [1, 5, 15 min], "after": [...]},
@@ -34,6 +34,7 @@ import sys
 import tempfile
 import time
 from datetime import UTC, datetime
+from importlib import metadata
 from pathlib import Path
 
 from timing import cpu_name
@@ -57,17 +58,18 @@ def goal(issue: int | str, text: str, measured: str, met: bool) -> dict:
     return {"issue": str(issue), "goal": text, "measured": measured, "met": bool(met)}
 
 
-def _repo_path(path: str) -> str:
-    """``path`` relative to the repository root when it lies inside it, else as given."""
+def repo_path(path: str) -> str:
+    """``path`` relative to the repository root when it lies inside it, else as given (links are kept:
+    ``.venv/bin/python`` stays itself)."""
     try:
-        return str(Path(path).resolve().relative_to(ROOT))
+        return str(Path(os.path.abspath(path)).relative_to(ROOT))
     except ValueError:
         return path
 
 
 def command_line(argv: list[str]) -> str:
     """The command as run, runnable from the repository root: this interpreter and ``argv``, script made relative."""
-    return shlex.join([_repo_path(sys.executable), _repo_path(argv[0]), *argv[1:]])
+    return shlex.join([repo_path(sys.executable), repo_path(argv[0]), *argv[1:]])
 
 
 def _git(*args: str) -> str | None:
@@ -78,20 +80,22 @@ def _git(*args: str) -> str | None:
     return out.stdout.strip() if out.returncode == 0 else None
 
 
-def commit() -> tuple[str | None, bool | None]:
-    """keyfill's commit (``HEAD``) and whether ``keyfill/`` has uncommitted changes; ``None`` outside git."""
+def commit() -> tuple[str | None, list[str] | None]:
+    """keyfill's commit (``HEAD``) and the files under ``keyfill/`` that differ from it; ``None`` outside git."""
     head = _git("rev-parse", "HEAD")
-    status = _git("status", "--porcelain", "--", "keyfill")
-    return head, (None if status is None else bool(status))
+    changed = _git("diff", "--name-only", "HEAD", "--", "keyfill")
+    return head, (None if changed is None else sorted(changed.splitlines()))
 
 
 def machine() -> dict:
     """The processor's name, the core count, Python's version and those of the measured libraries loaded."""
     info = {"cpu": cpu_name(), "cores": os.cpu_count(), "python": platform.python_version()}
     for name in VERSIONED:
-        version = getattr(sys.modules.get(name), "__version__", None)
-        if version:
-            info[name] = str(version)
+        if name in sys.modules:
+            try:
+                info[name] = metadata.version(name)
+            except metadata.PackageNotFoundError:
+                continue
     return info
 
 
@@ -109,7 +113,7 @@ class Run:
         head, dirty = commit()
         record = {
             "name": name,
-            "script": _repo_path(self.argv[0]),
+            "script": repo_path(self.argv[0]),
             "command": command_line(self.argv),
             "commit": head,
             "dirty": dirty,
@@ -124,8 +128,15 @@ class Run:
         record = plain(record)
         if write:
             path = write_record(record, directory)
-            print(f"recorded {_repo_path(str(path))}", file=sys.stderr)
+            print(f"recorded {repo_path(str(path))}", file=sys.stderr)
         return record
+
+
+def summary(record: dict) -> str:
+    """One line for a script's text output: the machine and the 1-minute load before and after the run."""
+    m = record["machine"]
+    before, after = record["load_average"]["before"][0], record["load_average"]["after"][0]
+    return f"machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; load average {before:.2f} -> {after:.2f}"
 
 
 def _default(value):

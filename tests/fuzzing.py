@@ -1,4 +1,4 @@
-"""Mutation fuzzing of keyfill's inputs: BVH text, USD text, edit TOML and model folders.
+"""Mutation fuzzing of keyfill's inputs: BVH text, USD text, edit TOML, model folders and glTF files.
 
 Every case is a seed input (a test fixture, an example, the shipped model)
 changed by a few random mutations, fed to the library (and, for some cases,
@@ -44,8 +44,8 @@ DATA = HERE / "data"
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-KINDS = ("bvh", "usd", "toml", "model")
-SUFFIX = {"bvh": ".bvh", "usd": ".usda", "toml": ".toml", "model": ""}
+KINDS = ("bvh", "usd", "toml", "model", "gltf")
+SUFFIX = {"bvh": ".bvh", "usd": ".usda", "toml": ".toml", "model": "", "gltf": ".glb"}
 
 # --- seeds ------------------------------------------------------------------------------------------
 
@@ -103,7 +103,32 @@ def seeds(kind: str) -> list[bytes]:
         return [(ROOT / "examples" / "edit" / "lamp_lift.toml").read_bytes(), RICH_TOML.encode()]
     if kind == "model":
         return [_pack(ARNN_MODEL)]
+    if kind == "gltf":
+        return _gltf_seeds()
     raise ValueError(kind)
+
+
+def _gltf_seeds() -> list[bytes]:
+    """What keyfill writes (a .glb, a .gltf with its buffer embedded) and a character with a mesh under an
+    Armature node (``tests/test_gltf.py``'s hand-built rig)."""
+    from test_gltf import character, glb
+
+    from keyfill import io
+    from keyfill.io import gltf_write
+
+    with tempfile.TemporaryDirectory() as tmp:
+        motion = io.load(DATA / "edge_layouts_crlf.bvh")
+        io.save(motion, Path(tmp) / "a.glb")
+        gltf_write.write(io.load(DATA / "cmu_02_03_cgspeed_first4frames.bvh"), Path(tmp) / "b.gltf", sidecar=None)
+        return [(Path(tmp) / "a.glb").read_bytes(), (Path(tmp) / "b.gltf").read_bytes(), glb(*character()[:2])]
+
+
+def _glb_chunks(data: bytes) -> tuple[bytes, bytes] | None:
+    """``(JSON chunk, the rest after it)`` of a well-formed start of a .glb, else None."""
+    if data[:4] != b"glTF" or len(data) < 20:
+        return None
+    n = int.from_bytes(data[12:16], "little")
+    return (data[20: 20 + n], data[20 + n:]) if 20 + n <= len(data) else None
 
 
 def _pack(folder: Path) -> bytes:
@@ -133,6 +158,15 @@ WORDS = [
     b"timeCodesPerSecond", b"endTimeCode", b"startTimeCode", b"keys", b"names", b"channels", b"joint", b"frame",
     b"time", b"move", b"target", b"timing", b"epsilon", b"hidden_size", b"sizes", b"arch", b"kind", b"skeleton",
     b"normalizer", b"mean", b"std", b"parents", b"offsets", b"version", b"format", b"architecture",
+]
+#: words of glTF's JSON, for the mutations of glTF inputs
+GLTF_WORDS = [
+    b"nodes", b"children", b"skins", b"joints", b"inverseBindMatrices", b"animations", b"channels", b"samplers",
+    b"sampler", b"target", b"node", b"path", b"translation", b"rotation", b"scale", b"weights", b"matrix", b"input",
+    b"output", b"interpolation", b"STEP", b"CUBICSPLINE", b"accessors", b"bufferView", b"bufferViews", b"byteOffset",
+    b"byteLength", b"byteStride", b"count", b"componentType", b"5126", b"5121", b"normalized", b"type", b"VEC4",
+    b"MAT4", b"SCALAR", b"sparse", b"buffers", b"uri", b"../case.bin", b"/etc/passwd", b"data:,", b"extras",
+    b"keyfill", b"fps", b"metersPerUnit", b"upAxis", b"endSites", b"keyMask",
 ]
 _NUM = re.compile(rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 _TOKEN = re.compile(rb"[^\s\[\]{}(),=\"']+")
@@ -164,6 +198,17 @@ def mutate(data: bytes, rnd: random.Random, kind: str) -> bytes:
             else:
                 weights = mutate(weights, rnd, "bytes")
         return config + b"\n@@WEIGHTS@@\n" + weights
+    chunks = _glb_chunks(data) if kind == "gltf" else None
+    if chunks is not None and rnd.random() < 0.9:  # mostly the JSON; the lengths mostly follow it
+        text, rest = chunks
+        if rnd.random() < 0.75:
+            text = mutate(text, rnd, "gltf")
+        else:
+            rest = rest[:8] + mutate(rest[8:], rnd, "bytes")
+        n = len(text) if rnd.random() < 0.9 else len(chunks[0])
+        body = n.to_bytes(4, "little") + data[16:20] + text + rest
+        total = 12 + len(body) if rnd.random() < 0.9 else len(data)
+        return data[:8] + total.to_bytes(4, "little") + body
     for _ in range(rnd.choice((1, 1, 1, 2, 3))):
         data = _mutate_once(data, rnd, kind)
     return data
@@ -194,7 +239,7 @@ def _mutate_once(data: bytes, rnd: random.Random, kind: str) -> bytes:
         got = _spans(_TOKEN, data, rnd)
         if got:
             _, (a, b) = got
-            return data[:a] + rnd.choice(WORDS) + data[b:]
+            return data[:a] + rnd.choice(WORDS + GLTF_WORDS if kind == "gltf" else WORDS) + data[b:]
     if op == 4 and n:  # delete a span
         a = rnd.randrange(n)
         return data[:a] + data[a + rnd.choice((1, 2, 8, 64, 1024)):]
@@ -275,7 +320,7 @@ def _motion_case(path: Path, work: Path, with_cli: bool) -> Outcome:
     from keyfill.errors import KeyfillError
 
     if with_cli:
-        return _cli(["convert", str(path), str(work / ("cli.bvh" if path.suffix != ".bvh" else "cli.usda"))])
+        return _cli(["convert", str(path), str(work / ("cli.bvh" if path.suffix != ".bvh" else "cli.glb"))])
     try:
         motion = io.load(path)
     except KeyfillError as e:
@@ -284,7 +329,7 @@ def _motion_case(path: Path, work: Path, with_cli: bool) -> Outcome:
     # round trip of a long one takes seconds per format, which the benchmarks measure).
     if motion.num_frames * motion.num_joints > ROUND_TRIP_MAX:
         return Outcome("ok")
-    for out in (work / "back.usda", work / "back.bvh"):
+    for out in (work / "back.usda", work / "back.bvh") + ((work / "back.glb",) if path.suffix == ".glb" else ()):
         try:
             io.save(motion, out)
         except KeyfillError as e:
@@ -343,7 +388,7 @@ def _run_case(kind: str, data: bytes, work: Path, variant: int) -> Outcome:
             (folder / "config.json").write_bytes(config)
             (folder / "weights.safetensors").write_bytes(weights)
             return _model_case(folder)
-        path = work / ("case" + SUFFIX[kind])
+        path = work / ("case" + (".gltf" if kind == "gltf" and data[:1] == b"{" else SUFFIX[kind]))
         path.write_bytes(data)
         if kind == "toml":
             return _toml_case(path, variant)
@@ -381,6 +426,7 @@ def _worker(seed: int, indices, mem_mb: int, conn) -> None:
     torch.set_num_threads(1)
     from pxr import Usd  # noqa: F401
 
+    import keyfill.io.gltf_write  # noqa: F401
     import keyfill.io.usd  # noqa: F401
     import keyfill.learn.arnn.model  # noqa: F401
     import keyfill.learn.registry  # noqa: F401

@@ -1,7 +1,7 @@
 """A few hundred mutation cases per ``make test`` (``make fuzz`` runs 100,000: see ``tests/fuzzing.py``).
 
 Hypothesis drives the mutations of :mod:`fuzzing` over the fixtures (BVH
-text, USD text, edit TOML, the shipped model folder); every case must end in
+text, USD text, edit TOML, the shipped model folder, glTF); every case must end in
 success or a :class:`keyfill.errors.KeyfillError`, never another exception.
 """
 
@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-CASES = {"bvh": 60, "usd": 50, "toml": 80, "model": 40}
+CASES = {"bvh": 60, "usd": 50, "toml": 80, "model": 40, "gltf": 60}
 
 
 def _check(kind: str, rnd: random.Random, variant: int, tmp_path_factory) -> None:
@@ -41,6 +41,7 @@ test_mutated_bvh_inputs_fail_cleanly = _test("bvh")
 test_mutated_usd_inputs_fail_cleanly = _test("usd")
 test_mutated_toml_inputs_fail_cleanly = _test("toml")
 test_mutated_model_folders_fail_cleanly = _test("model")
+test_mutated_gltf_inputs_fail_cleanly = _test("gltf")
 
 
 def test_the_seeds_themselves_are_accepted(tmp_path):

@@ -111,7 +111,7 @@ def blender():
 
 
 @pytest.mark.interop
-@pytest.mark.parametrize("suffix", [".bvh", ".usda", ".usdc"])
+@pytest.mark.parametrize("suffix", [".bvh", ".usda", ".usdc", ".glb"])
 @pytest.mark.parametrize("name", BLENDER_FIXTURES)
 def test_blender_imports_keyfill_output_with_same_world_positions(blender, name, suffix, tmp_path):
     motion = io.load(fixture(name))
@@ -122,7 +122,7 @@ def test_blender_imports_keyfill_output_with_same_world_positions(blender, name,
 
 
 @pytest.mark.interop
-@pytest.mark.parametrize("suffix", [".bvh", ".usda"])
+@pytest.mark.parametrize("suffix", [".bvh", ".usda", ".glb"])
 def test_blender_comparison_can_fail(blender, suffix, tmp_path):
     """A file whose Hips rotation at frame 5 is replaced (0.1 rad about Y) is caught at frame 5 only."""
     motion = io.load(fixture("dataset-1_walk_normal_002.bvh"))

@@ -79,10 +79,11 @@ class Rig:
     scale: float
 
 
-def pick(items: list[dict], wanted: str | int | None, what: str, label) -> int:
-    """The index of the ``what`` (skin, animation) to read: ``wanted`` (name or index) or the first (noted)."""
+def pick(items: list[dict], wanted: str | int | None, what: str, label, note: bool = True) -> int:
+    """The index of the ``what`` (skin, animation) to read: ``wanted`` (name or index) or the first (noted
+    unless ``note`` is false)."""
     if wanted is None:
-        if len(items) > 1:
+        if len(items) > 1 and note:
             name = items[0].get("name")
             progress.note(f"{label}: {len(items)} {what}s; reading the first"
                           f"{f' ({name!r})' if name else ''}")
@@ -161,12 +162,12 @@ def joint_names(nodes: list[dict], joints: list[int]) -> list[str]:
     return out
 
 
-def rig_of(doc: Document, skin: str | int | None) -> Rig:
+def rig_of(doc: Document, skin: str | int | None, note: bool = True) -> Rig:
     """The :class:`Rig` of the chosen skin (see :func:`pick`)."""
     label, nodes, skins = doc.label, doc.items("nodes"), doc.items("skins")
     if not skins:
         raise FormatError("no skin in this file: keyfill reads a skeleton from a glTF skin", label)
-    s = pick(skins, skin, "skin", label)
+    s = pick(skins, skin, "skin", label, note)
     joints = skins[s].get("joints", [])
     if not joints:
         raise FormatError(f"skin {s} has no joints", label)

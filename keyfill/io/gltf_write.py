@@ -144,7 +144,7 @@ def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
     from keyfill import __version__
 
     doc = load_document(template, template)
-    rig = rig_of(doc, None)
+    rig = rig_of(doc, None, note=False)  # the skin the motion was read from (noted then)
     sk = motion.skeleton
     if rig.names != list(sk.names) or not np.array_equal(rig.parents, sk.parents):
         raise UsageError(f"{template}: its skin's joints are not those of the motion, so its meshes cannot be "
@@ -200,7 +200,7 @@ def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
         sampler["output"] += offset_acc
     anims = raw.setdefault("animations", [])
     if anims:
-        anims[pick(anims, None, "animation", template)] = anim
+        anims[pick(anims, None, "animation", template, note=False)] = anim
     else:
         anims.append(anim)
     skin = raw["skins"][rig.skin]

@@ -60,8 +60,8 @@ def to_blender_frame(world: np.ndarray, meters_per_unit: float) -> np.ndarray:
 
 
 def bone_names(motion: Motion, fmt: str) -> list[str]:
-    """Blender's bone name for each joint: the BVH name, or the UsdSkel joint path's last component."""
-    if fmt == "bvh":
+    """Blender's bone name for each joint: the BVH or glTF name, or the UsdSkel joint path's last component."""
+    if fmt in ("bvh", "gltf"):
         return [n.encode("utf-8")[:63].decode("utf-8", "ignore") for n in motion.skeleton.names]
     return [p.rsplit("/", 1)[-1] for p in joint_paths(motion.skeleton)]
 
@@ -84,7 +84,7 @@ def blender_deviation(
     io.save(motion, path)
     sk = motion.skeleton
     result = blender_world_positions(path, sk.meters_per_unit)
-    fmt = "bvh" if suffix == ".bvh" else "usd"
+    fmt = {".bvh": "bvh", ".glb": "gltf", ".gltf": "gltf"}.get(suffix, "usd")
     if result["frames"] != motion.num_frames:
         raise AssertionError(f"Blender sees {result['frames']} frames, keyfill wrote {motion.num_frames}")
     names = bone_names(motion, fmt)

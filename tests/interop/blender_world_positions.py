@@ -1,4 +1,4 @@
-"""Import a BVH or USD file into Blender and print every bone head's world position per frame.
+"""Import a BVH, USD or glTF file into Blender and print every bone head's world position per frame.
 
 Runs inside Blender's Python (the ``bpy`` wheel in ``.venv-blender``, which
 cannot share keyfill's venv: it pins numpy<2), so it imports nothing from
@@ -27,6 +27,10 @@ and with keyfill:
   same +90 degree turn about X and, with ``apply_unit_conversion_scale=True``
   and ``scale=1``, scales by the stage's ``metersPerUnit``. Time code i is
   Blender frame i. ``--scale`` is ignored (the file carries its unit).
+* glTF (``bpy.ops.import_scene.gltf``): the file is metres and Y-up, turned Z-up
+  the same way; ``--scale`` is ignored. The importer turns seconds into frames at
+  the scene's rate, so the scene's fps is first set to the animation's
+  ``extras.keyfill.fps`` (read from the file's JSON here).
 
 ``positions[i]`` is always the file's frame i (Blender frame ``frame_start + i``).
 
@@ -38,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import struct
 import sys
 from pathlib import Path
 
@@ -48,9 +53,22 @@ def _clear_scene() -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
+def _gltf_fps(path: Path) -> float:
+    data = path.read_bytes()
+    text = data[20: 20 + struct.unpack_from("<I", data, 12)[0]] if data[:4] == b"glTF" else data
+    anims = json.loads(text).get("animations", [])
+    return float(anims[0].get("extras", {}).get("keyfill", {}).get("fps", 24.0)) if anims else 24.0
+
+
 def _import(path: Path, scale: float) -> str:
-    fmt = "bvh" if path.suffix.lower() == ".bvh" else "usd"
-    if fmt == "bvh":
+    suffix = path.suffix.lower()
+    fmt = "bvh" if suffix == ".bvh" else "gltf" if suffix in (".glb", ".gltf") else "usd"
+    if fmt == "gltf":
+        fps = _gltf_fps(path)
+        bpy.context.scene.render.fps = round(fps)
+        bpy.context.scene.render.fps_base = round(fps) / fps
+        result = bpy.ops.import_scene.gltf(filepath=str(path))
+    elif fmt == "bvh":
         result = bpy.ops.import_anim.bvh(
             filepath=str(path),
             target="ARMATURE",
@@ -116,7 +134,7 @@ def world_positions(path: Path, scale: float) -> dict:
 
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("file", type=Path, help="a .bvh, .usda, .usdc or .usd file")
+    parser.add_argument("file", type=Path, help="a .bvh, .usda, .usdc, .usd, .glb or .gltf file")
     parser.add_argument("--scale", type=float, default=0.01, help="BVH only: meters per file unit (default 0.01, cm)")
     parser.add_argument("--out", default="-", help="JSON output file ('-': stdout, the default)")
     args = parser.parse_args(argv)

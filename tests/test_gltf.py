@@ -339,6 +339,12 @@ def test_complete_keeps_the_mesh_of_a_character(capsys, tmp_path):
     view = out["bufferViews"][acc["bufferView"]]
     vertices = np.frombuffer(data, "<f4", 9, view["byteOffset"] + acc.get("byteOffset", 0)).reshape(3, 3)
     assert np.array_equal(vertices, np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]], dtype=np.float32))
+    used = {s[k] for s in out["animations"][0]["samplers"] for k in ("input", "output")}
+    used |= {out["skins"][0]["inverseBindMatrices"], *out["meshes"][0]["primitives"][0]["attributes"].values(),
+             out["meshes"][0]["primitives"][0]["indices"]}
+    assert used == set(range(len(out["accessors"])))  # the animation replaced left nothing behind
+    code, _, err = run(capsys, "complete", tmp_path / "filled.glb", "--keys", "0,4", "-o", tmp_path / "again.glb")
+    assert code == 0 and (tmp_path / "again.glb").stat().st_size == (tmp_path / "filled.glb").stat().st_size
     filled, source = io.load(tmp_path / "filled.glb"), io.load(tmp_path / "char.gltf")
     assert len(out["animations"]) == 1 and filled.keys.to_list() == [0, 4]
     assert np.abs(filled.world_positions()[[0, 4]] - source.world_positions()[[0, 4]]).max() < 1e-4

@@ -64,6 +64,8 @@ SCHEMA = {
     "buffers": {"uri": _STR, "byteLength": _INT},
     "scenes": {"nodes": _INTS},
     "images": {"uri": _STR, "bufferView": _INT, "mimeType": _STR},
+    "meshes": {"primitives": _OBJS},
+    "primitives": {"attributes": _OBJ, "indices": _INT, "targets": _OBJS},
 }
 _KINDS = {
     _INT: lambda v: type(v) is int,
@@ -83,7 +85,7 @@ def check_schema(raw: dict, label) -> None:
     if "scene" in raw and type(raw["scene"]) is not int:
         raise FormatError("not glTF: 'scene' is not a whole number", label)
     todo = [(key, f"{key}[{i}]", item) for key in ("nodes", "skins", "animations", "accessors", "bufferViews",
-                                                     "buffers", "scenes", "images")
+                                                     "buffers", "scenes", "images", "meshes")
             for i, item in enumerate(_objects(raw, key, label))]
     while todo:
         kind, where, obj = todo.pop()

@@ -137,6 +137,60 @@ def _fresh(motion: Motion) -> tuple[dict, bytes]:
     return json.loads(gltf.gltf_to_json()), bytes(writer.data)
 
 
+#: extensions that refer to no accessor and no buffer view (the others may: then nothing is pruned)
+PLAIN_EXTENSIONS = ("KHR_materials_", "KHR_texture_transform", "KHR_lights_punctual", "KHR_texture_basisu",
+                    "EXT_texture_webp", "KHR_mesh_quantization")
+
+
+def _accessor_refs(raw: dict) -> list[tuple[dict, str]]:
+    """Every ``(object, key)`` of ``raw`` whose value is an accessor index, in the places glTF 2.0 has them."""
+    refs = []  # the types are those gltf_buffers.check_schema checked
+    for prim in (p for mesh in raw.get("meshes", []) for p in mesh.get("primitives", [])):
+        for attrs in [prim.get("attributes", {}), *prim.get("targets", [])]:
+            refs += [(attrs, k) for k in attrs]
+        refs += [(prim, "indices")] if "indices" in prim else []
+    refs += [(skin, "inverseBindMatrices") for skin in raw.get("skins", []) if "inverseBindMatrices" in skin]
+    refs += [(s, k) for a in raw.get("animations", []) for s in a.get("samplers", []) for k in ("input", "output")
+             if k in s]
+    return [(obj, key) for obj, key in refs if type(obj[key]) is int]
+
+
+def _view_refs(raw: dict) -> list[tuple[dict, str]]:
+    """Every ``(object, "bufferView")`` of ``raw``: accessors, their sparse parts and images."""
+    objs = list(raw.get("accessors", [])) + list(raw.get("images", []))
+    objs += [acc["sparse"][part] for acc in raw.get("accessors", []) if isinstance(acc.get("sparse"), dict)
+             for part in ("indices", "values") if isinstance(acc["sparse"].get(part), dict)]
+    return [(obj, "bufferView") for obj in objs if type(obj.get("bufferView")) is int]
+
+
+def _renumber(items: list, dead: set[int], refs: list[tuple[dict, str]]) -> list:
+    """``items`` without the indices ``dead``, every reference in ``refs`` renumbered to match."""
+    new, kept = {}, []
+    for i, item in enumerate(items):
+        if i not in dead:
+            new[i] = len(kept)
+            kept.append(item)
+    for obj, key in refs:
+        obj[key] = new.get(obj[key], obj[key])
+    return kept
+
+
+def _drop_animation(raw: dict, a: int) -> None:
+    """Remove animation ``a`` and, unless an extension may refer to them, the accessors and buffer views that
+    only it used (the others renumbered), in place."""
+    old = raw["animations"].pop(a)
+    if any(not str(e).startswith(PLAIN_EXTENSIONS) for e in raw.get("extensionsUsed", [])):
+        return
+    refs = _accessor_refs(raw)
+    used = {obj[key] for obj, key in refs}
+    dead = {s.get(k) for s in old.get("samplers", []) for k in ("input", "output")} - used
+    raw["accessors"] = _renumber(raw.get("accessors", []), dead, refs)
+    refs = _view_refs(raw)
+    used = {obj[key] for obj, key in refs}
+    raw["bufferViews"] = _renumber(raw.get("bufferViews", []), set(range(len(raw.get("bufferViews", [])))) - used,
+                                   refs)
+
+
 def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
     """The JSON and buffer of ``template`` with ``motion`` as the animation of its skin."""
     from pygltflib import GLTF2
@@ -150,20 +204,21 @@ def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
         raise UsageError(f"{template}: its skin's joints are not those of the motion, so its meshes cannot be "
                          "kept; write to a file of another format, or read the motion from this file")
     raw = doc.json
+    anims = raw.setdefault("animations", [])
+    replaced = pick(anims, None, "animation", template, note=False) if anims else 0
+    if anims:
+        _drop_animation(raw, replaced)
     blob = bytearray()
-    bases = []
-    for i, data in enumerate(doc.buffers):
-        if data is None:
-            raise FormatError(f"buffer {i} has no data keyfill can read (an extension's?); its meshes cannot be "
-                              "kept", template)
-        blob += b"\0" * (-len(blob) % 8)
-        bases.append(len(blob))
-        blob += data
-    for i, view in enumerate(raw.get("bufferViews", [])):
-        if not 0 <= view.get("buffer", -1) < len(bases):
-            raise FormatError(f"bufferView {i} names buffer {view.get('buffer')!r}, which does not exist", template)
-        view["byteOffset"] = view.get("byteOffset", 0) + bases[view["buffer"]]
-        view["buffer"] = 0
+    for i, view in enumerate(raw.get("bufferViews", [])):  # each view's bytes, at its offset's residue mod 8
+        b = view.get("buffer")
+        data = doc.buffers[b] if type(b) is int and 0 <= b < len(doc.buffers) else None
+        start, length = view.get("byteOffset", 0), view.get("byteLength", 0)
+        if data is None or not 0 <= start <= start + length <= len(data):
+            raise FormatError(f"bufferView {i} does not lie in a buffer keyfill can read (one an extension fills?); "
+                              "the file's meshes cannot be kept", template)
+        blob += b"\0" * ((start - len(blob)) % 8)
+        view.update(buffer=0, byteOffset=len(blob))
+        blob += data[start: start + length]
     scratch = GLTF2()
     writer = BufferWriter(scratch)  # the images and the animation, appended to the template's views below
     embedded = []
@@ -198,11 +253,7 @@ def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
     for sampler in anim["samplers"]:
         sampler["input"] += offset_acc
         sampler["output"] += offset_acc
-    anims = raw.setdefault("animations", [])
-    if anims:
-        anims[pick(anims, None, "animation", template, note=False)] = anim
-    else:
-        anims.append(anim)
+    anims.insert(replaced, anim)
     skin = raw["skins"][rig.skin]
     skin["extras"] = {**(skin["extras"] if isinstance(skin.get("extras"), dict) else {}), EXTRAS: _layout(motion)}
     raw["asset"]["generator"] = f"keyfill {__version__}"

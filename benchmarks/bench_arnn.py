@@ -20,6 +20,13 @@ split of the dataset (the last 20 % of its sequences) with all keys and with
 1-2 keys deleted; a markdown table with key, frame and total loss, the frame
 loss relative to cubic, and each model's training time from its config.
 
+Each part is recorded (``results.py``; not with ``--no-record``): ``benchmarks/results/arnn-inference.json``
+(``frames``, ``keys``, ``model``, ``threads``, ``repeat`` and the timings above, each ``median`` and
+``best`` in ms) and ``arnn-tables.json`` (``data``, ``test_sequences``, ``seed`` and ``rows``: per model
+``label``, ``path``, ``arch``, ``curriculum``, ``epochs``, training minutes, and the scores
+``all_keys`` / ``deleted_keys``; then each model with exact keys, cubic and linear). The first model
+with the ARNN architecture and the curriculum is the one the goals judge.
+
     .venv/bin/python benchmarks/bench_arnn.py --inference
     .venv/bin/python benchmarks/bench_arnn.py --tables data/hops \\
         --model "ARNN, curriculum=data/models/arnn" --model "ARNN, no curriculum=data/models/arnn-nocurr"
@@ -28,9 +35,6 @@ loss relative to cubic, and each model's training time from its config.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -38,17 +42,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import results
 import torch
 from timing import timed_ms
 
 ROOT = Path(__file__).resolve().parents[1]
 GOAL_MS = 20.0
-
-
-def machine() -> str:
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return f"{platform.machine()}, {os.cpu_count()} cores, load {load:.2f}, torch {torch.__version__}, " \
-           f"{torch.get_num_threads()} thread(s)"
 
 
 def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
@@ -84,7 +83,7 @@ def inference(keys_file: Path, model: str | None, repeat: int) -> dict:
     return out
 
 
-def tables(data: str, models: list[tuple[str, str]], seed: int) -> list[dict]:
+def tables(data: str, models: list[tuple[str, str]], seed: int) -> dict:
     from keyfill.learn.arnn import model as arnn
     from keyfill.learn.lamp_data import read_sequences, split
     from keyfill.learn.protocols.keys import evaluate
@@ -105,7 +104,43 @@ def tables(data: str, models: list[tuple[str, str]], seed: int) -> list[dict]:
     for name in ("cubic", "linear"):
         rep = evaluate(name, test, seed=seed)
         rows.append({"label": name, **{c: s.as_dict() for c, s in rep.scores.items()}})
-    return rows
+    return {"data": data, "test_sequences": len(test), "seed": seed, "rows": rows}
+
+
+def inference_goals(figures: dict) -> list[dict]:
+    """Issue 4's goal: a 3-hop completion under 20 ms (the median of ``complete``)."""
+    ms = figures["complete_ms"]["median"]
+    return [results.goal(4, f"3-hop lamp completion under {GOAL_MS:g} ms", f"{ms:.1f} ms (median of "
+                                                                            f"{figures['repeat']})", ms < GOAL_MS)]
+
+
+def _totals(rows: list[dict]) -> str:
+    return " / ".join(f"{r['all_keys']['total']:.5f}" for r in rows)
+
+
+def table_goals(rows: list[dict]) -> list[dict]:
+    """The goals of issues 4 and 14 on Tables 1-2, judged for the first ARNN trained with the curriculum."""
+    trained = [r for r in rows if "arch" in r]
+    subject = next((r for r in trained if r["arch"] == "arnn" and r["curriculum"]), None)
+    if subject is None:
+        return []
+    cubic = next(r for r in rows if r["label"] == "cubic")
+    a, d = (subject[p]["frame"] / cubic[p]["frame"] for p in ("all_keys", "deleted_keys"))
+    out = [results.goal(4, "ARNN frame error at most half of cubic's, with all keys and with 1-2 keys deleted",
+                        f"{a:.2f}x (all keys), {d:.2f}x (deleted)", a <= 0.5 and d <= 0.5)]
+    for goal_issue, text, others in (
+            (4, "Table 1: the curriculum beats none", [r for r in trained if r["arch"] == "arnn" and not r["curriculum"]]),
+            (14, "the ARNN has the lowest total of the three architectures in both tables",
+             [r for r in trained if r["arch"] != "arnn" and r["curriculum"]])):
+        if others:
+            wins = all(subject[p]["total"] < r[p]["total"] for r in others for p in ("all_keys", "deleted_keys"))
+            deleted = " / ".join(f"{r['deleted_keys']['total']:.5f}" for r in others)
+            out.append(results.goal(goal_issue, text, f"total {subject['all_keys']['total']:.5f} against "
+                                    f"{_totals(others)} (all keys), {subject['deleted_keys']['total']:.5f} against "
+                                    f"{deleted} (deleted)", wins))
+    out.append(results.goal(14, "ARNN frame error at most 0.8x cubic's (all keys) and 0.45x (1-2 keys deleted)",
+                            f"{a:.2f}x and {d:.2f}x", a <= 0.8 and d <= 0.45))
+    return out
 
 
 def markdown(rows: list[dict], test_sequences: int) -> str:
@@ -138,22 +173,31 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=100)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0, help="seed of the key deletions")
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--json", action="store_true", help="print the records as JSON")
+    results.add_option(ap)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    report = {"machine": machine()}
+    report = {}
     if args.inference:
+        bench = results.Run()
         model = args.model[0].split("=", 1)[-1] if args.model else None
-        report["inference"] = inference(args.keys, model, args.repeat)
+        figures = {**inference(args.keys, model, args.repeat), "model": model, "threads": args.threads,
+                   "repeat": args.repeat}
+        report["inference"] = bench.record("arnn-inference", figures, inference_goals(figures),
+                                           write=not args.no_record)
     if args.tables:
-        models = [tuple(m.split("=", 1)) for m in args.model]
-        report["tables"] = tables(args.tables, models, args.seed)
+        bench = results.Run()
+        figures = tables(args.tables, [tuple(m.split("=", 1)) for m in args.model], args.seed)
+        report["tables"] = bench.record("arnn-tables", figures, table_goals(figures["rows"]), write=not args.no_record)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(results.dumps(report), end="")
         return
-    print(report["machine"])
+    for record in report.values():
+        print(results.summary(record))
+        for g in record["goals"]:
+            print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
     if "inference" in report:
-        r = report["inference"]
+        r = report["inference"]["figures"]
         print(f"3-hop sequence, {r['frames']} frames, {r['keys']} keys:          median      best")
         rows = [("network", "network_ms", ""), ("complete", "complete_ms", f"goal {GOAL_MS:.0f} ms"),
                 ("cubic", "cubic_ms", "peer, same run"), ("load", "load_ms", "model folder, once per process"),
@@ -163,10 +207,8 @@ def main() -> None:
         print(f"  complete / goal: {r['complete_ms']['median'] / GOAL_MS:.2f} (median), "
               f"{r['complete_ms']['best'] / GOAL_MS:.2f} (best)")
     if "tables" in report:
-        from keyfill.learn.lamp_data import read_sequences, split
-
-        n = len(split(read_sequences(args.tables))["test"])
-        print(markdown(report["tables"], n))
+        f = report["tables"]["figures"]
+        print(markdown(f["rows"], f["test_sequences"]))
 
 
 if __name__ == "__main__":

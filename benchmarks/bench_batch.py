@@ -25,6 +25,10 @@ ONNX (goals: start-up at most half of torch's; 1 x 30 latency no worse):
   onnxruntime, one thread each) and a 30-frame lamp completion of the network
   (``predict``), in process.
 
+The run is recorded in ``benchmarks/results/batch.json`` (``results.py``; not with
+``--no-record``): ``batch`` (left out with ``--skip-batch``), ``startup``, ``latency`` (parity
+included) and ``seconds``.
+
     .venv/bin/python benchmarks/bench_batch.py                 # --files 1000 --singles 20 --repeat 7
     .venv/bin/python benchmarks/bench_batch.py --json
 """
@@ -32,7 +36,7 @@ ONNX (goals: start-up at most half of torch's; 1 x 30 latency no worse):
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import shutil
 import statistics
 import sys
@@ -41,12 +45,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_bvh_io import load_average, machine
+import results
 from bench_complete import keyfill_command, timed_run
 from timing import timed_ms
 
 ROOT = Path(__file__).resolve().parents[1]
 LAMP_KEYS = ROOT / "examples" / "lamp" / "keys.usda"
+BATCH_GOAL, STARTUP_GOAL, PARITY_GOAL = 20.0, 0.5, 1e-4
 
 
 def batch_vs_single(work: Path, files: int, singles: int, workers: int | None) -> dict:
@@ -69,11 +74,12 @@ def batch_vs_single(work: Path, files: int, singles: int, workers: int | None) -
     outputs = sorted((work / "out").glob("*.usda"))
     assert len(outputs) == files, f"{len(outputs)} outputs of {files}"
     per_single = statistics.median(single)
+    shown = {str(src): "IN/", str(work / "out") + "/": "OUT/"}
     per_batch = wall / files
     return {"files": files, "single_sample": int(singles), "single_median_s": per_single,
             "single_best_s": min(single), "batch_wall_s": wall, "batch_cpu_s": cpu, "batch_per_file_s": per_batch,
             "ratio": per_single / per_batch, "workers": workers or "default (one per core)",
-            "batch_command": " ".join(["keyfill", *cmd[len(kf):]])}
+            "batch_command": " ".join(["keyfill", *(shown.get(a, a) for a in cmd[len(kf):])])}
 
 
 def startup(work: Path, repeat: int) -> dict:
@@ -181,6 +187,29 @@ def latency(model, graph: Path, work: Path, repeat: int) -> dict:
     return out
 
 
+def goals(result: dict) -> list[dict]:
+    """Issue 16's goals: batch per file, ONNX start-up, 1 x 30 latency, parity."""
+    out = []
+    if "batch" in result:
+        b = result["batch"]
+        out.append(results.goal(16, f"{b['files']:,} lamp files in one batch command at least {BATCH_GOAL:g}x faster "
+                                    "per file than single calls", f"{1e3 * b['batch_per_file_s']:.0f} ms against "
+                                    f"{b['single_median_s']:.2f} s per file: {b['ratio']:.0f}x", b["ratio"] >= BATCH_GOAL))
+    s, lat = result["startup"], result["latency"]
+    ratios = {m: s[f"{m}_onnx_over_torch"] for m in ("arnn", "transformer")}
+    out.append(results.goal(16, "start-up of one `complete` with the ONNX runtime at most half of torch's",
+                            f"ARNN {ratios['arnn']:.2f}x, transformer {ratios['transformer']:.2f}x",
+                            all(r <= STARTUP_GOAL for r in ratios.values())))
+    ms = {m: (lat[f"{m}_1x30_onnx_ms"]["median"], lat[f"{m}_1x30_torch_ms"]["median"]) for m in ("transformer", "arnn")}
+    out.append(results.goal(16, "1 x 30 frames with onnxruntime no slower than torch",
+                            f"transformer {ms['transformer'][0]:.1f} against {ms['transformer'][1]:.1f} ms, ARNN "
+                            f"{ms['arnn'][0]:.1f} against {ms['arnn'][1]:.1f} ms", all(o <= t for o, t in ms.values())))
+    parity = (lat["transformer_parity_relative"], lat["arnn_parity_relative_to_std"])
+    out.append(results.goal(16, "onnxruntime equals torch to 1e-4 of the data's scale",
+                            f"transformer {parity[0]:.1e}, ARNN {parity[1]:.1e}", max(parity) <= PARITY_GOAL))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--files", type=int, default=1000, help="lamp files of the batch")
@@ -188,24 +217,26 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, help="--workers of the batch command (default: keyfill's)")
     ap.add_argument("--repeat", type=int, default=7, help="runs per start-up case")
     ap.add_argument("--skip-batch", action="store_true")
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(ap)
     args = ap.parse_args(argv)
-    result = {"machine": machine(), "load_before": load_average()}
+    bench = results.Run()
+    result = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         t = time.perf_counter()
         if not args.skip_batch:
             (work / "batch").mkdir()
             result["batch"] = batch_vs_single(work / "batch", args.files, args.singles, args.workers)
-            result["load_after_batch"] = load_average()
+            result["batch"]["load_after"] = list(os.getloadavg())
         result["startup"], model, graph = startup(work, args.repeat)
         result["latency"] = latency(model, graph, work, 50)
         result["seconds"] = time.perf_counter() - t
-    result["load_after"] = load_average()
+    record = bench.record("batch", result, goals(result), write=not args.no_record)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(results.dumps(record), end="")
         return 0
-    print(f"machine: {result['machine']}; load average before {result['load_before']}, after {result['load_after']}")
+    print(results.summary(record))
     if "batch" in result:
         b = result["batch"]
         print(f"batch: {b['files']} lamp files by one command: {b['batch_wall_s']:.1f} s wall "

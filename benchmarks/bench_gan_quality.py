@@ -28,19 +28,22 @@ Three parts, all on the ``normal`` clips the model never saw:
    bone-length error (cm: every method writes rotations over constant offsets,
    so this checks that nothing else moved).
 
-Without the corpus the script says ``skipped`` and exits 0.
+Without the corpus the script says ``skipped`` and exits 0. The run is recorded in
+``benchmarks/results/gan_quality-<model folder>.json`` (``results.py``; not with ``--no-record``):
+``model``, ``transformer``, ``paper`` (the paper's figures), ``path_cm`` (``{frames: cm}``), ``sampled``
+(the quality report of part 2), ``realism`` (``{gap: {method: figures}}``) and ``seconds``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+import results
 
 from keyfill import io
 from keyfill.errors import DataError
@@ -57,6 +60,11 @@ from keyfill.motion import Keys
 #: a rotation counts as outside its range beyond this (radians): the real clips' hinge joints leave their
 #: zero-width ranges by up to 0.0064 degrees, the float noise of the BVH text
 RANGE_TOLERANCE = np.radians(0.01)
+#: Zhou et al. 2020: Table 2 (60 fps; 2.1 s is 128 of its frames), Table 4, Eqs. 11-12
+PAPER = {"path_cm_per_frame": 0.7, "path_cm_2s": 5.5, "key_joints_cm": 3.5, "key_root_cm": 10.0,
+         "dna_error_1_cm": 8.4, "dna_error_2_cm": 6.5}
+#: "near the paper's" key errors, as a factor
+NEAR = 2.0
 
 
 def bone_error_cm(motion, reference) -> float:
@@ -130,6 +138,24 @@ def realism_table(model, model_path: str, files: list[Path], gaps, transformer: 
     return out
 
 
+def goals(report: dict) -> list[dict]:
+    """Issue 12's goals for the gan: no range violation or bone-length error, key errors near the paper's."""
+    gan = {gap: table["gan"] for gap, table in report["realism"].items() if "gan" in table}
+    out = []
+    if gan:
+        worst_range = max(r["range_violations_pct"] for r in gan.values())
+        worst_bone = max(r["bone_error_cm"] for r in gan.values())
+        out.append(results.goal(12, "gan: zero joint-range violations and bone-length error between keys",
+                                f"{worst_range:.2f} % and {worst_bone:.1g} cm at keys every "
+                                f"{' and '.join(str(g) for g in gan)} frames", worst_range == 0 and worst_bone < 1e-6))
+    full = report["sampled"]["key_errors"]["full"]
+    joints, root = full["joints_cm"], full["root_cm"]
+    near = joints <= NEAR * PAPER["key_joints_cm"] and root <= NEAR * PAPER["key_root_cm"]
+    return out + [results.goal(12, f"gan key errors before post-processing near the paper's (Table 4: "
+                                   f"{PAPER['key_joints_cm']} cm joints, {PAPER['key_root_cm']} cm root; within "
+                                   f"{NEAR:g}x)", f"{joints:.1f} cm joints, {root:.0f} cm root", near)]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", help="a full gan model folder")
@@ -141,7 +167,8 @@ def main(argv=None) -> int:
     ap.add_argument("--clips", type=int, default=None, help="score only the first N held-out clips in part 3")
     ap.add_argument("--transformer", default=None, help="a transformer model folder for part 3")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(ap)
     args = ap.parse_args(argv)
     try:
         data = args.data or str(locate("bandai2"))
@@ -149,6 +176,7 @@ def main(argv=None) -> int:
         print(f"skipped: {e}")
         return 0
     print(f"load average before: {os.getloadavg()[0]:.2f}", file=sys.stderr)
+    bench = results.Run()
     started = time.perf_counter()
     model = load_model(args.model)
     corpus = load_corpus([data], fold=model.folded).select(include=(args.test_pattern,))
@@ -158,8 +186,10 @@ def main(argv=None) -> int:
     report["realism"] = realism_table(model, args.model, files, [int(g) for g in args.gaps.split(",")], args.transformer)
     report["seconds"] = round(time.perf_counter() - started, 1)
     print(f"load average after: {os.getloadavg()[0]:.2f}", file=sys.stderr)
+    figures = {"model": args.model, "transformer": args.transformer, "paper": PAPER, **report}
+    record = bench.record(f"gan_quality-{Path(args.model).name}", figures, goals(report), write=not args.no_record)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(results.dumps(record), end="")
         return 0
 
     def cm(v):
@@ -177,6 +207,8 @@ def main(argv=None) -> int:
         for name, r in table.items():
             print(f"  {name:<12} {r['clips']:>5} {r['foot_skating_cm_s']:>13.2f} {r['jitter_m_s3']:>13.2f} "
                   f"{r['range_violations_pct']:>15.3f} {r['bone_error_cm']:>14.2e}")
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
     return 0
 
 

@@ -15,6 +15,12 @@ Prints markdown tables with medians:
    accepted sequences per hour, against the paper's 10,000 runs x 1,000
    iterations for 300 sequences.
 
+Sections 1-5 are recorded in ``benchmarks/results/simulate.json`` and the build in
+``simulate-dataset.json`` (``results.py``; not with ``--no-record``): ``control``, ``resets``,
+``time_step`` (``reference``, ``shipped_iterations``, ``rows``), ``early_stop`` and ``annealing``;
+and the build's ``sequences``, ``runs``, ``acceptance_rate``, ``wall_s``, ``cpu_s``, ``episodes``,
+``workers``, ``iterations`` and rates.
+
 Usage::
 
     nice -n 5 .venv/bin/python benchmarks/bench_simulate.py                 # sections 1-5, about 3 min
@@ -34,6 +40,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import results
 
 from keyfill.sim.controller import REFERENCE
 from keyfill.sim.hops import analyse, satisfactory
@@ -42,10 +49,11 @@ from keyfill.sim.search import anneal
 from keyfill.sim.settings import DEFAULT_SETTINGS
 
 S = DEFAULT_SETTINGS
+GOAL_SEQUENCES, GOAL_MINUTES = 300, 30.0
 
 
 def load() -> str:
-    return "load average %.2f %.2f %.2f" % os.getloadavg()
+    return "load average {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
 
 
 def median_time(fn, repeats: int) -> float:
@@ -57,7 +65,7 @@ def median_time(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
-def bench_control(repeats: int) -> None:
+def bench_control(repeats: int) -> dict:
     print("\n## 1. Control: keyfill PD torques vs pybullet POSITION_CONTROL (reference controller, one episode)\n")
     with LampWorld(S) as w:
         ep = w.simulate(REFERENCE)
@@ -87,9 +95,11 @@ def bench_control(repeats: int) -> None:
     for name, t in (("keyfill PD, TORQUE_CONTROL (shipped)", t_torque), ("pybullet POSITION_CONTROL", t_pos)):
         print(f"| {name} | {t * 1e3:.1f} | {t / steps * 1e6:.1f} | {steps / t:,.0f} |")
     print(f"\n{steps} steps of {S.time_step * 1e3:.3f} ms; torque control costs {t_torque / t_pos:.2f}x position control.")
+    return {"steps": steps, "torque_ms": t_torque * 1e3, "position_ms": t_pos * 1e3,
+            "torque_us_per_step": t_torque / steps * 1e6, "position_us_per_step": t_pos / steps * 1e6}
 
 
-def bench_resets(repeats: int) -> None:
+def bench_resets(repeats: int) -> dict:
     print("\n## 2. Resets\n")
     with LampWorld(S) as w:
         t_restore = median_time(lambda: w.reset(REFERENCE.start_pose()), max(repeats * 20, 50))
@@ -103,6 +113,7 @@ def bench_resets(repeats: int) -> None:
     print("|---|---|")
     print(f"| restoreState + 6 x resetJointState (shipped, per episode) | {t_restore * 1e6:.0f} us |")
     print(f"| connect + build world (per run) | {t_rebuild * 1e3:.1f} ms |")
+    return {"restore_us": t_restore * 1e6, "rebuild_ms": t_rebuild * 1e3}
 
 
 def controllers(n: int) -> list:
@@ -116,7 +127,7 @@ def controllers(n: int) -> list:
     return out
 
 
-def bench_time_step(n: int) -> None:
+def bench_time_step(n: int) -> dict:
     print(f"\n## 3. Time step and solver iterations ({n} controllers near the reference)\n")
     ctrls = controllers(n)
 
@@ -132,6 +143,7 @@ def bench_time_step(n: int) -> None:
     print(f"reference: 1/1920 s, 100 iterations: {t_ref * 1e3:.0f} ms per episode\n")
     print("| time step | solver iterations | ms / episode | median abs. distance error | median abs. height error | same keep/reject as reference |")
     print("|---|---|---|---|---|---|")
+    rows = []
     for hz in (240, 480, 960):
         for it in (5, 10, 50):
             out, t = evaluate(dataclasses.replace(S, time_step=1 / hz, solver_iterations=it))
@@ -141,9 +153,13 @@ def bench_time_step(n: int) -> None:
             same = np.mean(out[:, 2] == ref[:, 2])
             mark = " (shipped)" if (1 / hz, it) == (S.time_step, S.solver_iterations) else ""
             print(f"| 1/{hz} s{mark} | {it} | {t * 1e3:.1f} | {d_err * 100:.1f} cm | {h_err * 1000:.1f} mm | {same:.0%} |")
+            rows.append({"hz": hz, "iterations": it, "ms_per_episode": t * 1e3, "distance_error_cm": d_err * 100,
+                         "height_error_mm": h_err * 1000, "same_decisions": same})
+    return {"reference": {"hz": 1920, "iterations": 100, "ms_per_episode": t_ref * 1e3},
+            "shipped_iterations": S.solver_iterations, "rows": rows}
 
 
-def bench_early_stop(n: int) -> None:
+def bench_early_stop(n: int) -> dict:
     print("\n## 4. Early termination of episodes that fell\n")
     rng = np.random.default_rng(2)
     fallen = []
@@ -160,9 +176,10 @@ def bench_early_stop(n: int) -> None:
     print("|---|---|---|")
     print(f"| stopped at the fall (shipped) | {steps_stop:.0f} | {t_stop * 1e3:.1f} |")
     print(f"| run to the end | {steps_full:.0f} | {t_full * 1e3:.1f} |")
+    return {"stopped": {"steps": steps_stop, "ms": t_stop * 1e3}, "full": {"steps": steps_full, "ms": t_full * 1e3}}
 
 
-def bench_annealing(runs: int, iterations: int) -> None:
+def bench_annealing(runs: int, iterations: int) -> dict:
     print(f"\n## 5. Annealing in one process ({runs} runs x {iterations} iterations, seed 0)\n")
     with LampWorld(S) as w:
         t = time.perf_counter()
@@ -183,9 +200,12 @@ def bench_annealing(runs: int, iterations: int) -> None:
     h = [r.hops.max_height for r in acc]
     print(f"\nAccepted hops: distance {min(d):.2f}-{max(d):.2f} m (median {statistics.median(d):.2f}), "
           f"base clearance {min(h) * 100:.1f}-{max(h) * 100:.1f} cm (median {statistics.median(h) * 100:.1f}).")
+    return {"runs": runs, "iterations": iterations, "accepted": len(acc),
+            "median_s_per_run": statistics.median(per_run), "episodes_per_s": episodes / el,
+            "accepted_per_hour": len(acc) / el * 3600, "median_distance_m": statistics.median(d)}
 
 
-def bench_dataset(count: int, workers: int, iterations: int, out: Path) -> None:
+def bench_dataset(count: int, workers: int, iterations: int, out: Path) -> dict:
     from keyfill.sim.runner import simulate
 
     print(f"\n## 6. Dataset build: {count} sequences, {workers} workers, {iterations} iterations\n")
@@ -214,6 +234,20 @@ def bench_dataset(count: int, workers: int, iterations: int, out: Path) -> None:
           f"At this rate the paper's {paper_episodes:,} episodes would take "
           f"{paper_episodes / (eps_cpu * workers) / 3600:.0f} h on {workers} otherwise idle cores.")
     print(json.dumps({"wall_s": wall, **summary}))
+    return {"sequences": summary["sequences"], "runs": summary["runs"], "acceptance_rate": summary["acceptance_rate"],
+            "wall_s": wall, "cpu_s": cpu_s, "episodes": summary["new_episodes"], "workers": workers,
+            "iterations": iterations, "episodes_per_s_per_core": eps_core, "episodes_per_cpu_s": eps_cpu,
+            "sequences_per_hour": summary["sequences"] / wall * 3600}
+
+
+def dataset_goals(figures: dict) -> list[dict]:
+    """Issue 3's goal, for a build of at least 300 sequences: 300 in at most 30 minutes."""
+    if figures["sequences"] < GOAL_SEQUENCES:
+        return []
+    minutes = figures["wall_s"] / 60 * GOAL_SEQUENCES / figures["sequences"]
+    return [results.goal(3, f"{GOAL_SEQUENCES} accepted lamp sequences in at most {GOAL_MINUTES:g} min",
+                         f"{minutes:.1f} min ({figures['sequences']} sequences, {figures['workers']} workers)",
+                         minutes <= GOAL_MINUTES)]
 
 
 def main() -> None:
@@ -226,19 +260,22 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("data/bench/hops"))
     ap.add_argument("--only-dataset", action="store_true", help="skip sections 1-5")
+    results.add_option(ap)
     args = ap.parse_args()
     from keyfill.cli.simulate import DEFAULT_ITERATIONS
 
     iterations = args.iterations or DEFAULT_ITERATIONS
     print(f"# keyfill simulate benchmark ({os.cpu_count()} CPUs; {load()})")
     if not args.only_dataset:
-        bench_control(args.repeats)
-        bench_resets(args.repeats)
-        bench_time_step(args.controllers)
-        bench_early_stop(args.controllers)
-        bench_annealing(args.runs, iterations)
+        bench = results.Run()
+        figures = {"control": bench_control(args.repeats), "resets": bench_resets(args.repeats),
+                   "time_step": bench_time_step(args.controllers), "early_stop": bench_early_stop(args.controllers),
+                   "annealing": bench_annealing(args.runs, iterations)}
+        bench.record("simulate", figures, [], write=not args.no_record)
     if args.dataset:
-        bench_dataset(args.dataset, args.workers, iterations, args.out)
+        bench = results.Run()
+        figures = bench_dataset(args.dataset, args.workers, iterations, args.out)
+        bench.record("simulate-dataset", figures, dataset_goals(figures), write=not args.no_record)
     print(f"\n({load()} at the end)")
 
 

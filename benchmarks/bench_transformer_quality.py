@@ -26,18 +26,22 @@ The tables of docs/benchmarks.md (transformer section), from a model trained wit
    gap of 15 or 30, 10 given frames), against interpolation and cubic.
 
 The corpus is read from ``data/bandai2/`` (unpacked from ``../shared`` when
-absent); without it the script says ``skipped`` and exits 0.
+absent); without it the script says ``skipped`` and exits 0. The run is recorded in
+``benchmarks/results/transformer_quality-<model folder>.json`` (``results.py``; not with
+``--no-record``): ``model``, ``protocol``, ``inbetweening`` (``{method: {length: scores}}``),
+``layouts`` (``{layout: {method: scores}}``), the papers' ratios ``ssmct`` and ``qin``
+(``{metric: {length: ratio}}``) and ``seconds``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+import results
 
 from keyfill import interpolate
 from keyfill.errors import DataError
@@ -62,11 +66,28 @@ def ssmct_ratio(metric: str, n: int) -> float:
     return ours / interp
 
 
+def _cells(met: dict) -> str:
+    """``N of M cells`` and the cells missed, from ``{metric: {length: met}}``."""
+    missed = [f"{m} at {n}" for m, by_n in met.items() for n, ok in by_n.items() if not ok]
+    total = sum(len(by_n) for by_n in met.values())
+    return f"{total - len(missed)} of {total} cells" + (f"; missed: {', '.join(missed)}" if missed else "")
+
+
+def goals(goal: dict, qin: dict) -> list[dict]:
+    """Issue 6's goal (SSMCT's ratios, 12 cells) and issue 14's (Qin et al.'s, 9 cells)."""
+    return [results.goal(6, "transformer ratios to interpolation at most SSMCT's, every metric and length (12 cells)",
+                         _cells(goal), all(ok for by_n in goal.values() for ok in by_n.values())),
+            results.goal(14, "transformer ratios to interpolation at most Qin et al.'s at 5, 15 and 30 frames (9 "
+                             "cells)", _cells(qin), all(ok for by_n in qin.values() for ok in by_n.values()))]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("model", help="a model folder trained with the normal style held out")
-    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    ap.add_argument("--json", action="store_true", help="print the record as JSON")
+    results.add_option(ap)
     args = ap.parse_args(argv)
+    bench = results.Run()
     try:
         folder = locate("bandai2")
     except DataError as e:
@@ -91,11 +112,13 @@ def main(argv=None) -> int:
              for m in ("L2Q", "L2P", "NPSS")}
     goal = {m: {n: ratio[m][n] <= ssmct_ratio(m, n) for n in B.LENGTHS} for m in ratio}
     qin = {m: {n: ratio[m][n] <= QIN[m][n] for n in QIN[m]} for m in ratio}
-    report = {"protocol": proto.info, "model": args.model, "model_info": model.info, "inbetweening": inbetween,
-              "layouts": others, "goal_met": goal, "qin_goal_met": qin, "seconds": time.perf_counter() - t0,
-              "load_average": os.getloadavg()}
+    report = {"protocol": proto.info, "model": args.model, "inbetweening": inbetween, "layouts": others,
+              "ssmct": {m: {n: ssmct_ratio(m, n) for n in B.LENGTHS} for m in SSMCT}, "qin": QIN,
+              "seconds": time.perf_counter() - t0}
+    record = bench.record(f"transformer_quality-{Path(args.model).name}", report, goals(goal, qin),
+                          write=not args.no_record)
     if args.json:
-        print(json.dumps(report, indent=2, default=str))
+        print(results.dumps(record), end="")
         return 0
     print(f"LaFAN1 protocol on Bandai-Namco dataset-2: {proto.info['test_windows']} test windows "
           f"({proto.info['test_clips']} normal clips), statistics from {proto.info['train_windows']} windows")

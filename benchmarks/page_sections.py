@@ -160,7 +160,8 @@ def simulate_dataset(f: dict) -> list[str]:
     """A full dataset build, in one sentence."""
     rate = f.get("acceptance_rate")
     return [(f"{num(f['sequences'], 0)} sequences from {num(f.get('runs'), 0)} runs "
-            f"({'-' if rate is None else f'{100 * rate:.0f} %'} accepted) with {f['workers']} workers, "
+            f"({'-' if rate is None else f'{100 * rate:.0f} %'} accepted) with {f['workers']} worker"
+             f"{'s' * (f['workers'] != 1)}, "
             f"{f['iterations']} annealing iterations per run: {num(f['wall_s'], 1, 1 / 60)} min wall, "
             f"{num(f.get('cpu_s'), 1, 1 / 60)} CPU-min, {num(f.get('episodes'), 0)} episodes, "
             f"{num(f.get('episodes_per_s_per_core'), 0)} episodes/s per core, "

@@ -13,7 +13,7 @@ toe):
 
 1. A name is read as lower-case tokens after any namespace prefix (up to the last ``:`` or ``|``, as in
    ``mixamorig1:``): ``LeftUpLeg`` -> left, up, leg; ``DEF-upper_arm.L.001`` -> def, upper, arm, l, 001.
-   The tokens l, left, r, right give the side; the others, without digits and filler (``DEF``, ``J``,
+   The tokens l, left, r, right give the side (also glued to a limb word: ``lhumerus``); the others, without digits and filler (``DEF``, ``J``,
    ``Bip``, ``joint``), joined, give the joint's word (``upleg``, ``upperarm``). A joint whose tokens say
    twist, roll, helper, ik, ctrl, end, nub, ... is a helper and plays no role.
 2. Each side's hand is the top-most joint whose word is hand, wrist or palm; each foot the top-most foot or
@@ -73,6 +73,10 @@ _HAND = {"hand", "wrist", "palm"}
 _FOOT = {"foot", "ankle"}
 _TOE = {"toe", "toes", "toebase", "ball"}
 _CLAVICLE = {"clavicle", "collar", "collarbone", "shoulder"}
+#: limb words a one-letter side may be glued to (Acclaim / CMU ASF names: ``lhumerus``, ``rfoot``)
+_LIMB_WORDS = _HAND | _FOOT | _TOE | _CLAVICLE | {
+    "humerus", "radius", "ulna", "femur", "tibia", "elbow", "knee", "hip", "thigh", "shin", "calf", "arm",
+    "forearm", "upperarm", "lowerarm", "leg", "upleg", "upperleg", "lowerleg", "fingers", "thumb"}
 
 
 @dataclass(frozen=True)
@@ -105,8 +109,8 @@ class RoleMap:
             raise DataError(f"no limb role {unknown[0]!r}; limb roles are {', '.join(_LIMBS)}")
         chains = {c: tuple(int(j) for j in getattr(self, c)) for c in _CHAINS}
         owner: dict[int, str] = {}
-        for role, j in [("hips", int(self.hips)), ("head", int(self.head))] + [
-                (c, j) for c in _CHAINS for j in chains[c]] + list(limbs.items()):
+        for role, j in [("hips", int(self.hips))] + [(c, j) for c in _CHAINS for j in chains[c]] + [
+                ("head", int(self.head))] + list(limbs.items()):
             if not 0 <= j < len(names):
                 raise DataError(f"role {role}: joint index {j} is outside the skeleton's {len(names)} joints")
             if j in owner:
@@ -173,10 +177,12 @@ def _read_name(name: str) -> tuple[str | None, str, bool]:
     tokens = _tokens(name)
     sides = {_SIDE_TOKENS[t] for t in tokens if t in _SIDE_TOKENS}
     word = "".join(t for t in tokens if t not in _SIDE_TOKENS and t not in _FILLER and not t.isdigit())
-    if not sides:  # "Leftarm": the side glued to the word
-        for prefix in ("left", "right"):
-            if word.startswith(prefix) and len(word) > len(prefix):
-                sides, word = {_SIDE_TOKENS[prefix]}, word[len(prefix):]
+    if not sides:  # the side glued to the word: "Leftarm", "lhumerus"
+        for prefix in ("left", "right", "l", "r"):
+            rest = word[len(prefix):]
+            if word.startswith(prefix) and rest and (len(prefix) > 1 or rest in _LIMB_WORDS):
+                sides, word = {_SIDE_TOKENS[prefix]}, rest
+                break
     return (sides.pop() if len(sides) == 1 else None), word, any(t in _HELPER for t in tokens)
 
 

@@ -278,6 +278,38 @@ def test_twist_and_ik_bones_are_not_mapped():
         assert not any("twist" in n.lower() or "ik_" in n for n in mapped), name
 
 
+def with_joint(sk: Skeleton, template: str, child: str, at_parent: bool = True) -> Skeleton:
+    """``sk`` with a joint (per side for a side template) between ``child`` and its parent: at the parent
+    (zero offset) or, with ``at_parent=False``, halfway."""
+    for s in ("l", "r") if "{" in template else ("l",):
+        name, below = side_name(template, s), side_name(child, s)
+        c = sk.names.index(below)
+        names = list(sk.names[:c]) + [name] + list(sk.names[c:])
+        parents = [int(p) for p in sk.parents[:c + 1]] + [int(p) + (p >= c) for p in sk.parents[c:]]
+        parents[c + 1] = c  # the child hangs from the new joint
+        half = sk.offsets[c] * (0 if at_parent else 0.5)
+        offsets = np.concatenate([sk.offsets[:c], [half], [sk.offsets[c] - half], sk.offsets[c + 1:]])
+        sk = Skeleton(names=names, parents=parents, offsets=offsets,
+                      channels=list(sk.channels[:c]) + [sk.channels[c]] + list(sk.channels[c:]), up_axis=sk.up_axis)
+    return sk
+
+
+@pytest.mark.parametrize("template, child, at_parent, changed", [
+    ("{Left}ArmRoll", "{Left}ForeArm", True, {}),  # a roll helper sitting on the upper arm
+    ("{Left}ArmRoll", "{Left}ForeArm", False, {}),  # halfway down the upper arm
+    ("{Left}Arm1", "{Left}ForeArm", True, {}),  # a segment of the upper arm, on it
+    ("{Left}ForeArm.001", "{Left}Hand", False, {}),  # a segment of the forearm, halfway
+    # an unnamed joint on the upper arm: its bone, not the zero-length one above it, is the upper arm
+    ("{Left}ArmX", "{Left}ForeArm", True, {"upper_arm_l": "LeftArmX", "upper_arm_r": "RightArmX"}),
+    ("{Left}UpLegTwist", "{Left}Leg", False, {}),
+    ("SpineRoll", "Spine2", False, {}),  # a helper in the torso: not part of the spine
+])
+def test_helpers_segments_and_zero_length_joints(template, child, at_parent, changed):
+    sk = with_joint(family("lafan1"), template, child, at_parent)
+    assert sk.num_joints == family("lafan1").num_joints + (2 if "{" in template else 1)
+    assert map_roles(sk).to_json() == {**expected(LAFAN1), **changed}
+
+
 def test_joint_order_does_not_matter():
     """SMPL lists its joints breadth first (pelvis, L_Hip, R_Hip, spine1, L_Knee, ...)."""
     sk = family("smpl")
@@ -345,6 +377,13 @@ def test_rig_map_overrides_and_the_rest_is_automatic():
     assert "clavicle_l" not in m
     rest = [k for k in auto if k not in ("spine", "neck", "clavicle_l", "upper_arm_l")]
     assert {k: m[k] for k in rest} == {k: auto[k] for k in rest}
+
+
+def test_rig_map_with_the_head_outside_the_hips():
+    with pytest.raises(DataError) as err:
+        map_roles(family("lafan1"), {"hips": "LeftUpLeg"}, label="walk.bvh")
+    assert str(err.value) == ("walk.bvh: the head 'Head' is not below the hips 'LeftUpLeg'; name both in rig_map")
+    assert err.value.params == ("rig_map",)
 
 
 @pytest.mark.parametrize("name", ["lafan1", "rigify", "joint-named-no-collar", "daz-genesis", "3dsmax-biped"])

@@ -237,15 +237,20 @@ class _Rig:
 
     def bones(self, path: list[int]) -> list[int]:
         """The joints of ``path`` that are limb bones: not helpers, not a later segment of their parent's bone
-        (same word and side: ``DEF-forearm.L.001`` under ``DEF-forearm.L``), not a zero-length bone."""
+        (same word and side: ``DEF-forearm.L.001`` under ``DEF-forearm.L``), not a zero-length bone (one child,
+        not a helper, at the joint itself: that child's bone is the limb's)."""
         out = []
         for j in path:
-            p = self.parents[j]
-            segment = p >= 0 and self.word[j] != "" and (self.word[j], self.side[j]) == (self.word[p], self.side[p])
-            zero_bone = len(self.children[j]) == 1 and self.zero[self.children[j][0]]
-            if not (self.helper[j] or segment or zero_bone):
+            kids = self.children[j]
+            zero_bone = len(kids) == 1 and self.zero[kids[0]] and not (self.helper[kids[0]] or self.segment(kids[0]))
+            if not (self.helper[j] or self.segment(j) or zero_bone):
                 out.append(j)
         return out
+
+    def segment(self, j: int) -> bool:
+        """Whether ``j`` continues its parent's bone: the same word and side (``DEF-forearm.L.001``)."""
+        p = self.parents[j]
+        return p >= 0 and self.word[j] != "" and (self.word[j], self.side[j]) == (self.word[p], self.side[p])
 
     def is_hips(self, j: int) -> bool:
         return not self.helper[j] and (self.word[j] in ("hips", "pelvis") or (self.word[j] == "hip" and
@@ -361,7 +366,7 @@ def _given(skeleton: Skeleton, rig_map, label: str) -> dict:
 
 
 def _torso(rig: _Rig, given: dict, used: set[int], found: dict) -> list[int]:
-    """Find hips and head (into ``found``); the non-helper joints strictly between them, bottom to top."""
+    """Find hips and head (into ``found``); the joints strictly between them, bottom to top."""
     feet = [found[f"foot_{s}"] for s in SIDES if found[f"foot_{s}"] is not None]
     hands = [found[f"hand_{s}"] for s in SIDES if found[f"hand_{s}"] is not None]
     head = found["head"]
@@ -370,7 +375,7 @@ def _torso(rig: _Rig, given: dict, used: set[int], found: dict) -> list[int]:
         hips = rig.lca(feet + ([head] if head is not None else hands))
         above = hips
         while hips is not None and not rig.is_hips(hips) and rig.parents[above] >= 0 \
-                and len(rig.children[rig.parents[above]]) == 1:
+                and len(rig.children[rig.parents[above]]) == 1:  # a hips-named joint straight above (Biped)
             above = rig.parents[above]
             hips = above if rig.is_hips(above) else hips
     elif hips is None:
@@ -390,7 +395,7 @@ def _torso(rig: _Rig, given: dict, used: set[int], found: dict) -> list[int]:
     if stop is None:
         raise DataError(f"{rig.label}: the head {rig.skeleton.names[found['head']]!r} is not below the hips "
                         f"{rig.skeleton.names[found['hips']]!r}; name both in rig_map", params="rig_map")
-    return [t for t in reversed(path) if not rig.helper[t]]
+    return path[::-1]
 
 
 def _find(rig: _Rig, given: dict) -> dict:
@@ -430,11 +435,11 @@ def _find(rig: _Rig, given: dict) -> dict:
     elif given.get("spine"):
         split = 1 + max((i for i, t in enumerate(torso) if t in given["spine"]), default=-1)
     else:
-        named = [i for i, t in enumerate(torso) if rig.word[t] == "neck"]
+        named = [i for i, t in enumerate(torso) if rig.word[t] == "neck" and not rig.helper[t]]
         arms = [torso.index(a) for a in attached if a in torso]
         split = named[0] if named else (max(arms) + 1 if arms else len(torso))
-    found["spine"] = given.get("spine", tuple(t for t in torso[:split] if t not in used))
-    found["neck"] = given.get("neck", tuple(t for t in torso[split:] if t not in used))
+    found["spine"] = given.get("spine", tuple(t for t in torso[:split] if t not in used and not rig.helper[t]))
+    found["neck"] = given.get("neck", tuple(t for t in torso[split:] if t not in used and not rig.helper[t]))
     return found
 
 

@@ -10,7 +10,10 @@ Errors about an argument name it as the library does (``batch_size must be at
 least 1``) and list it in :attr:`KeyfillError.params`, so that a Python caller
 reads the parameter it passed; the CLI writes each listed parameter as the
 command-line flag that gives it (``--batch-size must be at least 1``, see
-:func:`keyfill.cli.common.flag_words`).
+:func:`keyfill.cli.common.flag_words`) where the message first names it, as a
+whole word: a message names each listed parameter before any other use of the
+same word (``frames 30:40 selects no frame of walk (frames 0-23)``). Errors
+built from other errors keep their ``params``.
 """
 
 from __future__ import annotations

@@ -158,15 +158,17 @@ def check_values(motion, what: str = "the motion") -> None:
 
 
 def check_seed(seed: int) -> None:
-    """Raise :class:`UsageError` unless ``seed`` is a ``--seed`` every generator keyfill seeds can take."""
+    """Raise :class:`UsageError` (naming the parameter ``seed``) unless ``seed`` is a seed every generator
+    keyfill seeds can take."""
     if not 0 <= seed <= MAX_SEED:
-        raise UsageError(f"--seed must be between 0 and 2**63-1, got {seed}")
+        raise UsageError(f"seed must be between 0 and 2**63-1, got {seed}", params="seed")
 
 
-def check_count(option: str, value: int, high: int) -> None:
-    """Raise :class:`UsageError` unless ``value`` of ``option`` (e.g. ``"--workers"``) is 1 to ``high``."""
+def check_count(param: str, value: int, high: int) -> None:
+    """Raise :class:`UsageError` unless ``value`` of the parameter ``param`` (e.g. ``"workers"``) is 1 to
+    ``high``; the error names ``param`` (in ``params``)."""
     if not 1 <= value <= high:
-        raise UsageError(f"{option} must be between 1 and {high:,}, got {value}")
+        raise UsageError(f"{param} must be between 1 and {high:,}, got {value}", params=param)
 
 
 def check_number(what: str, value, low: float, high: float, *, whole: bool = False, low_ok: bool = True,

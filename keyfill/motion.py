@@ -324,22 +324,23 @@ class Keys:
         return len(self.frames)
 
     @classmethod
-    def parse(cls, text: str) -> "Keys":
-        """Keys from ``"0,12,30"`` (the ``--keys`` option)."""
+    def parse(cls, text: str, *, param: str = "text") -> "Keys":
+        """Keys from ``"0,12,30"`` (the ``--keys`` option); errors name the parameter ``param``."""
         try:
             frames = [int(t) for t in text.replace(" ", "").split(",") if t != ""]
         except ValueError:
-            raise UsageError(f"--keys takes frame numbers separated by commas, like 0,12,30; got {text!r}") from None
+            raise UsageError(f"{param} takes frame numbers separated by commas, like 0,12,30; got {text!r}",
+                             params=param) from None
         huge = [f for f in frames if abs(f) >= 2**63]
         if huge:
             raise UsageError(f"key {huge[0]} is out of range")
         return cls(np.array(frames, dtype=np.int64))
 
     @classmethod
-    def every(cls, step: int, num_frames: int) -> "Keys":
-        """A key every ``step`` frames from frame 0, plus the last frame."""
+    def every(cls, step: int, num_frames: int, *, param: str = "step") -> "Keys":
+        """A key every ``step`` frames from frame 0, plus the last frame; errors name the parameter ``param``."""
         if step < 1:
-            raise UsageError(f"--key-every must be at least 1, got {step}")
+            raise UsageError(f"{param} must be at least 1, got {step}", params=param)
         frames = np.arange(0, num_frames, step)
         if num_frames > 0 and frames[-1] != num_frames - 1:
             frames = np.append(frames, num_frames - 1)
@@ -361,17 +362,19 @@ class Keys:
     @classmethod
     def resolve(cls, motion: "Motion", keys_text: str | None = None, key_every: int | None = None,
                 min_keys: int = 2) -> "Keys":
-        """The keys for ``motion``: from ``--keys`` text, ``--key-every`` N, or else the motion's own keys."""
+        """The keys for ``motion``: from ``keys_text`` (``"0,12,30"``), a key every ``key_every`` frames, or else
+        the motion's own keys. Errors name the parameters ``keys_text`` and ``key_every`` (in ``params``)."""
         if keys_text is not None and key_every is not None:
-            raise UsageError("give --keys or --key-every, not both")
+            raise UsageError("give keys_text or key_every, not both", params=("keys_text", "key_every"))
         if keys_text is not None:
-            keys = cls.parse(keys_text)
+            keys = cls.parse(keys_text, param="keys_text")
         elif key_every is not None:
-            keys = cls.every(key_every, motion.num_frames)
+            keys = cls.every(key_every, motion.num_frames, param="key_every")
         elif motion.keys is not None:
             keys = motion.keys
         else:
-            raise UsageError("this file records no keys; give --keys (e.g. 0,12,30) or --key-every N")
+            raise UsageError("this file records no keys; give keys_text (e.g. 0,12,30) or key_every N",
+                             params=("keys_text", "key_every"))
         return keys.check(motion.num_frames, min_keys=min_keys)
 
 

@@ -110,7 +110,8 @@ class DaskCluster:
         except (OSError, TimeoutError) as e:
             raise KeyfillError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({e})") from None
         except ValueError as e:
-            raise UsageError(f"--scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})") from None
+            raise UsageError(f"scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})",
+                             params="scheduler") from None
         finally:
             log.setLevel(level)
         from distributed import as_completed
@@ -134,12 +135,12 @@ class DaskCluster:
 
 
 def check_options(workers: int | None, connect_timeout: float = 10.0) -> None:
-    """:class:`UsageError` for a ``--workers`` or ``--connect-timeout`` no executor can use."""
+    """:class:`UsageError` (naming the parameter) for ``workers`` or ``connect_timeout`` no executor can use."""
     if workers is not None:
-        check_count("--workers", workers, MAX_WORKERS)
+        check_count("workers", workers, MAX_WORKERS)
     if not 0 < connect_timeout <= MAX_CONNECT_SECONDS:
-        raise UsageError(f"--connect-timeout must be positive and at most {MAX_CONNECT_SECONDS:,.0f} s, "
-                         f"got {connect_timeout}")
+        raise UsageError(f"connect_timeout must be positive and at most {MAX_CONNECT_SECONDS:,.0f} s, "
+                         f"got {connect_timeout}", params="connect_timeout")
 
 
 def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = 10.0):

@@ -150,7 +150,7 @@ def test_bad_dna_sources(models, motion, tmp_path):
         complete(motion, KEYS, CompleteOptions(model=model, dna=f"{tmp_path / 'ok.bvh'}:3,50"))
     with pytest.raises(UsageError, match="no Motion DNA encoder"):
         complete(motion, KEYS, CompleteOptions(model=str(models[1]), dna=str(tmp_path / "ok.bvh")))
-    with pytest.raises(UsageError, match="--dna-count must be between 1 and 256, got 0"):
+    with pytest.raises(UsageError, match="^count must be between 1 and 256, got 0"):
         dna_poses(load_model(model), count=0)  # the test model fills at most 256 frames at once
 
 

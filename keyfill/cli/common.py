@@ -18,7 +18,7 @@ FORMAT_CHOICE = click.Choice(list(io.FORMATS), case_sensitive=False)
 
 
 #: library parameters whose flag is not ``--`` + the name with dashes
-FLAG_OF = {"learning_rate": "--lr", "chunk": "--batch-size", "outdir": "-o"}
+FLAG_OF = {"learning_rate": "--lr", "chunk": "--batch-size", "outdir": "-o", "output": "-o", "keys_text": "--keys"}
 
 
 def flag(param: str) -> str:
@@ -27,10 +27,12 @@ def flag(param: str) -> str:
 
 
 def flag_words(message: str, params) -> str:
-    """``message`` with each parameter of ``params`` that it names (as a whole word) written as its flag."""
+    """``message`` with each parameter of ``params`` written as its flag where the message first names it (as a
+    whole word): later words that spell the same (``--fps: the frame rate 1e+308 fps``, ``--frames 30:40 selects
+    no frame of walk (frames 0-23)``) are the message's own."""
     for param in params:
         # a whole word, not part of a name or path (``/data/format/x.bvh``, ``format.json``)
-        message = re.sub(rf"(?<![\w\-/.]){re.escape(param)}(?![\w\-/.])", flag(param), message)
+        message = re.sub(rf"(?<![\w\-/.]){re.escape(param)}(?![\w\-/.])", flag(param), message, count=1)
     return message
 
 
@@ -195,7 +197,8 @@ def run_batch(inputs, outdir, fmt, job, spec, workers, scheduler, connect_timeou
         summary = run(items, fn, spec, workers=workers, scheduler=scheduler, force=force, chunk=batch_size,
                       connect_timeout=connect_timeout, on_chunk=lambda done: bar.update(len(done)))
     summary.output = str(outdir)
-    for f in summary.failed:
+    for f in summary.failed:  # the library's words as flags, on the error lines and in --json alike
+        f["error"] = flag_words(f["error"], f.pop("params", ()))
         click.echo(f"keyfill: error: {f['error']}", err=True)
     if as_json:
         emit_json(summary.to_dict())

@@ -71,7 +71,8 @@ def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, f
     try:
         result, reports = apply(curves, edit_file, solver=solver, best_effort=best_effort)
     except InfeasibleError as e:
-        raise InfeasibleError(f"{e}; nothing written (--best-effort keeps the closest result)") from None
+        raise InfeasibleError(f"{e}; nothing written (--best-effort keeps the closest result)",
+                              params=e.params) from None
     curvefile.save(result, dst)
     if as_json:
         emit_json(

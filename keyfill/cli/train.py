@@ -62,7 +62,7 @@ def _command(method: registry.Method) -> click.Command:
         from keyfill.learn.training import Common, check_outputs, read_checkpoint, side_files, train
 
         if threads is not None:
-            check_count("--threads", threads, MAX_WORKERS)
+            check_count("threads", threads, MAX_WORKERS)
             torch.set_num_threads(threads)
         output = output.rstrip("/") or output
         default_checkpoint, default_log = side_files(output)

@@ -180,8 +180,8 @@ class _Parser:
         self.line: int | None = None
         self.context = ""
 
-    def fail(self, message: str) -> FormatError:
-        return FormatError(f"{self.context}{message}", self.path, self.line)
+    def fail(self, message: str, params: tuple[str, ...] = ()) -> FormatError:
+        return FormatError(f"{self.context}{message}", self.path, self.line, params=params)
 
     # --- values ------------------------------------------------------------
 
@@ -219,12 +219,12 @@ class _Parser:
     def time(self, table: dict, what: str) -> float:
         if self.frame is not None:
             if "frame" not in table and "time" not in table:
-                return self.inside(self.frame, "--frame")
+                return self.inside(self.frame, "frame", params=("frame",))  # load()'s frame
             given = table.get("frame", table.get("time"))
             if isinstance(given, (int, float)) and not isinstance(given, bool):
                 given = self.number(given, "frame" if "frame" in table else "time")
                 if given != self.frame:
-                    raise self.fail(f"is at frame {given:g} but --frame is {self.frame:g}")
+                    raise self.fail(f"frame is {self.frame:g} but this edit is at frame {given:g}", ("frame",))
         if ("frame" in table) == ("time" in table):
             raise self.fail(f"{what} needs one of 'frame' or 'time'")
         if "frame" in table:
@@ -234,11 +234,11 @@ class _Parser:
         t = self.number(table.get("frame", table.get("time")), "frame" if "frame" in table else "time")
         return self.inside(t, "frame" if "frame" in table else "time")
 
-    def inside(self, t: float, what: str) -> float:
+    def inside(self, t: float, what: str, params: tuple[str, ...] = ()) -> float:
         times = self.curves.times
         last = min(times[-1], self.curves.num_frames - 1)
         if not times[0] <= t <= last:
-            raise self.fail(f"{what} {t:g} is outside the curves (keys from {times[0]:g} to {times[-1]:g})")
+            raise self.fail(f"{what} {t:g} is outside the curves (keys from {times[0]:g} to {times[-1]:g})", params)
         return t
 
     def point(self, spec, what: str, orientation_ok: bool = True) -> Point:

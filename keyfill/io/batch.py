@@ -16,8 +16,8 @@ neighbours: the outputs are the same bytes in one run, a resumed run, with any
 number of workers or on a cluster. Outputs that exist and are newer than their
 input are skipped (``force`` redoes them); a chunk with nothing left to do is
 not sent. Each item's outcome is a dict: ``input``, ``output``, ``status``
-(``done``, ``skipped``, ``failed``), ``error`` for a failure, and what the job
-reports. One failing input does not stop the others.
+(``done``, ``skipped``, ``failed``), ``error`` for a failure (and ``params``, the
+parameters its message names), and what the job reports. One failing input does not stop the others.
 """
 
 from __future__ import annotations
@@ -201,13 +201,17 @@ def prepare_outputs(items: list[Item]) -> None:
 
 
 def failure(item: Item, error: BaseException) -> dict:
-    """The outcome of an item that failed with ``error``."""
+    """The outcome of an item that failed with ``error``; ``params`` keeps the parameters its message names
+    (:attr:`KeyfillError.params`), when it names any."""
     message = " ".join(str(error).split())
     if not isinstance(error, KeyfillError):
         message = f"internal error: {type(error).__name__}: {message}"
     if not message.startswith(item.src):
         message = f"{item.src}: {message}"
-    return {"input": item.src, "output": item.dst, "status": "failed", "error": message}
+    outcome = {"input": item.src, "output": item.dst, "status": "failed", "error": message}
+    if getattr(error, "params", ()):
+        outcome["params"] = list(error.params)
+    return outcome
 
 
 def run(items: list[Item], fn: Callable, spec, workers: int | None = None, scheduler: str | None = None,

@@ -290,7 +290,7 @@ def _load_cached(loader, path: str, device: str, stamp: tuple):
 
 
 def torch_device(name: str):
-    """``torch.device(name)``, or a :class:`UsageError` when it is not there."""
+    """``torch.device(name)``, or a :class:`UsageError` (naming the parameter ``device``) when it is not there."""
     import torch
 
     try:
@@ -298,5 +298,5 @@ def torch_device(name: str):
     except (RuntimeError, ValueError):
         raise UsageError(f"unknown torch device {name!r}; use cpu, cuda or cuda:N") from None
     if dev.type == "cuda" and not torch.cuda.is_available():
-        raise UsageError(f"device {name!r} was asked for, but torch sees no CUDA GPU here; use --device cpu")
+        raise UsageError(f"{name!r} was asked for, but torch sees no CUDA GPU here; use device cpu", params="device")
     return dev

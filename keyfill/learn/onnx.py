@@ -137,16 +137,16 @@ def select(method, model: str | None, runtime: str) -> Graph | None:
     uses one when onnxruntime is installed and the folder holds a graph.
     """
     if runtime not in RUNTIMES:
-        raise UsageError(f"--runtime is one of {', '.join(RUNTIMES)}, not {runtime!r}")
+        raise UsageError(f"runtime is one of {', '.join(RUNTIMES)}, not {runtime!r}", params="runtime")
     if is_graph(model):
         if runtime == "torch":
-            raise UsageError(f"{model}: an ONNX graph runs with --runtime onnx (or auto), not torch")
+            raise UsageError(f"{model}: an ONNX graph runs with runtime onnx (or auto), not torch", params="runtime")
         if not Path(model).is_file():
             raise ModelError(f"{model}: no such graph")
         graph = open_graph(model)
         if graph.kind != method.name:
             raise UsageError(f"{model}: a graph of a {graph.kind!r} model, not {method.name!r}; "
-                             f"complete with --method {graph.kind}")
+                             f"complete with method {graph.kind}", params="method")
         return graph
     if runtime == "torch" or not method.learned or method.onnx is None:
         if runtime == "onnx" and (not method.learned or method.onnx is None):
@@ -172,7 +172,7 @@ def select(method, model: str | None, runtime: str) -> Graph | None:
         return None
     if not available():
         if runtime == "onnx":
-            raise UsageError("--runtime onnx needs onnxruntime: pip install 'keyfill[onnx]'")
+            raise UsageError("runtime onnx needs onnxruntime: pip install 'keyfill[onnx]'", params="runtime")
         return None
     graph = open_graph(path)
     check_binding(graph, folder)

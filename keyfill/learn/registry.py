@@ -191,19 +191,21 @@ def checked_keys(m: Method, motion: Motion, keys: Keys) -> Keys:
 
 
 def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
-    """``options`` once its ``--model`` and ``--dna`` are known to fit ``m`` (a :class:`UsageError` otherwise);
-    reads no weights."""
+    """``options`` once its ``model`` and ``dna`` are known to fit ``m`` (a :class:`UsageError` naming them
+    otherwise); reads no weights."""
     if (options.dna is not None or options.dna_count is not None) and not m.dna:
-        raise UsageError(f"--dna and --dna-count apply to methods with Motion DNA "
-                         f"({', '.join(n.name for n in METHODS.values() if n.dna)}), not to {m.name!r}")
+        raise UsageError(f"dna and dna_count apply to methods with Motion DNA "
+                         f"({', '.join(n.name for n in METHODS.values() if n.dna)}), not to {m.name!r}",
+                         params=("dna", "dna_count"))
     if not m.learned and options.model is not None:
-        raise UsageError(f"--model applies to learned methods, not to {m.name!r}")
+        raise UsageError(f"model applies to learned methods, not to {m.name!r}", params="model")
     from keyfill.learn.onnx import is_graph
 
     if options.model is not None and not is_graph(options.model):
         kind = method_for_model(options.model).name
         if kind != m.name:
-            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {m.name!r}; complete with --method {kind}")
+            raise UsageError(f"{options.model}: a model of kind {kind!r}, not {m.name!r}; complete with method {kind}",
+                             params="method")
         options = replace(options, model=str(options.model))
     return options
 

@@ -235,9 +235,9 @@ def distributed_context(device: str = "cpu") -> Context:
 
 
 def _diverged(epoch: int, what: str, last_good) -> TrainingDiverged:
-    where = (f"the last good checkpoint, {last_good[0]} (epoch {last_good[1]}), is kept: resume from it with "
-             f"--resume and a lower --lr" if last_good else "no checkpoint had been written yet; try a lower --lr")
-    return TrainingDiverged(f"training diverged at epoch {epoch + 1}: {what}; {where}")
+    where = (f"the last good checkpoint, {last_good[0]} (epoch {last_good[1]}), is kept: resume continues from it, "
+             f"with a lower lr" if last_good else "no checkpoint had been written yet; try a lower lr")
+    return TrainingDiverged(f"training diverged at epoch {epoch + 1}: {what}; {where}", params=("resume", "lr"))
 
 
 class Updater:
@@ -358,7 +358,7 @@ def train(
     try:
         check_outputs(output, checkpoint, log)
         if resume and (checkpoint is None or not Path(checkpoint).is_file()):
-            raise UsageError(f"--resume: no checkpoint {checkpoint}")
+            raise UsageError(f"resume: no checkpoint {checkpoint}", params="resume")
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             return _run(task, Path(output), seed, checkpoint, log, resume, ctx, progress, on_epoch)
@@ -567,7 +567,8 @@ def read_checkpoint(path, kind: str | None = None) -> dict:
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise ModelError(f"{path}: not a keyfill checkpoint")
     if kind is not None and state.get("kind") != kind:
-        raise UsageError(f"--resume: {path} is a checkpoint of a {state.get('kind')!r} model, not {kind!r}")
+        raise UsageError(f"resume: {path} is a checkpoint of a {state.get('kind')!r} model, not {kind!r}",
+                         params="resume")
     return state
 
 
@@ -577,11 +578,12 @@ def _check_resume(path, state: dict, config: dict, fingerprint: str) -> None:
     now = json.loads(json.dumps(config, sort_keys=True))
     for key in sorted(set(saved) | set(now)):
         if saved.get(key) != now.get(key):
-            what = f"--seed {saved.get(key)}, now {now.get(key)}" if key == "seed" else \
+            what = f"seed {saved.get(key)}, now {now.get(key)}" if key == "seed" else \
                 f"{key}={saved.get(key)!r}, now {now.get(key)!r}"
-            raise UsageError(f"--resume: {path} was made with other settings ({what}); give the same options to resume")
+            raise UsageError(f"resume: {path} was made with other settings ({what}); give the same options to resume",
+                             params=("resume", "seed") if key == "seed" else "resume")
     if state["data"] != fingerprint:
-        raise UsageError(f"--resume: {path} was made with other training data")
+        raise UsageError(f"resume: {path} was made with other training data", params="resume")
 
 
 def _write_log(path, rows: list[dict]) -> None:

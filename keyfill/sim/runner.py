@@ -103,16 +103,16 @@ def check_arguments(
     count: int, seed: int, iterations: int, workers: int | None, fmt: str,
     max_runs: int | None = None, connect_timeout: float = 10.0,
 ) -> None:
-    """Raise :class:`UsageError` for values ``simulate`` cannot work with."""
+    """Raise :class:`UsageError` for values ``simulate`` cannot work with, naming the parameter."""
     if count < 1:
-        raise UsageError(f"--count must be at least 1, got {count}")
+        raise UsageError(f"count must be at least 1, got {count}", params="count")
     check_seed(seed)
     if iterations < 1:
-        raise UsageError(f"--iterations must be at least 1, got {iterations}")
+        raise UsageError(f"iterations must be at least 1, got {iterations}", params="iterations")
     if fmt not in ds.SUFFIXES:
         raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(ds.SUFFIXES)}")
     if max_runs is not None and max_runs < 1:
-        raise UsageError(f"--max-runs must be at least 1, got {max_runs}")
+        raise UsageError(f"max_runs must be at least 1, got {max_runs}", params="max_runs")
     check_options(workers, connect_timeout)
 
 
@@ -138,7 +138,7 @@ def prepare_folder(folder: Path, config: dict, force: bool) -> None:
         if not cfg_path.is_file():
             raise UsageError(
                 f"{folder} is not empty and is not a keyfill simulate folder (no {ds.CONFIG_FILE}); "
-                "choose a new or empty folder, or use --force to build in it anyway"
+                "choose a new or empty folder, or use force to build in it anyway", params="force"
             )
         try:
             old = json.loads(cfg_path.read_text(encoding="utf-8"))
@@ -146,7 +146,7 @@ def prepare_folder(folder: Path, config: dict, force: bool) -> None:
             old = None
         if old != config:
             raise UsageError(f"{folder} holds a dataset of a different configuration ({_difference(old, config)}); "
-                             "use --force to replace it, or choose another folder")
+                             "use force to replace it, or choose another folder", params="force")
         return
     if folder.is_dir() and force:
         for p in folder.iterdir():
@@ -350,6 +350,6 @@ def _build(folder, job, fmt, count, max_runs, executor, window, on_run) -> Summa
     if len(records) < count:
         raise DataError(
             f"only {len(records)} of {count} sequences were accepted in {len(lines)} runs (the limit); "
-            f"they are kept in {folder}: raise the run limit or --iterations and run again"
+            f"they are kept in {folder}: raise the run limit or iterations and run again", params="iterations"
         )
     return summary

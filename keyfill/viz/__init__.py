@@ -31,11 +31,12 @@ PREVIEW_SUFFIXES = (".gif", ".png")
 
 
 def frame_range(text: str | None, num_frames: int, label: str = "the motion") -> np.ndarray:
-    """Frame indices selected by ``--frames A:B`` (Python slice rules: A to B-1).
+    """Frame indices selected by ``text`` ``"A:B"``, the ``frames`` parameter of the picture functions
+    (Python slice rules: A to B-1).
 
     Either end may be left out (``:30``, ``10:``); negative numbers count from
     the end. ``None`` selects every frame. Raises :class:`UsageError` for
-    malformed text and for a range that selects no frame.
+    malformed text and for a range that selects no frame; it names the parameter ``frames``.
     """
     if num_frames == 0:
         raise DataError(f"{label} has no frames")
@@ -47,10 +48,11 @@ def frame_range(text: str | None, num_frames: int, label: str = "the motion") ->
             raise ValueError
         a, b = (int(p) if p.strip() else None for p in parts)
     except ValueError:
-        raise UsageError(f"--frames takes A:B (frames A to B-1, either may be left out), got {text!r}") from None
+        raise UsageError(f"frames takes A:B (frames A to B-1, either may be left out), got {text!r}",
+                         params="frames") from None
     idx = np.arange(num_frames)[slice(a, b)]
     if len(idx) == 0:
-        raise UsageError(f"--frames {text} selects no frame of {label} (frames 0-{num_frames - 1})")
+        raise UsageError(f"frames {text} selects no frame of {label} (frames 0-{num_frames - 1})", params="frames")
     return idx
 
 
@@ -63,14 +65,15 @@ def unit_label(meters_per_unit: float) -> str:
     return f"units of {meters_per_unit:g} m"
 
 
-def check_suffix(path: str, allowed: tuple[str, ...], option: str = "-o") -> str:
-    """The lower-case suffix of ``path``; a :class:`UsageError` unless it is one of ``allowed``."""
+def check_suffix(path: str, allowed: tuple[str, ...], param: str = "output") -> str:
+    """The lower-case suffix of ``path``; a :class:`UsageError` (naming the parameter ``param``) unless it is
+    one of ``allowed``."""
     from pathlib import Path
 
     suffix = Path(path).suffix.lower()
     if suffix not in allowed:
         raise UsageError(
-            f"{option} {path}: unsupported picture type {suffix or '(no suffix)'!r}; "
-            f"expected {', '.join(allowed)}"
+            f"{param} {path}: unsupported picture type {suffix or '(no suffix)'!r}; "
+            f"expected {', '.join(allowed)}", params=param
         )
     return suffix

@@ -160,7 +160,7 @@ def select_panels(curves: Curves, motion: Motion, joints=None, channels=None) ->
             motion.skeleton.index(name)  # UsageError that lists the joints
         cand = [i for i in cand if curves.joints[i] in joints]
         if not cand:
-            raise UsageError(f"joint {', '.join(joints)} has no animated channels; try --positions")
+            raise UsageError(f"joint {', '.join(joints)} has no animated channels; try positions", params="positions")
     if channels:
         full = {curves.names[i].lower() for i in cand}
         kinds = {curves.kinds[i].lower() for i in cand}
@@ -173,10 +173,10 @@ def select_panels(curves: Curves, motion: Motion, joints=None, channels=None) ->
         first = _first_moving_joint(curves, cand)
         cand = [i for i in cand if curves.joints[i] == first]
     if not cand:
-        raise DataError("nothing to plot: no channel of this motion is animated; try --positions")
+        raise DataError("nothing to plot: no channel of this motion is animated; try positions", params="positions")
     if len(cand) > MAX_PANELS:
         raise UsageError(f"{len(cand)} panels is too many for one figure (at most {MAX_PANELS}); "
-                         "choose fewer with --joints or --channels")
+                         "choose fewer with joints or channels", params=("joints", "channels"))
     return cand
 
 

@@ -40,7 +40,8 @@ def delays_ms(num_frames: int, fps: float, step: int = 1) -> list[int]:
     A :class:`UsageError` when one shown frame would last longer than a GIF delay can (655.35 s)."""
     if 100.0 * step / fps > MAX_DELAY_CS:
         raise UsageError(f"a GIF frame lasts at most {MAX_DELAY_CS / 100:g} s; one of {step} motion frame(s) at "
-                         f"{fps:g} fps would last {step / fps:g} s (give a higher --fps or a smaller --step)")
+                         f"{fps:g} frames per second would last {step / fps:g} s (give a higher fps or a smaller "
+                         "step)", params=("fps", "step"))
     times_cs = np.round(100.0 * step * np.arange(num_frames + 1) / fps).astype(np.int64)
     return [int(d) * 10 for d in np.maximum(np.diff(times_cs), 1)]
 

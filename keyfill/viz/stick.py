@@ -292,11 +292,11 @@ def preview(
     if view not in VIEWS:
         raise UsageError(f"unknown view {view!r}; expected one of {', '.join(VIEWS)}")
     if step is not None:
-        check_count("--step", step, max_frames())
+        check_count("step", step, max_frames())
     if fps is not None and check_fps(fps):
-        raise UsageError(f"--fps: {check_fps(fps)}")
+        raise UsageError(f"fps: {check_fps(fps)}", params="fps")
     if size is not None and not all(16 <= v <= 8192 for v in size):
-        raise UsageError(f"--size {size[0]}x{size[1]}: each side must be 16 to 8192 pixels")
+        raise UsageError(f"size {size[0]}x{size[1]}: each side must be 16 to 8192 pixels", params="size")
     if len(labels) != len(motions):
         raise UsageError(f"{len(labels)} labels for {len(motions)} files")
     first = motions[0].skeleton
@@ -319,7 +319,8 @@ def preview(
         stride = gif.gif_step(rate, step or 1)
         ts = list(range(0, length, stride))
         if len(ts) > MAX_GIF_FRAMES:
-            raise UsageError(f"{len(ts)} GIF frames is too many (at most {MAX_GIF_FRAMES}); use --step or --frames")
+            raise UsageError(f"{len(ts)} GIF images is too many (at most {MAX_GIF_FRAMES}); use step or frames",
+                             params=("step", "frames"))
         delays = gif.delays_ms(len(ts), rate, stride)  # before rendering: refuses what a GIF cannot time
     else:
         kind = "still" if trail else "filmstrip"

@@ -80,7 +80,7 @@ def load(path: str | Path, device: str = "cpu") -> LampModel:
     The lamp networks run on the CPU (``device`` must be ``"cpu"``).
     """
     if device != "cpu":
-        raise UsageError("the lamp networks run on the CPU (--device cpu)")
+        raise UsageError("the lamp networks run on the CPU (device cpu)", params="device")
     from keyfill.learn.arnn.network import build
     from keyfill.learn.modelfile import build_for_loading, load_model, load_state
 

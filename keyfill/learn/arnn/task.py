@@ -118,21 +118,22 @@ class Settings:
     sizes: dict = field(default_factory=dict)
 
     def check(self) -> "Settings":
+        """``self``, or a :class:`UsageError` naming the setting (its field, in ``params``) that cannot work."""
         if self.arch not in network.ARCHITECTURES:
             raise UsageError(f"unknown architecture {self.arch!r}; choose one of {', '.join(network.ARCHITECTURES)}")
         for name in ("epochs", "batch_size", "checkpoint_every"):
             if getattr(self, name) < 1:
-                raise UsageError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
+                raise UsageError(f"{name} must be at least 1, got {getattr(self, name)}", params=name)
         if not self.lr > 0 or not math.isfinite(self.lr):
-            raise UsageError(f"--lr must be a positive number, got {self.lr}")
+            raise UsageError(f"lr must be a positive number, got {self.lr}", params="lr")
         if not self.key_weight >= 0 or not math.isfinite(self.key_weight):
-            raise UsageError(f"--key-weight must be 0 or more, got {self.key_weight}")
+            raise UsageError(f"key_weight must be 0 or more, got {self.key_weight}", params="key_weight")
         if self.key_loss not in ("mean", "sum"):
-            raise UsageError(f"--key-loss must be mean or sum, not {self.key_loss!r}")
+            raise UsageError(f"key_loss must be mean or sum, not {self.key_loss!r}", params="key_loss")
         if not 0 <= self.max_deleted <= max_frames():  # a sequence has fewer keys than frames
-            raise UsageError(f"--max-deleted must be 0 to {max_frames():,}, got {self.max_deleted}")
+            raise UsageError(f"max_deleted must be 0 to {max_frames():,}, got {self.max_deleted}", params="max_deleted")
         if not (self.clip >= 0 and math.isfinite(self.clip)):
-            raise UsageError(f"--clip must be 0 (no clipping) or a positive number, got {self.clip}")
+            raise UsageError(f"clip must be 0 (no clipping) or a positive number, got {self.clip}", params="clip")
         return self
 
 
@@ -219,7 +220,7 @@ class ArnnTask(TrainingTask):
 
     def begin(self, rank: int, world: int, device: str) -> None:
         if device != "cpu":
-            raise UsageError("the lamp networks train on the CPU (--device cpu)")
+            raise UsageError("the lamp networks train on the CPU (device cpu)", params="device")
         self.rank, self.world = rank, world
 
     def build(self, generator):

@@ -299,7 +299,7 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
         raise UsageError("this gan model has no Motion DNA encoder (it was trained without --dna)")
     if count is None:
         count = dna_count(key_frames, model.fps, cfg.dna_seconds) if key_frames is not None else 1
-    check_count("--dna-count", count, cfg.max_frames)  # at most a pose per frame the model fills at once
+    check_count("count", count, cfg.max_frames)  # at most a pose per frame the model fills at once
     if source is None:
         return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
     q, _ = model_hierarchy(model.skeleton, model.folded, source.skeleton, source.rotations, source.positions,
@@ -411,7 +411,8 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
 
 
 def parse_dna(text: str) -> tuple[str, list[int] | None]:
-    """``"FILE[:FRAMES]"`` -> ``(file, frames or None)``; a file name holding ``:`` is read whole when it exists."""
+    """``"FILE[:FRAMES]"`` (``CompleteOptions.dna``) -> ``(file, frames or None)``; a file name holding ``:`` is
+    read whole when it exists. Errors name the option ``dna``."""
     import os
 
     if os.path.exists(text) or ":" not in text:
@@ -420,9 +421,10 @@ def parse_dna(text: str) -> tuple[str, list[int] | None]:
     try:
         frames = [int(t) for t in listed.split(",") if t.strip()]
     except ValueError:
-        raise UsageError(f"--dna takes FILE or FILE:FRAMES with frames separated by commas; got {text!r}") from None
+        raise UsageError(f"dna takes FILE or FILE:FRAMES with frames separated by commas; got {text!r}",
+                         params="dna") from None
     if not frames:
-        raise UsageError(f"--dna {text!r} lists no frames")
+        raise UsageError(f"dna {text!r} lists no frames", params="dna")
     return path, frames
 
 
@@ -444,6 +446,8 @@ def complete(motion, keys, options):
         if options.dna is not None:
             dna_file, frames = parse_dna(options.dna)
             source = io.load(dna_file)
+        if options.dna_count is not None and model.config.dna:  # named as the option, not dna_poses' count
+            check_count("dna_count", options.dna_count, model.config.max_frames)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)
     filled, info = complete_motion(model, motion, keys, options.seed, dna)
     info = {"model": str(options.model or path.name), **info, "exact_keys": bool(options.exact_keys)}

@@ -490,7 +490,7 @@ def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int =
         return GanConfig.from_preset(preset, **data, seed=seed) if "widths" not in data else \
             GanConfig.from_json({**data, "seed": seed})
     except (TypeError, UsageError) as e:  # name the file a bad setting came from
-        raise UsageError(f"{path}: {e}" if path is not None else str(e)) from None
+        raise UsageError(f"{path}: {e}" if path is not None else str(e), params=getattr(e, "params", ())) from None
 
 
 def _make_task(common, options: dict, progress) -> GanTask:

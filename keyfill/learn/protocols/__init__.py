@@ -72,8 +72,8 @@ def choose_protocol(method_or_model: str, data: Sequence[str], protocol: str | N
     if protocol is None:
         return want or ("keys" if is_lamp_dataset(data) else "lafan1")
     if want is not None and protocol != want:
-        raise UsageError(f"{method_or_model}: a model of kind {method.name!r} is scored with --protocol {want}, "
-                         f"not {protocol}")
+        raise UsageError(f"{method_or_model}: a model of kind {method.name!r} is scored with protocol {want}, "
+                         f"not {protocol}", params="protocol")
     return protocol
 
 

@@ -157,20 +157,21 @@ def read_config(path: str | os.PathLike | None) -> tuple[ModelConfig, TrainConfi
         model = ModelConfig(**data.get("model", {}))
         train = TrainConfig(**{k: tuple(v) if k == "val_lengths" else v for k, v in data.get("training", {}).items()})
     except (TypeError, ModelError, UsageError) as e:
-        raise UsageError(f"{path}: {e}") from None
+        raise UsageError(f"{path}: {e}", params=getattr(e, "params", ())) from None
     return model, train
 
 
 def initial_model(path: str | os.PathLike, corpus: Corpus) -> CompletionModel:
-    """The transformer model folder a run starts from (``--init``); refused when it serves another skeleton
-    or its corpus was folded differently."""
+    """The transformer model folder a run starts from (the ``init`` parameter, ``--init``); refused when it serves
+    another skeleton or its corpus was folded differently (a :class:`UsageError` naming ``init``)."""
     model = load(path)
     diff = model.skeleton.difference(corpus.skeleton, atol=1e-2 * float(np.abs(corpus.skeleton.offsets).max()))
     if diff is not None:
-        raise UsageError(f"--init {path}: the model serves another skeleton than the training clips: {diff}")
+        raise UsageError(f"init {path}: the model serves another skeleton than the training clips: {diff}",
+                         params="init")
     if model.folded != corpus.folded:
-        raise UsageError(f"--init {path}: the model's corpus {'folded' if model.folded else 'kept'} the top joint, "
-                         f"the training clips {'fold' if corpus.folded else 'keep'} it")
+        raise UsageError(f"init {path}: the model's corpus {'folded' if model.folded else 'kept'} the top joint, "
+                         f"the training clips {'fold' if corpus.folded else 'keep'} it", params="init")
     return model
 
 
@@ -479,7 +480,8 @@ def _make_task(common, options: dict, progress) -> TransformerTask:
     if common.epochs is not None:
         train_cfg = dataclasses.replace(train_cfg, epochs=common.epochs)
     if common.checkpoint_every is not None:
-        raise UsageError("the transformer writes a checkpoint after every epoch; --checkpoint-every does not apply")
+        raise UsageError("the transformer writes a checkpoint after every epoch; checkpoint_every does not apply",
+                         params="checkpoint_every")
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
     return TransformerTask(corpus.select(options["include"], options["exclude"]), model_cfg, train_cfg,

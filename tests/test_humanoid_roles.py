@@ -108,8 +108,10 @@ UNREAL = {"root": "root", "hips": "pelvis", "spine": [f"spine_0{i}" for i in ran
           "neck": ["neck_01", "neck_02"], "head": "head", "clavicle": "clavicle_{l}", "upper_arm": "upperarm_{l}",
           "forearm": "lowerarm_{l}", "hand": "hand_{l}", "thigh": "thigh_{l}", "shin": "calf_{l}",
           "foot": "foot_{l}", "toe": "ball_{l}"}
-UNREAL_EXTRAS = [("upperarm_twist_01_{l}", "upperarm_{l}", (10, 0, 0)), ("upperarm_twist_02_{l}", "upperarm_{l}", (20, 0, 0)),
-                 ("lowerarm_twist_01_{l}", "lowerarm_{l}", (14, 0, 0)), ("thigh_twist_01_{l}", "thigh_{l}", (0, -20, 0)),
+UNREAL_EXTRAS = [("upperarm_twist_01_{l}", "upperarm_{l}", (10, 0, 0)),
+                 ("upperarm_twist_02_{l}", "upperarm_{l}", (20, 0, 0)),
+                 ("lowerarm_twist_01_{l}", "lowerarm_{l}", (14, 0, 0)),
+                 ("thigh_twist_01_{l}", "thigh_{l}", (0, -20, 0)),
                  ("calf_twist_01_{l}", "calf_{l}", (0, -20, 0)), ("index_01_{l}", "hand_{l}", (8, 0, 2)),
                  ("index_02_{l}", "index_01_{l}", (3, 0, 0)), ("thumb_01_{l}", "hand_{l}", (3, -1, 3)),
                  ("ik_foot_root", "root", (0, 0, 0)), ("ik_foot_{l}", "ik_foot_root", (9, 11, 0)),
@@ -140,20 +142,24 @@ NO_COLLAR = {k: v for k, v in JOINT_NAMED.items() if k != "clavicle"}
 VRM = {"root": "Root", "hips": "J_Bip_C_Hips", "spine": ["J_Bip_C_Spine", "J_Bip_C_Chest", "J_Bip_C_UpperChest"],
        "neck": ["J_Bip_C_Neck"], "head": "J_Bip_C_Head", "clavicle": "J_Bip_{L}_Shoulder",
        "upper_arm": "J_Bip_{L}_UpperArm", "forearm": "J_Bip_{L}_LowerArm", "hand": "J_Bip_{L}_Hand",
-       "thigh": "J_Bip_{L}_UpperLeg", "shin": "J_Bip_{L}_LowerLeg", "foot": "J_Bip_{L}_Foot", "toe": "J_Bip_{L}_ToeBase"}
+       "thigh": "J_Bip_{L}_UpperLeg", "shin": "J_Bip_{L}_LowerLeg", "foot": "J_Bip_{L}_Foot",
+       "toe": "J_Bip_{L}_ToeBase"}
 DAZ = {"hips": "hip", "spine": ["abdomenLower", "abdomenUpper", "chestLower", "chestUpper"],
        "neck": ["neckLower", "neckUpper"], "head": "head", "clavicle": "{l}Collar", "upper_arm": "{l}ShldrBend",
        "forearm": "{l}ForearmBend", "hand": "{l}Hand", "thigh": "{l}ThighBend", "shin": "{l}Shin", "foot": "{l}Foot",
        "toe": "{l}Toe"}
-DAZ_TWISTS = {"thigh": ["pelvis"], "shin": ["{l}ThighTwist"], "forearm": ["{l}ShldrTwist"], "hand": ["{l}ForearmTwist"]}
+DAZ_TWISTS = {"thigh": ["pelvis"], "shin": ["{l}ThighTwist"], "forearm": ["{l}ShldrTwist"],
+              "hand": ["{l}ForearmTwist"]}
 BIPED = {"root": "Bip01", "hips": "Bip01_Pelvis", "spine": ["Bip01_Spine", "Bip01_Spine1", "Bip01_Spine2"],
-         "neck": ["Bip01_Neck"], "head": "Bip01_Head", "clavicle": "Bip01_{L}_Clavicle", "upper_arm": "Bip01_{L}_UpperArm",
-         "forearm": "Bip01_{L}_Forearm", "hand": "Bip01_{L}_Hand", "thigh": "Bip01_{L}_Thigh", "shin": "Bip01_{L}_Calf",
+         "neck": ["Bip01_Neck"], "head": "Bip01_Head", "clavicle": "Bip01_{L}_Clavicle",
+         "upper_arm": "Bip01_{L}_UpperArm", "forearm": "Bip01_{L}_Forearm", "hand": "Bip01_{L}_Hand",
+         "thigh": "Bip01_{L}_Thigh", "shin": "Bip01_{L}_Calf",
          "foot": "Bip01_{L}_Foot", "toe": "Bip01_{L}_Toe0", "leg_parent": "Bip01_Spine", "arm_parent": "Bip01_Neck"}
 ASF = {"hips": "hip", "spine": ["lowerback", "upperback", "thorax"], "neck": ["lowerneck", "upperneck"],
        "head": "head", "clavicle": "{l}clavicle", "upper_arm": "{l}humerus", "forearm": "{l}radius",
        "hand": "{l}wrist", "thigh": "{l}femur", "shin": "{l}tibia", "foot": "{l}foot", "toe": "{l}toes"}
-ASF_EXTRAS = [("{l}hand", "{l}wrist", (6, 0, 0)), ("{l}fingers", "{l}hand", (4, 0, 0)), ("{l}thumb", "{l}hand", (2, 0, 3))]
+ASF_EXTRAS = [("{l}hand", "{l}wrist", (6, 0, 0)), ("{l}fingers", "{l}hand", (4, 0, 0)),
+              ("{l}thumb", "{l}hand", (2, 0, 3))]
 UNSIDED = {"hips": "hips", "spine": ["spine", "chest"], "neck": ["neck"], "head": "head",
            "clavicle": "shoulder{dup}", "upper_arm": "upper_arm{dup}", "forearm": "forearm{dup}", "hand": "hand{dup}",
            "thigh": "thigh{dup}", "shin": "shin{dup}", "foot": "foot{dup}", "toe": "toe{dup}"}
@@ -183,15 +189,11 @@ def family(name: str) -> Skeleton:
     return humanoid(**FAMILIES[name])
 
 
-def roles_by_name(m: RoleMap) -> dict:
-    return m.to_json()
-
-
 MIXAMO = {"hips": "Hips", "spine": ["Spine", "Spine1", "Spine2"], "neck": ["Neck"], "head": "Head",
           **{f"{r}_{s}": f"{side}{w}" for s, side in (("l", "Left"), ("r", "Right")) for r, w in (
               ("clavicle", "Shoulder"), ("upper_arm", "Arm"), ("forearm", "ForeArm"), ("hand", "Hand"),
               ("thigh", "UpLeg"), ("shin", "Leg"), ("foot", "Foot"), ("toe", "ToeBase"))}}
-CMU = {**MIXAMO, "spine": ["LowerBack", "Spine", "Spine1"], "neck": ["Neck", "Neck1"], "toe_l": "LeftToeBase"}
+CMU = {**MIXAMO, "spine": ["LowerBack", "Spine", "Spine1"], "neck": ["Neck", "Neck1"]}
 BANDAI = {"hips": "Hips", "spine": ["Spine", "Chest"], "neck": ["Neck"], "head": "Head",
           **{f"{r}_{s}": f"{w}_{s.upper()}" for s in ("l", "r") for r, w in (
               ("clavicle", "Shoulder"), ("upper_arm", "UpperArm"), ("forearm", "LowerArm"), ("hand", "Hand"),
@@ -396,7 +398,8 @@ def test_to_json_is_a_rig_map_that_gives_the_same_roles(name):
 @pytest.mark.parametrize("rig_map, words", [
     ({"hand_l": "LeftPaw"}, ["has no joint 'LeftPaw'", "hand_l"]),
     ({"tail": "Hips"}, ["'tail' is no humanoid role", "hips, spine, neck, head"]),
-    ({"hand_l": "LeftHand", "forearm_l": "LeftHand"}, ["joint 'LeftHand' is given for two roles, hand_l and forearm_l"]),
+    ({"hand_l": "LeftHand", "forearm_l": "LeftHand"},
+     ["joint 'LeftHand' is given for two roles, hand_l and forearm_l"]),
     ({"spine": ["Spine", "Spine1"], "neck": ["Spine1"]}, ["joint 'Spine1' is given for two roles, spine and neck"]),
     ({"hips": ["Hips"]}, ["hips must be one joint name"]),
     ({"spine": 3}, ["spine must be a list of joint names"]),

@@ -13,9 +13,10 @@ toe):
 
 1. A name is read as lower-case tokens after any namespace prefix (up to the last ``:`` or ``|``, as in
    ``mixamorig1:``): ``LeftUpLeg`` -> left, up, leg; ``DEF-upper_arm.L.001`` -> def, upper, arm, l, 001.
-   The tokens l, left, r, right give the side (also glued to a limb word: ``lhumerus``); the others, without digits and filler (``DEF``, ``J``,
-   ``Bip``, ``joint``), joined, give the joint's word (``upleg``, ``upperarm``). A joint whose tokens say
-   twist, roll, helper, ik, ctrl, end, nub, ... is a helper and plays no role.
+   The tokens l, left, r, right give the side (also glued to a limb word: ASF's ``lhumerus``); the others,
+   without digits and filler (``DEF``, ``J``, ``Bip``, ``joint``), joined, give the joint's word (``upleg``,
+   ``upperarm``). A joint whose tokens say twist, roll, helper, ik, ctrl, end, nub, ... is a helper and plays
+   no role.
 2. Each side's hand is the top-most joint whose word is hand, wrist or palm; each foot the top-most foot or
    ankle (so SMPL's ``L_Ankle`` is the foot); the head the top-most ``head``. Where names give no side (a
    Blender ``hand`` and ``hand.001``) the rest pose decides: the character's left is the up axis crossed
@@ -253,8 +254,9 @@ class _Rig:
         return p >= 0 and self.word[j] != "" and (self.word[j], self.side[j]) == (self.word[p], self.side[p])
 
     def is_hips(self, j: int) -> bool:
-        return not self.helper[j] and (self.word[j] in ("hips", "pelvis") or (self.word[j] == "hip" and
-                                                                               self.side[j] is None))
+        """Whether the name says hips: ``Hips``, ``pelvis``, or ``hip`` without a side (Daz)."""
+        word = self.word[j]
+        return not self.helper[j] and (word in ("hips", "pelvis") or (word == "hip" and self.side[j] is None))
 
     @cached_property
     def world(self) -> np.ndarray:

@@ -9,6 +9,7 @@ differs and how to train a model instead.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "human"
 EXAMPLE = EXAMPLES / "keys.usda"
 #: each method's example: keys 2.3 s apart for the gan, 0.5 s for the transformer (at most 63 frames)
+LAMP_KEYS = Path(__file__).resolve().parents[1] / "examples" / "lamp" / "keys.usda"
 EXAMPLE_OF = {"gan": EXAMPLE, "transformer": EXAMPLES / "keys_15.usda"}
 SHIPPED = (DEFAULT_MODEL, PARTIAL_MODEL, transformer.DEFAULT_MODEL)
 
@@ -80,12 +82,32 @@ def test_a_dna_file_does_not_replace_the_model_name_in_the_report(tmp_path, caps
 
 @pytest.mark.parametrize("method,hint", [("gan", "keyfill train gan CLIPS -o MODEL-path --stage path"),
                                          ("transformer", "keyfill train transformer CLIPS -o MODEL")])
-def test_another_skeleton_names_the_model_skeleton_and_the_training_command(tmp_path, capsys, method, hint):
-    out = tmp_path / "cmu.bvh"
-    code = main(["complete", str(DATA / "cmu_02_03_cgspeed_first4frames.bvh"), "-o", str(out), "--keys", "0,3",
-                 "--method", method])
+def test_a_skeleton_that_is_no_humanoid_names_the_model_skeleton_and_the_training_command(tmp_path, capsys,
+                                                                                          method, hint):
+    out = tmp_path / "lamp.bvh"
+    code = main(["complete", str(LAMP_KEYS), "-o", str(out), "--method", method])
     err = capsys.readouterr().err.strip()
     assert code == 1 and not out.exists() and len(err.splitlines()) == 1
     assert err.startswith("keyfill: error: the motion has another skeleton than the model (22 joints, top joint "
-                          "'joint_Root'): 22 joints vs 31; the first that differs is joint 0, 'joint_Root' vs ")
+                          "'joint_Root'): 22 joints vs 4; the first that differs is joint 0, 'joint_Root' vs ")
     assert hint in err
+    assert "; nor can it be retargeted: the skeleton: found no joint for the humanoid roles" in err
+    assert "--rig-map" in err
+
+
+@pytest.mark.parametrize("method", ["gan", "transformer"])
+@pytest.mark.parametrize("fixture", ["cmu_02_03_cgspeed_first4frames.bvh", "bvhtoolbox_test_freebvh_mixamo.bvh"])
+def test_another_humanoid_is_retargeted_and_keeps_its_own_layout(tmp_path, capsys, method, fixture):
+    src = io.load(DATA / fixture)
+    out = tmp_path / "out.bvh"
+    keys = "0,3" if src.num_frames == 4 else "0,10,20,30,40,50,60,68"
+    assert main(["complete", str(DATA / fixture), "-o", str(out), "--keys", keys, "--method", method,
+                 "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["rig"]["hips"] == src.skeleton.names[0] and info["model_fps"] == 30.0
+    filled = io.load(out)
+    assert filled.skeleton.names == src.skeleton.names and filled.skeleton.channels == src.skeleton.channels
+    assert filled.fps == src.fps and filled.num_frames == src.num_frames
+    k = [int(x) for x in keys.split(",")]
+    np.testing.assert_allclose(filled.positions[k], src.positions[k], atol=1e-6)
+    np.testing.assert_allclose(np.abs(np.sum(filled.rotations[k] * src.rotations[k], -1)), 1.0, atol=1e-9)

@@ -28,6 +28,8 @@ class CompleteOptions:
             see :mod:`keyfill.learn.onnx`.
         dna: Motion DNA source ``"FILE[:FRAMES]"`` (methods with the ``dna`` capability).
         dna_count: how many representative poses the Motion DNA takes (None: one per 3 s of gap).
+        rig_map: a TOML file of humanoid role -> joint name(s) for methods that serve any humanoid rig
+            (:mod:`keyfill.learn.rig_bridge`); None maps the roles from the skeleton's names and hierarchy.
     """
 
     model: str | None = None
@@ -37,6 +39,7 @@ class CompleteOptions:
     runtime: str = "auto"
     dna: str | None = None
     dna_count: int | None = None
+    rig_map: str | None = None
 
     def __post_init__(self):
         check_seed(self.seed)

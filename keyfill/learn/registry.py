@@ -53,6 +53,8 @@ class Method:
             refuses them for the others.
         dna: whether it takes a Motion DNA (``CompleteOptions.dna`` / ``dna_count``).
         aliases: other names it answers to (``interpolation``: the LaFAN1 benchmark's word for ``linear``).
+        humanoid: its models serve one human skeleton and frame rate, and any humanoid rig at any frame rate
+            through :mod:`keyfill.learn.rig_bridge` (the module's ``model_path(options, keys)`` names the model).
     """
 
     name: str
@@ -66,6 +68,7 @@ class Method:
     partial_keys: bool = False
     dna: bool = False
     aliases: tuple[str, ...] = ()
+    humanoid: bool = False
 
     @property
     def learned(self) -> bool:
@@ -119,10 +122,10 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("transformer", "BERT-style motion-completion transformer (Duan et al. 2021)",
            "keyfill.learn.transformer.model:complete", module="keyfill.learn.transformer.model", protocol="lafan1",
            training="keyfill.learn.transformer.task", export="keyfill.learn.transformer.onnx:export_onnx",
-           onnx="keyfill.learn.transformer.onnx"),
+           onnx="keyfill.learn.transformer.onnx", humanoid=True),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
-           training="keyfill.learn.gan.task", partial_keys=True, dna=True),
+           training="keyfill.learn.gan.task", partial_keys=True, dna=True, humanoid=True),
 )}
 
 
@@ -217,7 +220,10 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     keys = checked_keys(m, motion, keys)
     options = checked_options(m, options)
     graph = _graph(m, options)
-    if graph is not None:
+    bridged = _on_model_rig(m, motion, keys, options)
+    if bridged is not None:
+        result = bridged
+    elif graph is not None:
         result = importlib.import_module(m.onnx).complete_graph([(motion, keys)], options, graph)[0]
         if isinstance(result, KeyfillError):
             raise result
@@ -225,6 +231,22 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
         result = m.function()(motion, keys, options)
     result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
     return result
+
+
+def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOptions) -> Completion | None:
+    """For a ``humanoid`` method, the completion through :mod:`keyfill.learn.rig_bridge` when ``motion`` has
+    another skeleton or frame rate than the model; None when the model serves it as it is."""
+    from keyfill.learn.onnx import is_graph
+
+    if not m.humanoid or is_graph(options.model):
+        return None
+    from keyfill.learn import rig_bridge
+
+    model = rig_bridge.served(m.implementation().model_path(options, keys))
+    if not rig_bridge.needed(model, motion, keys):
+        return None
+    return rig_bridge.complete_on_model_rig(motion, keys, lambda mm, kk: complete(mm, kk, m.name, options),
+                                            model, options, hint=getattr(m.implementation(), "TRAIN_HINT", ""))
 
 
 def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
@@ -247,6 +269,21 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
             ready.append((i, motion, checked_keys(m, motion, keys)))
         except KeyfillError as e:
             results[i] = e
+    if m.humanoid:  # motions of other rigs or frame rates go through the bridge one by one
+        direct = []
+        for i, motion, keys in ready:
+            try:
+                bridged = _on_model_rig(m, motion, keys, options)
+            except KeyfillError as e:
+                bridged = e
+            if bridged is None:
+                direct.append((i, motion, keys))
+            else:
+                results[i] = bridged
+                if isinstance(bridged, Completion):
+                    bridged.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames,
+                                    **bridged.info}
+        ready = direct
     graph = _graph(m, options)
     many = getattr(m.implementation(), "complete_many", None) if m.learned and graph is None else None
     if graph is not None:

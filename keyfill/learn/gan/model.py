@@ -438,7 +438,7 @@ def complete(motion, keys, options):
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.modelfile import load_cached
 
-    path = options.model or (PARTIAL_MODEL if keys.partial else DEFAULT_MODEL)
+    path = model_path(options, keys)
     model = load_cached(load, path, options.device)
     dna = None
     if options.dna is not None or options.dna_count is not None:
@@ -507,3 +507,9 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         out_q.append(fixed.rotations)
         out_r.append(fixed.positions[:, 0])
     return np.array(out_q), np.array(out_r)
+
+
+def model_path(options, keys) -> Path:
+    """The model folder (or graph) a completion with ``options`` uses: ``options.model``, else the shipped
+    model for whole keys or, for partial ``keys``, the one trained with them."""
+    return Path(options.model) if options.model is not None else PARTIAL_MODEL if keys.partial else DEFAULT_MODEL

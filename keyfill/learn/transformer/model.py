@@ -365,3 +365,8 @@ def complete_many(jobs, options):
     from keyfill.learn.modelfile import load_cached
 
     return complete_many_with(load_cached(load, options.model or DEFAULT_MODEL, options.device), jobs, options)
+
+
+def model_path(options, keys) -> Path:
+    """The model folder (or graph) a completion with ``options`` uses: ``options.model`` or the shipped one."""
+    return Path(options.model) if options.model is not None else DEFAULT_MODEL

@@ -1,0 +1,207 @@
+"""The shipped human models on any humanoid rig and frame rate: retarget the keys in, complete, retarget back.
+
+A human model knows one skeleton and one frame rate. :func:`complete_on_model_rig` lets it complete a motion
+of any humanoid rig (:mod:`keyfill.characters.humanoid`) at any frame rate:
+
+1. the key frames are retargeted onto the model's skeleton (:func:`keyfill.characters.retarget.retarget`);
+2. the keys are placed on the model's frame grid: each gap of ``g`` frames at the motion's rate becomes
+   ``max(1, round(g * model_fps / fps))`` model frames, so every key lands on a model frame (a time warp of
+   at most half a model frame per gap);
+3. the model completes those keys (through :func:`keyfill.learn.registry.complete`, so the method, model,
+   runtime and seed options apply unchanged);
+4. the result is retargeted back onto the motion's skeleton and resampled at the motion's own frames
+   (slerp of rotations, lerp of translations, within each gap's time warp);
+5. joints the model has no role for (fingers, eyes, twist bones, extra helper joints) take the C1 cubic
+   spline through the motion's own keys, and so do translations other than the hips';
+6. the keys are made exact on the motion's own channels (:func:`keyfill.learn.exact_keys.snap_to_keys`).
+
+The output keeps the motion's skeleton, channel layout, Euler orders, frame rate and frame count. Partial keys
+keep their kind; a model joint is keyed where the motion's joint of its role is.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from keyfill import interpolate
+from keyfill import rotations as R
+from keyfill.characters.retarget import Rig, make_rig, retarget
+from keyfill.errors import DataError, ModelError
+from keyfill.learn.corpus import model_hierarchy
+from keyfill.motion import Keys, Motion, Skeleton
+
+
+def fits(served: Served, motion: Motion, frame: int) -> bool:
+    """``motion`` is on the model's own skeleton (as the model checks it, :func:`keyfill.learn.corpus.model_hierarchy`:
+    the same joints and parents, bones within 1 % at ``frame``): no retargeting needed."""
+    try:
+        model_hierarchy(served.skeleton, served.folded, motion.skeleton, motion.rotations[frame: frame + 1],
+                        motion.positions[frame: frame + 1])
+    except ModelError:
+        return False
+    return True
+
+
+@functools.lru_cache(maxsize=8)
+def _model_rig(skeleton_json: str) -> Rig:
+    import json
+
+    return make_rig(Skeleton.from_json(json.loads(skeleton_json)), label="the model's skeleton")
+
+
+def rigs(motion: Motion, model: Served, rig_map: dict | None, frame: int, hint: str) -> tuple[Rig, Rig]:
+    """``(the motion's rig, the model's rig)``. When either skeleton is no humanoid, the model's own error
+    for another skeleton (ending with ``hint``), followed by why the motion cannot be retargeted.
+
+    The model's rig is computed once per skeleton and process."""
+    import json
+
+    try:
+        return make_rig(motion.skeleton, rig_map=rig_map), _model_rig(json.dumps(model.skeleton.to_json()))
+    except DataError as e:
+        try:
+            model_hierarchy(model.skeleton, model.folded, motion.skeleton, motion.rotations[frame: frame + 1],
+                            motion.positions[frame: frame + 1], hint=hint)
+        except ModelError as mismatch:
+            raise ModelError(f"{mismatch}; nor can it be retargeted: {e}", params=e.params) from None
+        raise
+
+
+def model_frames(keys: np.ndarray, fps: float, model_fps: float) -> np.ndarray:
+    """``(K,)`` model frames of ``keys (K,)`` given at ``fps``: the first key at 0, each gap of ``g`` frames
+    ``max(1, round(g * model_fps / fps))`` model frames long."""
+    gaps = np.maximum(1, np.rint(np.diff(keys) * (model_fps / fps)).astype(np.int64))
+    return np.concatenate([[0], np.cumsum(gaps)]).astype(np.int64)
+
+
+def _held(poses_rot: np.ndarray, poses_pos: np.ndarray, frames: np.ndarray, count: int):
+    """``count`` frames holding each of the ``K`` poses from its frame in ``frames`` on."""
+    src = np.searchsorted(frames, np.arange(count), side="right") - 1
+    return poses_rot[src], poses_pos[src]
+
+
+def resample(motion: Motion, model_keys: np.ndarray, keys: np.ndarray, num_frames: int, fps: float) -> Motion:
+    """``motion`` (on the model's grid, keys at ``model_keys``) at the frames ``0 .. num_frames-1`` of a motion
+    whose keys are ``keys`` at ``fps``: each gap's frames map linearly onto its model frames (slerp of
+    rotations, lerp of translations); frames before the first key and after the last hold it."""
+    t = np.clip(np.arange(num_frames), keys[0], keys[-1])
+    s, u = interpolate.segment_coordinates(num_frames, keys)
+    tau = model_keys[s] + np.where(t >= keys[-1], 1.0, u) * (model_keys[s + 1] - model_keys[s])
+    a = np.clip(np.floor(tau).astype(np.int64), 0, motion.num_frames - 1)
+    b = np.minimum(a + 1, motion.num_frames - 1)
+    w = tau - a
+    rot = R.quat_slerp(motion.rotations[a], motion.rotations[b], np.broadcast_to(w[:, None], (num_frames,
+                                                                                          motion.num_joints)))
+    pos = motion.positions[a] + w[:, None, None] * (motion.positions[b] - motion.positions[a])
+    return Motion(motion.skeleton, fps, R.quat_normalize(rot), pos)
+
+
+def _model_keys(keys: Keys, frames: np.ndarray, source: Rig, target: Rig) -> Keys:
+    """``keys`` on the model's grid (``frames``) and skeleton: a model joint is keyed where the motion's joint
+    of its role is (any of a chain's joints, for the spine and neck)."""
+    if keys.mask is None:
+        return Keys(frames, given=keys.given)
+    mask = np.zeros((len(frames), target.skeleton.num_joints), dtype=bool)
+    for role, j in target.roles.limbs.items():
+        if role in source.roles.limbs:
+            mask[:, j] = keys.mask[:, source.roles.limbs[role]]
+    for name, chain in target.chains().items():
+        keyed = keys.mask[:, source.chains()[name]].any(axis=1)
+        mask[:, chain] = keyed[:, None]
+    return Keys(frames, mask=mask, given=keys.given)
+
+
+def mapped_joints(rig: Rig) -> np.ndarray:
+    """``(J,)`` bool: the joints of ``rig`` that play a role."""
+    out = np.zeros(rig.skeleton.num_joints, dtype=bool)
+    out[[j for chain in rig.chains().values() for j in chain]] = True
+    out[list(rig.roles.limbs.values())] = True
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Served:
+    """What a human model serves: its ``skeleton`` (as its config records it), its ``fps`` and whether its
+    corpus ``folded`` a static top joint into the hips."""
+
+    skeleton: Skeleton
+    fps: float
+    folded: bool
+
+
+def served(model_path) -> Served:
+    """What the model folder ``model_path`` serves, from its config (no weights are read); a model that
+    records no frame rate is taken to be at 30 fps (the Bandai-Namco corpora's)."""
+    from keyfill.learn.modelfile import read_config
+
+    config = read_config(model_path)
+    try:
+        return Served(Skeleton.from_json(config["skeleton"]), float(config.get("fps", 30.0)),
+                      bool(config.get("folded_root", False)))
+    except (KeyError, TypeError, ValueError, DataError) as e:
+        raise ModelError(f"{model_path}: damaged model config ({e})") from None
+
+
+def needed(served: Served, motion: Motion, keys: Keys) -> bool:
+    """Whether ``motion`` needs the bridge: another skeleton or another frame rate than the model's."""
+    return abs(motion.fps - served.fps) > 1e-9 * served.fps or not fits(served, motion, int(keys.frames[0]))
+
+
+def complete_on_model_rig(motion: Motion, keys: Keys, complete, model: Served, options, hint: str = ""):
+    """Complete ``motion`` between ``keys`` with a model that serves ``model`` (the module docstring).
+
+    Args:
+        complete: ``(model_motion, model_keys) -> Completion`` on the model's skeleton and frame rate.
+        options: the :class:`~keyfill.learn.completion.CompleteOptions`; ``rig_map`` (a TOML file of role ->
+            joint name(s)) overrides the automatic role mapping of ``motion``'s skeleton, ``exact_keys`` makes
+            the keys exact on the motion's own channels.
+        hint: ends the error for a motion that is neither on the model's skeleton nor a humanoid (how to train
+            a model for it).
+
+    Returns a :class:`~keyfill.learn.completion.Completion`.
+    """
+    from keyfill.characters.humanoid import read_rig_map
+    from keyfill.learn.completion import Completion
+    from keyfill.learn.exact_keys import snap_to_keys
+
+    k = keys.frames
+    same = fits(model, motion, int(k[0]))
+    model_fps = model.fps
+    if not same:
+        rig_map = read_rig_map(options.rig_map) if options.rig_map is not None else None
+        source, target = rigs(motion, model, rig_map, int(k[0]), hint)
+    frames = model_frames(k, motion.fps, model_fps)
+    posed = motion.replace(keys=None).frames(k)
+    if not same:
+        posed = retarget(posed, source, target)
+    rot, pos = _held(posed.rotations, posed.positions, frames, int(frames[-1]) + 1)
+    model_motion = Motion(posed.skeleton, model_fps, rot, pos)
+    if same:
+        model_keys = Keys(frames, mask=keys.mask, given=keys.given)
+    else:
+        model_keys = _model_keys(keys, frames, source, target)
+    done = complete(model_motion, model_keys)
+    filled = done.motion.replace(keys=None)
+    if not same:
+        filled = retarget(filled, target, source)
+    filled = resample(filled, frames, k, motion.num_frames, motion.fps)
+    if same:
+        rotations, positions = filled.rotations, filled.positions
+    else:  # joints without a role, and translations but the hips', from the motion's own keys
+        spline = interpolate.cubic(motion, keys)
+        keep = ~mapped_joints(source)
+        rotations = np.where(keep[None, :, None], spline.rotations, filled.rotations)
+        positions = spline.positions.copy()
+        positions[:, source.roles.hips] = filled.positions[:, source.roles.hips]
+    result = motion.replace(rotations=R.quat_continuous_np(rotations, axis=0), positions=positions, keys=keys)
+    inner = {key: v for key, v in done.info.items() if key not in ("method", "keys", "frames")}
+    info = {**inner, "model_fps": float(model_fps), "model_keys": frames.tolist(), "exact_keys": bool(options.exact_keys)}
+    if not same:
+        info["rig"] = source.roles.to_json()
+    if options.exact_keys:
+        result, report = snap_to_keys(result, motion, keys)
+        info.update(report)
+    return Completion(result, info)

@@ -111,3 +111,14 @@ def test_another_humanoid_is_retargeted_and_keeps_its_own_layout(tmp_path, capsy
     k = [int(x) for x in keys.split(",")]
     np.testing.assert_allclose(filled.positions[k], src.positions[k], atol=1e-6)
     np.testing.assert_allclose(np.abs(np.sum(filled.rotations[k] * src.rotations[k], -1)), 1.0, atol=1e-9)
+
+
+def test_a_dna_clip_of_another_rig_is_retargeted_onto_the_model(tmp_path):
+    mixamo = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
+    outs = {}
+    for name, dna in (("own", f"{EXAMPLE}:0,100,200"), ("mixamo", f"{mixamo}:10,30,50")):
+        outs[name] = tmp_path / f"{name}.bvh"
+        assert main(["complete", str(EXAMPLE), "-o", str(outs[name]), "--method", "gan", "--dna", dna]) == 0
+    own, other = io.load(outs["own"]), io.load(outs["mixamo"])
+    assert own.skeleton.names == other.skeleton.names
+    assert not np.allclose(own.rotations, other.rotations, atol=1e-3)  # the Mixamo poses steer it elsewhere

@@ -70,6 +70,15 @@ def rigs(motion: Motion, model: Served, rig_map: dict | None, frame: int, hint: 
         raise
 
 
+def on_model_skeleton(motion: Motion, model: Served, rig_map: dict | None = None, hint: str = "") -> Motion:
+    """``motion`` as it is when the model serves its skeleton, else retargeted onto the model's skeleton (every
+    frame, at the motion's own rate): how a Motion DNA clip of any humanoid reaches a model."""
+    if fits(model, motion, 0):
+        return motion
+    source, target = rigs(motion, model, rig_map, 0, hint)
+    return retarget(motion.replace(keys=None), source, target)
+
+
 def model_frames(keys: np.ndarray, fps: float, model_fps: float) -> np.ndarray:
     """``(K,)`` model frames of ``keys (K,)`` given at ``fps``: the first key at 0, each gap of ``g`` frames
     ``max(1, round(g * model_fps / fps))`` model frames long."""

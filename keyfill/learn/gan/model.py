@@ -434,6 +434,7 @@ def complete(motion, keys, options):
     ``options.dna`` (``FILE[:FRAMES]``) and ``options.dna_count`` choose the Motion DNA.
     """
     from keyfill import io
+    from keyfill.learn import rig_bridge
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.modelfile import load_cached
@@ -445,7 +446,8 @@ def complete(motion, keys, options):
         source, frames = (None, None)
         if options.dna is not None:
             dna_file, frames = parse_dna(options.dna)
-            source = io.load(dna_file)
+            served = rig_bridge.Served(model.skeleton, model.fps, model.folded)
+            source = rig_bridge.on_model_skeleton(io.load(dna_file), served, hint=TRAIN_HINT)
         if options.dna_count is not None and model.config.dna:  # named as the option, not dna_poses' count
             check_count("dna_count", options.dna_count, model.config.max_frames)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)

@@ -45,6 +45,10 @@ from keyfill.learn.registry import ALIASES, METHODS
 @click.option("--dna-count", type=int, metavar="K",
               help="How many representative frames of the DNA file (or the bank) to use (default: one per 3 s of "
                    "the gaps between keys).")
+@click.option("--rig-map", type=click.Path(exists=True, dir_okay=False), metavar="FILE.toml",
+              help='Humanoid roles the mapper does not find in IN\'s skeleton, as TOML lines role = "JointName" '
+                   "(e.g. hand_l = \"L_Wrist\"); for the methods whose human models serve any humanoid rig "
+                   "through retargeting (see 'keyfill info IN --rig' and docs/retarget.md).")
 @click.option("--runtime", type=click.Choice(["auto", "torch", "onnx"]), default="auto", show_default=True,
               help="Run a learned model with torch or its exported ONNX graph (onnxruntime, no torch import; see "
                    "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
@@ -54,8 +58,8 @@ from keyfill.learn.registry import ALIASES, METHODS
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
-             device, dna, dna_count, runtime, fmt, in_fmt, workers, scheduler, connect_timeout, force, batch_size,
-             as_json):
+             device, dna, dna_count, rig_map, runtime, fmt, in_fmt, workers, scheduler, connect_timeout, force,
+             batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -81,6 +85,12 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     With an exported graph (keyfill export), --runtime onnx or auto runs
     the model through onnxruntime and imports no torch (docs/onnx.md).
 
+    The shipped human models (transformer, gan) complete any humanoid rig at
+    any frame rate: the keys are retargeted onto the model's skeleton and
+    frame rate, completed, and retargeted back; the output keeps IN's
+    skeleton, channels and fps (docs/retarget.md). --rig-map names the roles
+    the mapper cannot find ('keyfill info IN --rig' shows the mapping).
+
     \b
     Methods:
     {methods}
@@ -98,13 +108,19 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete examples/human/keys_15.usda --method transformer -o walk.usda   (the shipped human transformer)
       keyfill complete path.bvh --keys 0,200,400 --key-joints Hips --key-positions --method gan -o out.bvh
       keyfill complete walk.bvh --keys 0,300,600 --method gan --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
+      keyfill complete mixamo.bvh --key-every 10 --method transformer -o out.bvh     (retargeted to the model)
+      keyfill complete robot.bvh --key-every 10 --method transformer --rig-map robot.toml -o out.bvh
     """
     from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
 
     options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime, dna=dna,
-                              dna_count=dna_count)
+                              dna_count=dna_count, rig_map=rig_map)
+    if rig_map is not None:  # a damaged rig map is refused before any file is read
+        from keyfill.characters.humanoid import read_rig_map
+
+        read_rig_map(rig_map)
     if is_batch(inputs, dst):
         from keyfill.learn.batch import CompleteSpec
 

@@ -45,12 +45,26 @@ def describe(motion, path: str) -> dict:
 @click.option("--representative", type=int, metavar="N",
               help="Also list the N representative frames (largest joint-rotation change; the frames a Motion DNA "
                    "takes from this file, see docs/gan.md).")
+@click.option("--rig", is_flag=True,
+              help="Also show the humanoid roles of the skeleton (which joint is the hips, each hand, ...) and which "
+                   "shipped human models fit it, directly or through retargeting (docs/retarget.md).")
+@click.option("--rig-map", type=click.Path(exists=True, dir_okay=False), metavar="FILE.toml",
+              help='Give roles the mapper does not find, as TOML lines role = "JointName" (e.g. hand_l = "L_Wrist"; '
+                   "spine = [...] for the chain); implies --rig.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
-def info(file, fmt, representative, as_json):
+def info(file, fmt, representative, rig, rig_map, as_json):
     """Show what a motion file (BVH, USD or glTF) holds.
 
     Skeleton (joints, channels, Euler orders), frame count, frame rate,
     duration, keys and the world-space bounding box.
+
+    With --rig: the humanoid role of each joint (hips, spine chain, neck,
+    head, per side clavicle, upper arm, forearm, hand, thigh, shin, foot,
+    toe) and, for each method with a shipped human model (transformer, gan),
+    whether the model serves this skeleton as its own, through retargeting
+    (keyfill complete then retargets the keys onto the model's skeleton and
+    back), or not and why. A skeleton the mapper cannot resolve is an error
+    that names the roles it could not find; give them with --rig-map.
 
     \b
     Examples:
@@ -58,6 +72,8 @@ def info(file, fmt, representative, as_json):
       keyfill info keys.usda --json | jq .keys
       cat walk.bvh | keyfill info - --format bvh
       keyfill info salsa.bvh --representative 8 --json | jq .representative_frames
+      keyfill info character.bvh --rig
+      keyfill info character.bvh --rig-map character.toml --json | jq .rig
     """
     from keyfill import io
 
@@ -67,6 +83,14 @@ def info(file, fmt, representative, as_json):
         from keyfill.learn.representative import representative_frames
 
         d["representative_frames"] = representative_frames(motion, representative).tolist()
+    roles = None
+    if rig or rig_map is not None:
+        from keyfill.characters.humanoid import read_rig_map
+        from keyfill.learn.registry import humanoid_fit
+
+        roles, d["models"] = humanoid_fit(motion, read_rig_map(rig_map) if rig_map is not None else None,
+                                          label="stdin" if file == "-" else file)
+        d["rig"] = roles.to_json()
     if as_json:
         emit_json(d)
         return
@@ -89,3 +113,21 @@ def info(file, fmt, representative, as_json):
     width = max(len(r[0]) for r in rows)
     for name, order, chans in rows:
         click.echo(f"  {name:<{width}}  {order}  {chans}")
+    if roles is not None:
+        click.echo("humanoid roles:")
+        for line in roles.describe():
+            click.echo(f"  {line}")
+        click.echo("shipped human models:")
+        for name, m in d["models"].items():
+            click.echo(f"  {name}{_model_words(m, d['fps'])}")
+
+
+def _model_words(m: dict, fps: float) -> str:
+    """`` (bandai2-gan, 30 fps): through retargeting, resampled from 120 fps`` for ``info --rig``."""
+    where = f" ({m['model']}, {m['model_fps']:g} fps)" if "model_fps" in m else f" ({m['model']})" if m["model"] else ""
+    if m["fits"] == "no":
+        return f"{where}: no: {m['reason']}"
+    text = "its own skeleton" if m["fits"] == "own skeleton" else "through retargeting"
+    if m.get("resampled"):
+        text += f", resampled from {fps:g} fps"
+    return f"{where}: {text}"

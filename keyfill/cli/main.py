@@ -27,6 +27,7 @@ from keyfill.errors import KeyfillError
 COMMANDS = {
     "info": "keyfill.cli.info:info",
     "convert": "keyfill.cli.convert:convert",
+    "retarget": "keyfill.cli.retarget:retarget",
     "complete": "keyfill.cli.complete:complete",
     "simulate": "keyfill.cli.simulate:simulate",
     "train": "keyfill.cli.train:train",

@@ -194,14 +194,18 @@ def checked_keys(m: Method, motion: Motion, keys: Keys) -> Keys:
 
 
 def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
-    """``options`` once its ``model`` and ``dna`` are known to fit ``m`` (a :class:`UsageError` naming them
-    otherwise); reads no weights."""
+    """``options`` once its ``model``, ``dna`` and ``rig_map`` are known to fit ``m`` (a :class:`UsageError`
+    naming them otherwise); reads no weights."""
     if (options.dna is not None or options.dna_count is not None) and not m.dna:
         raise UsageError(f"dna and dna_count apply to methods with Motion DNA "
                          f"({', '.join(n.name for n in METHODS.values() if n.dna)}), not to {m.name!r}",
                          params=("dna", "dna_count"))
     if not m.learned and options.model is not None:
         raise UsageError(f"model applies to learned methods, not to {m.name!r}", params="model")
+    if options.rig_map is not None and not m.humanoid:
+        raise UsageError(f"rig_map applies to methods whose models serve any humanoid rig "
+                         f"({', '.join(n.name for n in METHODS.values() if n.humanoid)}), not to {m.name!r}",
+                         params="rig_map")
     from keyfill.learn.onnx import is_graph
 
     if options.model is not None and not is_graph(options.model):
@@ -247,6 +251,63 @@ def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOption
         return None
     return rig_bridge.complete_on_model_rig(motion, keys, lambda mm, kk: complete(mm, kk, m.name, options),
                                             model, options, hint=getattr(m.implementation(), "TRAIN_HINT", ""))
+
+
+def humanoid_fit(motion: Motion, rig_map: dict | None = None, label: str = "the skeleton"):
+    """``(roles, models)``: the humanoid roles of ``motion``'s skeleton (a :class:`~keyfill.characters.humanoid.RoleMap`,
+    with ``rig_map`` as :func:`~keyfill.characters.humanoid.map_roles` takes it) and how the shipped model of
+    each ``humanoid`` method fits it, for ``keyfill info --rig``. Reads model configs, no weights, no torch.
+
+    ``models``: method name -> ``{"model": folder name or None, "model_fps": float, "fits": "own skeleton" |
+    "through retargeting" | "no", "reason": why not (only with "no"), "resampled": whether the motion's frame
+    rate differs from the model's (its keys are then placed on the model's frames)}``.
+
+    Raises the mapper's :class:`~keyfill.errors.DataError` (``params="rig_map"``) when the skeleton is no
+    humanoid it can resolve; ``label`` names it there.
+    """
+    import numpy as np
+
+    from keyfill.characters.humanoid import map_roles
+    from keyfill.characters.retarget import make_rig
+    from keyfill.errors import DataError
+    from keyfill.learn import rig_bridge
+
+    roles = map_roles(motion.skeleton, rig_map, label=label)
+    if motion.num_frames == 0:  # the rest pose stands for the frames the file lacks
+        sk = motion.skeleton
+        motion = Motion(sk, motion.fps, np.tile([1.0, 0.0, 0.0, 0.0], (1, sk.num_joints, 1)), sk.offsets[None].copy())
+    try:
+        make_rig(motion.skeleton, roles=roles, label=label)
+        own_problem = None
+    except DataError as e:
+        own_problem = str(e)
+    models: dict[str, dict] = {}
+    for m in METHODS.values():
+        if not m.humanoid:
+            continue
+        path = m.default_model()
+        if path is None:
+            models[m.name] = {"model": None, "fits": "no", "reason": "no model ships with this keyfill"}
+            continue
+        try:
+            served = rig_bridge.served(path)
+        except ModelError as e:
+            models[m.name] = {"model": path.name, "fits": "no", "reason": str(e)}
+            continue
+        entry = {"model": path.name, "model_fps": served.fps,
+                 "resampled": bool(abs(motion.fps - served.fps) > 1e-9 * served.fps)}
+        if rig_bridge.fits(served, motion, 0):
+            entry["fits"] = "own skeleton"
+        else:
+            try:
+                make_rig(served.skeleton, label="the model's skeleton")
+                if own_problem is not None:
+                    raise DataError(own_problem)
+                entry["fits"] = "through retargeting"
+            except DataError as e:
+                entry.update(fits="no", reason=str(e))
+        models[m.name] = entry
+    return roles, models
 
 
 def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",

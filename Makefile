@@ -35,6 +35,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	@command -v npm >/dev/null && $(MAKE) --no-print-directory gltf-validator \
 	    || echo "make test: no npm (or no registry): tests/test_gltf.py skips the glTF validator"
+	$(BIN)/ruff check keyfill tests benchmarks
 	$(BIN)/python -m pytest -q
 
 # The Khronos glTF validator (npm package, run with node by tests/interop/gltf_validate.js) for

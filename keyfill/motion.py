@@ -14,8 +14,8 @@ End Sites, units and up axis).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -186,7 +186,7 @@ class Skeleton:
         ident[:, 0] = 1
         return fk(ident, self.offsets, self.parents)[1]
 
-    def difference(self, other: "Skeleton", atol: float = 1e-6) -> str | None:
+    def difference(self, other: Skeleton, atol: float = 1e-6) -> str | None:
         """A one-line description of the first difference from ``other``, or None."""
         if self.num_joints != other.num_joints:
             n = min(self.num_joints, other.num_joints)
@@ -203,7 +203,7 @@ class Skeleton:
                 return f"joint {self.names[j]!r} has a different rest offset"
         return None
 
-    def replace(self, **changes) -> "Skeleton":
+    def replace(self, **changes) -> Skeleton:
         return dataclasses.replace(self, **changes)
 
 
@@ -280,7 +280,7 @@ class Keys:
             np.array([a in self.given for a in "XYZ"])
         return self.joint_mask(num_joints)[..., None] & axes
 
-    def channel_masks(self, skeleton: "Skeleton") -> tuple[np.ndarray, np.ndarray]:
+    def channel_masks(self, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
         """``(rotation (K, J), translation (K, J, 3))`` bool: the local channels the keys fix.
 
         With ``given="pose"`` a keyed joint fixes its rotation and translation. Positions
@@ -298,7 +298,7 @@ class Keys:
         trans = self.coordinate_mask(J) & movable[None, :, None]
         return np.zeros_like(joints), trans
 
-    def restrict(self, skeleton: "Skeleton", joints: Sequence[str] | None = None, given: str = "pose") -> "Keys":
+    def restrict(self, skeleton: Skeleton, joints: Sequence[str] | None = None, given: str = "pose") -> Keys:
         """These key frames, keying only the joints named ``joints`` (all when None) at every key, giving ``given``.
 
         ``keys.restrict(sk, [sk.names[0]], "position")`` is a path of root spots (the
@@ -315,7 +315,7 @@ class Keys:
             mask = np.repeat(row[None], len(self.frames), axis=0)
         return Keys(self.frames, mask, given)
 
-    def select(self, index) -> "Keys":
+    def select(self, index) -> Keys:
         """The keys ``index`` (an index array or a bool array over the keys) with their mask rows."""
         mask = None if self.mask is None else self.mask[index]
         return Keys(self.frames[index], mask, self.given)
@@ -324,7 +324,7 @@ class Keys:
         return len(self.frames)
 
     @classmethod
-    def parse(cls, text: str, *, param: str = "text") -> "Keys":
+    def parse(cls, text: str, *, param: str = "text") -> Keys:
         """Keys from ``"0,12,30"`` (the ``--keys`` option); errors name the parameter ``param``."""
         try:
             frames = [int(t) for t in text.replace(" ", "").split(",") if t != ""]
@@ -337,7 +337,7 @@ class Keys:
         return cls(np.array(frames, dtype=np.int64))
 
     @classmethod
-    def every(cls, step: int, num_frames: int, *, param: str = "step") -> "Keys":
+    def every(cls, step: int, num_frames: int, *, param: str = "step") -> Keys:
         """A key every ``step`` frames from frame 0, plus the last frame; errors name the parameter ``param``."""
         if step < 1:
             raise UsageError(f"{param} must be at least 1, got {step}", params=param)
@@ -346,7 +346,7 @@ class Keys:
             frames = np.append(frames, num_frames - 1)
         return cls(frames)
 
-    def check(self, num_frames: int, min_keys: int = 2) -> "Keys":
+    def check(self, num_frames: int, min_keys: int = 2) -> Keys:
         """Raise a :class:`UsageError` unless the keys fit a motion of ``num_frames`` frames."""
         if len(self.frames) < min_keys:
             raise UsageError(f"at least {min_keys} keys are needed, got {len(self.frames)}")
@@ -360,8 +360,8 @@ class Keys:
         return [int(f) for f in self.frames]
 
     @classmethod
-    def resolve(cls, motion: "Motion", keys_text: str | None = None, key_every: int | None = None,
-                min_keys: int = 2) -> "Keys":
+    def resolve(cls, motion: Motion, keys_text: str | None = None, key_every: int | None = None,
+                min_keys: int = 2) -> Keys:
         """The keys for ``motion``: from ``keys_text`` (``"0,12,30"``), a key every ``key_every`` frames, or else
         the motion's own keys. Errors name the parameters ``keys_text`` and ``key_every`` (in ``params``)."""
         if keys_text is not None and key_every is not None:
@@ -480,10 +480,10 @@ class Motion:
             angles[:, j] = np.unwrap(a, axis=0)
         return angles
 
-    def replace(self, **changes) -> "Motion":
+    def replace(self, **changes) -> Motion:
         return dataclasses.replace(self, **changes)
 
-    def frames(self, index: slice | Iterable[int]) -> "Motion":
+    def frames(self, index: slice | Iterable[int]) -> Motion:
         """A motion of the selected frames (keys outside the selection are dropped)."""
         idx = np.arange(self.num_frames)[index] if isinstance(index, slice) else np.asarray(list(index))
         keys = None
@@ -497,7 +497,7 @@ class Motion:
         return self.replace(rotations=self.rotations[idx], positions=self.positions[idx], keys=keys)
 
     @classmethod
-    def rest(cls, skeleton: Skeleton, num_frames: int = 1, fps: float = 30.0) -> "Motion":
+    def rest(cls, skeleton: Skeleton, num_frames: int = 1, fps: float = 30.0) -> Motion:
         """A motion that holds the rest pose for ``num_frames`` frames."""
         rot = np.zeros((num_frames, skeleton.num_joints, 4))
         rot[..., 0] = 1

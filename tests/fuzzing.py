@@ -137,7 +137,7 @@ def _pack(folder: Path) -> bytes:
 
 
 def _model_files(data: bytes) -> tuple[bytes, bytes]:
-    config, sep, weights = data.partition(b"\n@@WEIGHTS@@\n")
+    config, _sep, weights = data.partition(b"\n@@WEIGHTS@@\n")
     return config, weights
 
 
@@ -426,9 +426,9 @@ def _worker(seed: int, indices, mem_mb: int, conn) -> None:
     torch.set_num_threads(1)
     from pxr import Usd  # noqa: F401
 
-    import keyfill.io.gltf_write  # noqa: F401
-    import keyfill.io.usd  # noqa: F401
-    import keyfill.learn.arnn.model  # noqa: F401
+    import keyfill.io.gltf_write
+    import keyfill.io.usd
+    import keyfill.learn.arnn.model
     import keyfill.learn.registry  # noqa: F401
 
     _lamp_curves()

@@ -174,7 +174,7 @@ def test_curriculum_schedules_have_the_papers_shape():
     assert tf[E // 20] > 0.95 and tf[E // 2 - E // 20] < 0.05  # flat ends: sigmoid, not linear
     # omega: 0 through the first half, a sigmoid up to exactly 1, then held
     assert om[: E // 2 + 1].max() == 0.0 and om[-1] == 1.0 and np.all(np.diff(om) >= 0)
-    mid = int(round((0.5 + 0.85) / 2 * E))
+    mid = round((0.5 + 0.85) / 2 * E)
     assert om[mid] == pytest.approx(0.5, abs=0.01)
     assert om[int(0.88 * E)] == 1.0
     rises = np.diff(om)

@@ -172,7 +172,7 @@ def test_bad_training_options(dataset, capsys, tmp_path):
 
 
 def test_evaluate_keys_protocol(model, dataset, capsys):
-    code, out, err = run(capsys, "evaluate", model, dataset, "--json")
+    code, out, _err = run(capsys, "evaluate", model, dataset, "--json")
     assert code == 0
     res = json.loads(out)
     assert res["protocol"] == "keys" and res["test_sequences"] == 2

@@ -71,7 +71,7 @@ def test_format_sets_the_suffix_and_globs_keep_relative_names(tmp_path, capsys):
     (src / "deep").mkdir(parents=True)
     shutil.copy(MIXAMO, src / "deep" / "walk.bvh")
     shutil.copy(MIXAMO, src / "run.bvh")
-    code, out, err = run(capsys, "complete", f"{src}/**/*.bvh", "-o", tmp_path / "out/", "--key-every", "5",
+    code, _out, err = run(capsys, "complete", f"{src}/**/*.bvh", "-o", tmp_path / "out/", "--key-every", "5",
                          "--format", "usda")
     assert code == 0, err
     assert sorted(outputs(tmp_path / "out")) == ["deep/walk.usda", "run.usda"]
@@ -147,7 +147,7 @@ def test_a_bad_input_is_reported_and_the_others_go_on(lamps, tmp_path, capsys):
 
 def test_an_output_folder_that_is_a_file_is_refused(lamps, tmp_path, capsys):
     (tmp_path / "out").write_text("a file")
-    code, out, err = run(capsys, "complete", lamps, "-o", tmp_path / "out", "--method", "arnn")
+    code, _out, err = run(capsys, "complete", lamps, "-o", tmp_path / "out", "--method", "arnn")
     assert code == 2 and err.startswith("keyfill: error: -o ") and "is a file" in err
     assert (tmp_path / "out").read_text() == "a file"
 
@@ -157,7 +157,7 @@ def test_two_inputs_for_one_output_are_refused_before_any_work(tmp_path, capsys)
         (tmp_path / d).mkdir()
         shutil.copy(LAMP_KEYS, tmp_path / d / "keys.usda")
     shutil.copy(LAMP_KEYS, tmp_path / "c.usda")
-    code, out, err = run(capsys, "complete", tmp_path / "c.usda", tmp_path / "a" / "keys.usda",
+    code, _out, err = run(capsys, "complete", tmp_path / "c.usda", tmp_path / "a" / "keys.usda",
                          tmp_path / "b" / "keys.usda", "-o", tmp_path / "out")
     assert code == 2 and "would both be written to" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
@@ -235,7 +235,7 @@ def test_transformer_batch_sends_windows_of_one_layout_together(tmp_path, capsys
     monkeypatch.setattr(T.CompletionModel, "complete_windows",
                         lambda self, q, r, k: calls.append(len(q)) or real(self, q, r, k))
     args = ("--method", "transformer", "--model", tmp_path / "model", "--key-every", "10", "--runtime", "torch")
-    code, out, err = run(capsys, "complete", tmp_path / "in", "-o", tmp_path / "out", "--workers", "1", *args)
+    code, _out, err = run(capsys, "complete", tmp_path / "in", "-o", tmp_path / "out", "--workers", "1", *args)
     assert code == 0, err
     assert calls == [3]  # one window per clip, one layout: one call
     for i in range(3):
@@ -252,7 +252,7 @@ def test_an_unreachable_scheduler_is_one_error_and_writes_nothing(tmp_path, caps
     with socket.socket() as s:  # a port nobody listens on
         s.bind(("127.0.0.1", 0))
         address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
-    code, out, err = run(capsys, "complete", LAMP_KEYS, MIXAMO, "-o", tmp_path / "out", "--key-every", "5",
+    code, _out, err = run(capsys, "complete", LAMP_KEYS, MIXAMO, "-o", tmp_path / "out", "--key-every", "5",
                          "--scheduler", address, "--connect-timeout", "1")
     assert code == 1 and err.startswith(f"keyfill: error: cannot reach the Dask scheduler at {address}")
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "out").exists()

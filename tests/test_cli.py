@@ -35,7 +35,7 @@ def assert_one_line_error(err: str, *fragments: str):
 
 
 def test_info_json(capsys):
-    code, out, err = run(capsys, "info", MIXAMO, "--json")
+    code, out, _err = run(capsys, "info", MIXAMO, "--json")
     assert code == 0
     d = json.loads(out)
     assert d["frames"] == 69 and d["num_joints"] == 55 and d["num_channels"] == 168 and d["fps"] == 30
@@ -174,7 +174,7 @@ def test_bad_bvh_input(capsys, tmp_path, case, command):
     src.write_text(text)
     out = tmp_path / "out.usda"
     args = ["convert", src, out] if command == "convert" else ["complete", src, "-o", out, "--keys", "0,5"]
-    code, stdout, err = run(capsys, *args)
+    code, _stdout, err = run(capsys, *args)
     assert code == 1
     assert_one_line_error(err, "bad.bvh", *fragments)
     assert not out.exists() and list(tmp_path.iterdir()) == [src]
@@ -261,8 +261,8 @@ def test_failed_write_leaves_no_partial_file(capsys, tmp_path):
 def test_debug_shows_the_traceback(tmp_path):
     r = subprocess.run(
         [sys.executable, "-m", "keyfill", "--debug", "info", str(tmp_path / "missing.bvh")],
-        capture_output=True, text=True,
+        capture_output=True, text=True, check=False,
     )
     assert r.returncode == 1 and "Traceback" in r.stderr
-    r = subprocess.run([sys.executable, "-m", "keyfill", "info", str(tmp_path / "missing.bvh")], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "keyfill", "info", str(tmp_path / "missing.bvh")], capture_output=True, text=True, check=False)
     assert r.returncode == 1 and "Traceback" not in r.stderr and r.stderr.startswith("keyfill: error:")

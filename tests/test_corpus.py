@@ -60,7 +60,7 @@ def test_corpus_arrays_and_windows(tmp_path):
         q, _ = c.clip(i)
         assert np.all(np.sum(q[1:] * q[:-1], -1) >= 0)
     # windows as the reference cuts them: start + length < frames
-    q, r, clip_of, skipped = c.windows(50, 10)
+    q, _r, clip_of, skipped = c.windows(50, 10)
     assert skipped == 1  # the 30-frame clip
     assert Path(c.files[3]).name == "walk_short_000.bvh"
     assert len(q) == 3 * 2  # starts 0 and 10 (20 + 50 = 70 is not < 70)

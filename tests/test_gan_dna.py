@@ -69,7 +69,7 @@ def test_partial_key_sampling_gives_root_half_body_and_planes():
 
     sk = walker_skeleton()
     m = walker_motion(sk, 10, np.random.default_rng(0))
-    q, p = fold_root(m.rotations, m.positions, sk.parents)
+    _q, p = fold_root(m.rotations, m.positions, sk.parents)
     halves = body_halves(sk.replace(offsets=np.vstack([np.zeros(3), p[0, 1:]])))
     names = [[sk.names[j] for j in np.flatnonzero(h)] for h in halves]
     assert names == [["joint_Root", "Hips", "Spine", "Head"], ["joint_Root", "Hips", "Leg_L", "Foot_L", "Leg_R",

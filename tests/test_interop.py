@@ -23,7 +23,7 @@ from keyfill import io
 from keyfill.motion import Motion
 
 sys.path.insert(0, str(Path(__file__).parent / "interop"))
-from blender_check import blender_deviation, blender_missing  # noqa: E402
+from blender_check import blender_deviation, blender_missing
 
 #: bvhio reads one ROOT per file, so the local edge-layout fixtures are not for it
 LOCAL_FIXTURES = ["cmu_02_03_cgspeed_first4frames.bvh", "bvhtoolbox_test_freebvh_mixamo.bvh"]

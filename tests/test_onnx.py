@@ -12,16 +12,16 @@ import pytest
 pytest.importorskip("onnxruntime")
 pytest.importorskip("onnxscript")
 
-from synthetic_corpus import walker_motion, walker_skeleton  # noqa: E402
+from synthetic_corpus import walker_motion, walker_skeleton
 
-from keyfill import io  # noqa: E402
-from keyfill.cli.main import main  # noqa: E402
-from keyfill.learn import onnx as kx  # noqa: E402
-from keyfill.motion import Keys  # noqa: E402
+from keyfill import io
+from keyfill.cli.main import main
+from keyfill.learn import onnx as kx
+from keyfill.motion import Keys
 
 ROOT = Path(__file__).resolve().parents[1]
 LAMP_KEYS = ROOT / "examples" / "lamp" / "keys.usda"
-TINY = dict(layers=2, d_model=32, heads=4, ffn=64, dropout=0.0, max_frames=65)
+TINY = {"layers": 2, "d_model": 32, "heads": 4, "ffn": 64, "dropout": 0.0, "max_frames": 65}
 
 
 def run(capsys, *args):
@@ -188,13 +188,13 @@ def test_onnx_runtime_imports_no_torch(lamp_graph, transformer, tmp_path):
         "assert 'torch' not in sys.modules, sorted(m for m in sys.modules if m.startswith('torch'))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}, check=False)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "lamp.usda").is_file() and (tmp_path / "w.bvh").is_file()
 
 
 def test_a_model_without_a_graph_says_how_to_export(tmp_path, capsys):
-    code, out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "arnn",
+    code, _out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "arnn",
                          "--runtime", "onnx")
     assert code == 1 and len(err.strip().splitlines()) == 1
     assert "has no exported graph" in err and "keyfill export arnn -o arnn.onnx" in err
@@ -209,26 +209,26 @@ def test_a_graph_of_other_weights_is_refused(transformer, tmp_path, capsys):
     io.save(motion.replace(keys=Keys([0, 20, 40, 59])), tmp_path / "walk.bvh")
     keys = ("--keys", "0,20,40,59")
     for runtime in ("onnx", "auto"):
-        code, out, err = run(capsys, "complete", tmp_path / "walk.bvh", "-o", tmp_path / "x.bvh", "--method",
+        code, _out, err = run(capsys, "complete", tmp_path / "walk.bvh", "-o", tmp_path / "x.bvh", "--method",
                              "transformer", "--model", other, "--runtime", runtime, *keys)
         assert code == 1 and "exported from other weights" in err and f"keyfill export {other}" in err
     # a batch is refused before any work
-    code, out, err = run(capsys, "complete", tmp_path / "walk.bvh", "-o", tmp_path / "out/", "--method",
+    code, _out, err = run(capsys, "complete", tmp_path / "walk.bvh", "-o", tmp_path / "out/", "--method",
                          "transformer", "--model", other, *keys)
     assert code == 1 and "exported from other weights" in err and not (tmp_path / "out").exists()
     assert not (tmp_path / "x.bvh").exists()
     # torch still works
-    code, out, err = run(capsys, "complete", tmp_path / "walk.bvh", "-o", tmp_path / "x.bvh", "--method",
+    code, _out, err = run(capsys, "complete", tmp_path / "walk.bvh", "-o", tmp_path / "x.bvh", "--method",
                          "transformer", "--model", other, "--runtime", "torch", *keys)
     assert code == 0, err
 
 
 def test_a_graph_of_another_method_is_refused(lamp_graph, tmp_path, capsys):
-    code, out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "transformer",
+    code, _out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "transformer",
                          "--model", lamp_graph)
     assert code == 2 and "a graph of a 'arnn' model, not 'transformer'" in err
     (tmp_path / "fake.onnx").write_bytes(b"not a graph")
-    code, out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "arnn",
+    code, _out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "arnn",
                          "--model", tmp_path / "fake.onnx")
     assert code == 1 and "not a readable ONNX graph" in err
 

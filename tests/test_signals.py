@@ -52,7 +52,7 @@ def _start_slow_convert(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
 
 
 def test_sigterm_during_convert_leaves_nothing(tmp_path):
-    proc, out = _start_slow_convert(tmp_path)
+    proc, _out = _start_slow_convert(tmp_path)
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=30) == 128 + signal.SIGTERM
     assert proc.stderr.read().decode().strip().splitlines()[-1] == "keyfill: error: terminated"

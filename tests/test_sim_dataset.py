@@ -153,7 +153,7 @@ def test_killed_build_resumes(reference, tmp_path):
 
 def test_bvh_format(tmp_path, capsys):
     folder = tmp_path / "bvh"
-    rc, out, err = simulate(["-o", str(folder), "--count", "1", "--format", "bvh", "--workers", "1", *FAST, "--json"],
+    rc, out, _err = simulate(["-o", str(folder), "--count", "1", "--format", "bvh", "--workers", "1", *FAST, "--json"],
                             capsys)
     assert rc == 0 and json.loads(out)["sequences"] == 1
     seqs = read_dataset(folder)
@@ -173,7 +173,7 @@ def test_bvh_format(tmp_path, capsys):
 )
 def test_bad_numbers(tmp_path, capsys, args, message):
     folder = tmp_path / "out"
-    rc, out, err = simulate(["-o", str(folder), *args], capsys)
+    rc, _out, err = simulate(["-o", str(folder), *args], capsys)
     assert rc == 2
     assert err.startswith("keyfill: error: ") and message in err and len(err.strip().splitlines()) == 1
     assert not folder.exists()
@@ -185,12 +185,12 @@ def test_folder_of_another_configuration(reference, tmp_path, capsys):
     for name, data in snapshot(reference).items():
         (folder / name).write_bytes(data)
     before = snapshot(folder)
-    rc, out, err = simulate(["-o", str(folder), "--count", "4", "--seed", "1", *FAST], capsys)
+    rc, _out, err = simulate(["-o", str(folder), "--count", "4", "--seed", "1", *FAST], capsys)
     assert rc == 2 and "holds a dataset of a different configuration (seed 0 there, 1 now)" in err
     assert "--force" in err and snapshot(folder) == before
-    rc, out, err = simulate(["-o", str(folder), "--count", "4", "--seed", "0", "--iterations", "4"], capsys)
+    rc, _out, err = simulate(["-o", str(folder), "--count", "4", "--seed", "0", "--iterations", "4"], capsys)
     assert rc == 2 and "iterations 3 there, 4 now" in err and snapshot(folder) == before
-    rc, out, err = simulate(["-o", str(folder), "--count", "1", "--seed", "1", "--workers", "1", *FAST, "--force"],
+    rc, _out, err = simulate(["-o", str(folder), "--count", "1", "--seed", "1", "--workers", "1", *FAST, "--force"],
                             capsys)
     assert rc == 0
     assert json.loads((folder / "simulate.json").read_text())["seed"] == 1
@@ -202,10 +202,10 @@ def test_foreign_folder_is_refused(tmp_path, capsys):
     folder = tmp_path / "mine"
     folder.mkdir()
     (folder / "notes.txt").write_text("keep me")
-    rc, out, err = simulate(["-o", str(folder), "--count", "1", *FAST], capsys)
+    rc, _out, err = simulate(["-o", str(folder), "--count", "1", *FAST], capsys)
     assert rc == 2 and "is not empty and is not a keyfill simulate folder" in err
     assert [p.name for p in folder.iterdir()] == ["notes.txt"]
-    rc, out, err = simulate(["-o", str(folder), "--count", "1", "--workers", "1", *FAST, "--force"], capsys)
+    rc, _out, err = simulate(["-o", str(folder), "--count", "1", "--workers", "1", *FAST, "--force"], capsys)
     assert rc == 0 and (folder / "notes.txt").read_text() == "keep me"  # --force removes only its own files
 
 
@@ -219,7 +219,7 @@ def test_unreachable_scheduler(tmp_path, capsys):
     folder = tmp_path / "out"
     address = f"tcp://127.0.0.1:{_free_port()}"
     start = time.monotonic()
-    rc, out, err = simulate(["-o", str(folder), "--count", "1", "--scheduler", address, "--connect-timeout", "1"],
+    rc, _out, err = simulate(["-o", str(folder), "--count", "1", "--scheduler", address, "--connect-timeout", "1"],
                             capsys)
     assert time.monotonic() - start < 30
     assert rc == 1 and err.startswith(f"keyfill: error: cannot reach the Dask scheduler at {address} within 1 s")

@@ -14,7 +14,7 @@ DATA = Path(__file__).parent / "data"
 
 
 def _skeleton() -> Skeleton:
-    return io.load(sorted(DATA.glob("*.bvh"))[0]).skeleton
+    return io.load(min(DATA.glob("*.bvh"))).skeleton
 
 
 def test_full_form_round_trips_through_json_text():

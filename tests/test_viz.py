@@ -7,6 +7,8 @@ Pillow and checked for size, frame count, timing and pixels.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from conftest import DATA, shared_path
@@ -282,7 +284,7 @@ def test_preview_gif_frames_timing_and_motion(tmp_path):
     assert frames[0].shape == (120, 160, 3)
     assert sum(delays) == 800  # 24 frames at 30 fps
     # Every frame differs from the next (the figure moves) ...
-    assert min(changed(a, b) for a, b in zip(frames, frames[1:])) > 20
+    assert min(changed(a, b) for a, b in itertools.pairwise(frames)) > 20
     # ... while the fixed camera keeps the ground where it was: the bottom rows, below the feet, never change.
     ground_rows = [np.flatnonzero(np.all(np.abs(f - [176, 176, 176]) < 12, axis=-1).sum(axis=1) > 40) for f in frames]
     assert all(np.array_equal(r, ground_rows[0]) for r in ground_rows) and len(ground_rows[0])
@@ -317,7 +319,7 @@ def test_preview_filmstrip(tmp_path):
     im = pixels(tmp_path / "s.png")
     assert im.shape == (120 + 8, 8 * 104 + 4, 3)
     cells = [im[4:124, 4 + i * 104: 104 + i * 104] for i in range(8)]
-    assert min(changed(a, b) for a, b in zip(cells, cells[1:])) > 20
+    assert min(changed(a, b) for a, b in itertools.pairwise(cells)) > 20
     info = S.preview([walker()], ["w"], tmp_path / "t.png", size=(100, 120), step=2)
     assert len(info.frames) == 12
     assert pixels(tmp_path / "t.png").shape == (2 * 124 + 4, 8 * 104 + 4, 3)  # two rows of 8

@@ -31,6 +31,9 @@ from keyfill.edit.move import move
 from keyfill.edit.session import EditReport, Session, Settings, character_size
 from keyfill.edit.timing import timing
 
+#: the settings of an edit unless others are given (frozen, so one instance serves every call)
+DEFAULT_SETTINGS = Settings()
+
 __all__ = ["EditReport", "Settings", "character_size", "edit_tangents", "pose"]
 
 
@@ -39,7 +42,7 @@ def edit_tangents(
     edit_file: EditFile,
     solver: str = QP.DEFAULT_SOLVER,
     best_effort: bool = False,
-    settings: Settings = Settings(),
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> tuple[Curves, list[EditReport]]:
     """Apply the edits of ``edit_file`` in order; returns the new curves and one report per edit.
 
@@ -63,7 +66,7 @@ def pose(
     edit_file: EditFile,
     solver: str = QP.DEFAULT_SOLVER,
     best_effort: bool = False,
-    settings: Settings = Settings(),
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> tuple[Curves, list[EditReport]]:
     """Change key poses (Eq. 13): each edit moves its point at its key frame; tangents stay."""
     session = Session(curves, edit_file, solver, best_effort, settings)

@@ -518,5 +518,4 @@ def write(motion: Motion, path: str | Path) -> None:
     needs little memory beyond the motion's channel values.
     """
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        for piece in _pieces(motion):
-            f.write(piece)
+        f.writelines(_pieces(motion))

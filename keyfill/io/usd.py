@@ -272,10 +272,10 @@ def open_stage(path: str | Path, label=None):
     label = label if label is not None else path
     try:
         stage = Usd.Stage.Open(str(path))
-    except Exception as e:  # pxr raises Tf.ErrorException with a multi-line text
+    except Exception as e:  # noqa: BLE001 - pxr raises Tf.ErrorException (and others) with a multi-line text
         try:
             text = str(e)
-        except Exception:  # a message that cannot be decoded (a file that is not UTF-8)
+        except UnicodeError:  # a message that cannot be decoded (a file that is not UTF-8)
             text = "not UTF-8 text"
         first = text.strip().splitlines()
         raise FormatError(f"not a readable USD file ({first[-1].strip() if first else 'parse error'})", label) from None
@@ -293,13 +293,13 @@ def read_stage(stage, label) -> Motion:
     except Tf.ErrorException as e:  # USD refusing what the file composes to (e.g. a relationship that is not one)
         try:
             text = " ".join(str(e).split())
-        except Exception:  # a message that is not UTF-8
+        except UnicodeError:  # a message that is not UTF-8
             text = "an error in the file's content"
         raise FormatError(f"USD cannot read this file: {text[-300:]}", label) from None
 
 
 def _read_stage(stage, label) -> Motion:
-    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
+    _Gf, _Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     skel = _find_skeleton(stage, UsdSkel, label)
     joints = _tokens(skel.GetJointsAttr(), label)
     if not joints:
@@ -336,7 +336,7 @@ def _read_stage(stage, label) -> Motion:
         start, end = min(start, times[0]), max(end, times[-1])
     if end < start:
         raise FormatError(f"endTimeCode {end:g} comes before startTimeCode {start:g}", label)
-    num_frames = int(round(end - start)) + 1 if times or stage.HasAuthoredMetadata("endTimeCode") else 1
+    num_frames = round(end - start) + 1 if times or stage.HasAuthoredMetadata("endTimeCode") else 1
     problem = limits.check_size(num_frames, len(joints), _file_size(stage.GetRootLayer().realPath))
     if problem:
         raise FormatError(f"time codes {start:g} to {end:g}: {problem}", label)

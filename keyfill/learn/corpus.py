@@ -41,9 +41,9 @@ import shutil
 import tarfile
 import tempfile
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -230,7 +230,7 @@ class Corpus:
         a, b = self.starts[i], self.starts[i + 1]
         return self.quats[a:b], self.root[a:b]
 
-    def subset(self, keep: Sequence[int] | np.ndarray) -> "Corpus":
+    def subset(self, keep: Sequence[int] | np.ndarray) -> Corpus:
         """The corpus of the clips with indices ``keep`` (in that order)."""
         keep = [int(i) for i in keep]
         parts_q = [self.clip(i)[0] for i in keep]
@@ -245,14 +245,14 @@ class Corpus:
             starts=starts,
         )
 
-    def matching(self, pattern: str | None, invert: bool = False) -> "Corpus":
+    def matching(self, pattern: str | None, invert: bool = False) -> Corpus:
         """The clips whose file name matches (or, with ``invert``, does not match) ``pattern``."""
         if pattern is None:
             return self
         hit = [fnmatch.fnmatch(Path(f).name, pattern) != invert for f in self.files]
         return self.subset(np.flatnonzero(hit))
 
-    def select(self, include: Sequence[str] = (), exclude: Sequence[str] = ()) -> "Corpus":
+    def select(self, include: Sequence[str] = (), exclude: Sequence[str] = ()) -> Corpus:
         """The clips whose file name matches one of ``include`` (all when empty) and none of ``exclude``."""
         names = [Path(f).name for f in self.files]
         keep = [i for i, n in enumerate(names) if (not include or any(fnmatch.fnmatch(n, p) for p in include))
@@ -435,10 +435,9 @@ def _write_cache(corpus: Corpus, path: Path) -> None:
     }
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_output(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, quats=corpus.quats, root=corpus.root, starts=corpus.starts, parents=s.parents,
-                         offsets=s.offsets, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8))
+        with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, quats=corpus.quats, root=corpus.root, starts=corpus.starts, parents=s.parents,
+                     offsets=s.offsets, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8))
     except OSError:
         pass  # caching is an optimisation; a read-only checkout still works
 

@@ -106,7 +106,7 @@ class Normalizer:
     std: np.ndarray
 
     @classmethod
-    def fit(cls, sequences: list[LampSequence]) -> "Normalizer":
+    def fit(cls, sequences: list[LampSequence]) -> Normalizer:
         """Statistics over every frame from first to last key of ``sequences``."""
         if not sequences:
             raise DataError("no sequences to compute normalisation statistics from")
@@ -118,7 +118,7 @@ class Normalizer:
         return {"mean": [float(v) for v in self.mean], "std": [float(v) for v in self.std]}
 
     @classmethod
-    def from_json(cls, data: dict) -> "Normalizer":
+    def from_json(cls, data: dict) -> Normalizer:
         """The statistics :meth:`to_json` wrote (``ValueError`` unless they are bounded as :meth:`fit` gives them)."""
         from keyfill.learn.modelfile import bounded_array
 

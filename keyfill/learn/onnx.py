@@ -80,7 +80,7 @@ class Graph:
         opts.log_severity_level = 3
         try:
             self.session = ort.InferenceSession(self.path, opts, providers=["CPUExecutionProvider"])
-        except Exception as e:  # onnxruntime raises its own exception types
+        except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types, not a hierarchy
             raise ModelError(f"{path}: not a readable ONNX graph ({' '.join(str(e).split())[:200]})") from None
         meta = self.session.get_modelmeta().custom_metadata_map
         if meta.get("keyfill.format") != FORMAT:

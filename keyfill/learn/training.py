@@ -42,9 +42,10 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.limits import check_seed
@@ -107,7 +108,7 @@ class TrainingTask:
         """This process's part of a global batch (``world > 1`` only)."""
         raise NotImplementedError
 
-    def step(self, batch, update: "Updater") -> tuple[dict[str, float], int]:
+    def step(self, batch, update: Updater) -> tuple[dict[str, float], int]:
         """Train on one batch: call ``update(name, loss)`` once per optimiser, in the order needed.
 
         Returns the named losses to log (plain floats) and the step's weight in the epoch's mean

@@ -49,14 +49,14 @@ class Controller:
         """``(3,)`` joint angles the lamp rests in before the first cycle: the last state's target."""
         return self.poses[-1]
 
-    def clipped(self, settings: Settings) -> "Controller":
+    def clipped(self, settings: Settings) -> Controller:
         """Durations within ``[min_duration, max_duration]``, targets within the joint limits."""
         return Controller(
             np.clip(self.durations, settings.min_duration, settings.max_duration),
             np.clip(self.poses, settings.lower_limits, settings.upper_limits),
         )
 
-    def neighbour(self, rng: np.random.Generator, settings: Settings) -> "Controller":
+    def neighbour(self, rng: np.random.Generator, settings: Settings) -> Controller:
         """A candidate near this one (paper section 4.4.2).
 
         One of the four durations moves by ``duration_step`` (7 ms) and, in
@@ -72,7 +72,7 @@ class Controller:
         p[np.arange(NUM_STATES), joints] += settings.angle_step * signs
         return Controller(d, p).clipped(settings)
 
-    def perturbed(self, rng: np.random.Generator, settings: Settings) -> "Controller":
+    def perturbed(self, rng: np.random.Generator, settings: Settings) -> Controller:
         """This controller with small Gaussian noise on every parameter (a run's initial guess)."""
         d = self.durations + rng.normal(0.0, settings.init_duration_noise, NUM_STATES)
         p = self.poses + rng.normal(0.0, settings.init_angle_noise, (NUM_STATES, 3))
@@ -82,7 +82,7 @@ class Controller:
         return {"durations": self.durations.tolist(), "poses": self.poses.tolist()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Controller":
+    def from_dict(cls, d: dict) -> Controller:
         return cls(np.array(d["durations"]), np.array(d["poses"]))
 
 

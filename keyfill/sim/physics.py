@@ -34,6 +34,7 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 
@@ -83,12 +84,12 @@ def lamp_urdf(dims: Dimensions, settings: Settings) -> str:
     ]
     free = '<limit lower="-1000" upper="1000" effort="0" velocity="1000"/>'
     joints = [
-        f'<joint name="base_x" type="prismatic"><parent link="world"/><child link="slider_x"/>'
-        f'<axis xyz="1 0 0"/>{free}</joint>',
-        f'<joint name="base_y" type="prismatic"><parent link="slider_x"/><child link="slider_y"/>'
-        f'<axis xyz="0 1 0"/>{free}</joint>',
-        '<joint name="base_angle" type="continuous"><parent link="slider_y"/><child link="base"/>'
-        '<axis xyz="0 0 1"/></joint>',
+        (f'<joint name="base_x" type="prismatic"><parent link="world"/><child link="slider_x"/>'
+         f'<axis xyz="1 0 0"/>{free}</joint>'),
+        (f'<joint name="base_y" type="prismatic"><parent link="slider_x"/><child link="slider_y"/>'
+         f'<axis xyz="0 1 0"/>{free}</joint>'),
+        ('<joint name="base_angle" type="continuous"><parent link="slider_y"/><child link="base"/>'
+         '<axis xyz="0 0 1"/></joint>'),
     ]
     hinges = [("leg", "base", d.base_height), ("neck", "leg", d.leg_length), ("head", "neck", d.neck_length)]
     for k, (child, parent, y) in enumerate(hinges):
@@ -167,7 +168,7 @@ class LampWorld:
             self.p.disconnect(physicsClientId=self.client)
             self.client = None
 
-    def __enter__(self) -> "LampWorld":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -220,9 +221,9 @@ class LampWorld:
             f1 = kp1 * (t1 - q1) - kd1 * w1
             f2 = kp2 * (t2 - q2) - kd2 * w2
             forces = [
-                m0 if f0 > m0 else (-m0 if f0 < -m0 else f0),
-                m1 if f1 > m1 else (-m1 if f1 < -m1 else f1),
-                m2 if f2 > m2 else (-m2 if f2 < -m2 else f2),
+                m0 if f0 > m0 else (max(f0, -m0)),
+                m1 if f1 > m1 else (max(f1, -m1)),
+                m2 if f2 > m2 else (max(f2, -m2)),
             ]
             p.setJointMotorControlArray(lamp, hinges, torque, forces=forces, physicsClientId=cid)
             p.stepSimulation(physicsClientId=cid)

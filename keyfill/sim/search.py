@@ -120,7 +120,7 @@ def anneal(
         if rng.random() < accept_probability(e_c - e_s, t):
             s, e_s = cand, e_c
         t = temperature(k + 1, settings)
-    common = dict(run=run, seed=seed, w_e=w_e, iterations=iterations, episodes=iterations + 1)
+    common = {"run": run, "seed": seed, "w_e": w_e, "iterations": iterations, "episodes": iterations + 1}
     if best is None:
         return RunResult(**common, accepted=False, reason=f"no satisfactory episode (last: {last_reason})")
     e, c, ep, hops = best

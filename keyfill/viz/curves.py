@@ -18,9 +18,9 @@ original numbering); keys (``Motion.keys``) are open circles on each file's curv
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

@@ -14,8 +14,8 @@ stores each frame as the rectangle that changed since the previous one.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 from PIL import Image

@@ -8,7 +8,7 @@ plus the most frequent others loses almost nothing.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from PIL import Image

@@ -16,9 +16,9 @@ dot per frame, so spacing shows timing, and the keys circled.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -218,7 +218,7 @@ class StickRenderer:
                 tuple(0.35 * key + 0.65), to_rgb(st.FRAME_COLOR)]
         for colors in self.colors:
             flat += [to_rgb(c) for c in ([colors] if isinstance(colors, str) else colors)]
-        return [tuple(int(round(255 * v)) for v in c) for c in dict.fromkeys(flat)]
+        return [tuple(round(255 * v) for v in c) for c in dict.fromkeys(flat)]
 
     def frame_label(self, t: int) -> str:
         """``"frame 12"`` in the file's numbering, ``"frame 12  key"`` at a key."""
@@ -241,7 +241,7 @@ def _default_size(aspect: float, side: int) -> tuple[int, int]:
         w, h = side, side / min(aspect, 3.0)
     else:
         w, h = side * max(aspect, 1 / 3.0), side
-    return int(round(w / 2)) * 2, int(round(h / 2)) * 2
+    return round(w / 2) * 2, round(h / 2) * 2
 
 
 def _fit(lo: np.ndarray, hi: np.ndarray, aspect: float) -> tuple[np.ndarray, np.ndarray]:

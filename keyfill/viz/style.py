@@ -84,7 +84,7 @@ def save_figure(fig: Figure, path: Path, fmt: str) -> None:
         fig.canvas.draw()
         rgba = np.asarray(fig.canvas.buffer_rgba())
         flat = ["#ffffff", "#000000", TEXT_COLOR, AXIS_GRID_COLOR, *FILE_COLORS]
-        required = [tuple(int(round(255 * v)) for v in to_rgb(c)) for c in flat]
+        required = [tuple(round(255 * v) for v in to_rgb(c)) for c in flat]
         Palette([rgba], 256, required).apply(rgba).save(path, format="PNG")
         return
     fig.savefig(path, format=fmt, metadata=_NO_METADATA[fmt], facecolor="white")

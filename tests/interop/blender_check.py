@@ -33,7 +33,7 @@ def blender_missing() -> str | None:
         return f"no Blender venv at {BLENDER_PYTHON.parent.parent} (create it with: {INSTALL})"
     probe = subprocess.run(
         [str(BLENDER_PYTHON), "-c", "import bpy; print(bpy.app.version_string)"],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True, text=True, timeout=120, check=False,
     )
     if probe.returncode != 0:
         last = (probe.stderr.strip().splitlines() or ["no output"])[-1]
@@ -46,7 +46,7 @@ def blender_world_positions(path: Path, meters_per_unit: float) -> dict:
     out = Path(str(path) + ".blender.json")
     proc = subprocess.run(
         [str(BLENDER_PYTHON), str(SCRIPT), str(path), "--scale", repr(meters_per_unit), "--out", str(out)],
-        capture_output=True, text=True, timeout=600,
+        capture_output=True, text=True, timeout=600, check=False,
     )
     if proc.returncode != 0:
         raise RuntimeError(f"Blender failed on {path} (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}")

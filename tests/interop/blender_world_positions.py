@@ -107,7 +107,7 @@ def _frame_range(arm) -> tuple[int, int]:
     if action is None:
         raise SystemExit("blender_world_positions: the imported armature has no animation")
     first, last = action.frame_range
-    return int(round(first)), int(round(last))
+    return round(first), round(last)
 
 
 def world_positions(path: Path, scale: float) -> dict:

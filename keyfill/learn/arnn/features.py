@@ -45,15 +45,15 @@ class Batch:
         lengths: ``(B,)`` int64 frames per sequence.
     """
 
-    frames: "torch.Tensor"  # noqa: F821
-    is_key: "torch.Tensor"  # noqa: F821
-    valid: "torch.Tensor"  # noqa: F821
-    lengths: "torch.Tensor"  # noqa: F821
+    frames: torch.Tensor  # noqa: F821
+    is_key: torch.Tensor  # noqa: F821
+    valid: torch.Tensor  # noqa: F821
+    lengths: torch.Tensor  # noqa: F821
 
     def __len__(self) -> int:
         return self.frames.shape[0]
 
-    def select(self, index) -> "Batch":
+    def select(self, index) -> Batch:
         """The sequences ``index`` (a tensor of indices), trimmed to their longest length."""
         lengths = self.lengths[index]
         T = int(lengths.max())
@@ -111,7 +111,7 @@ def conditioning(frames, is_key):
     after = torch.where(is_key, t, torch.full_like(t, T))
     at_or_after = torch.flip(torch.cummin(torch.flip(after, [1]), dim=1).values, [1])[:, 1:]
     next_idx = torch.where(at_or_after >= T, prev_idx, at_or_after)
-    gather = lambda idx: torch.gather(frames, 1, idx[..., None].expand(B, T - 1, frames.shape[-1]))  # noqa: E731
+    gather = lambda idx: torch.gather(frames, 1, idx[..., None].expand(B, T - 1, frames.shape[-1]))
     span = (next_idx - prev_idx).clamp(min=1).to(frames.dtype)
     t_rel = torch.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).to(frames.dtype) / span,
                         torch.ones_like(span))
@@ -125,7 +125,7 @@ def _conditioning_np(frames: np.ndarray, is_key: np.ndarray):
     prev_idx = np.maximum.accumulate(np.where(is_key, t, -1), axis=1)[:, :-1]
     at_or_after = np.minimum.accumulate(np.where(is_key, t, T)[:, ::-1], axis=1)[:, ::-1][:, 1:]
     next_idx = np.where(at_or_after >= T, prev_idx, at_or_after)
-    gather = lambda idx: np.take_along_axis(frames, idx[..., None], axis=1)  # noqa: E731
+    gather = lambda idx: np.take_along_axis(frames, idx[..., None], axis=1)
     span = np.maximum(next_idx - prev_idx, 1).astype(frames.dtype)
     t_rel = np.where(next_idx > prev_idx, (t[:, 1:] - prev_idx).astype(frames.dtype) / span,
                      np.ones_like(span))

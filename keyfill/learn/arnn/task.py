@@ -45,9 +45,9 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -117,7 +117,7 @@ class Settings:
     checkpoint_every: int = 50
     sizes: dict = field(default_factory=dict)
 
-    def check(self) -> "Settings":
+    def check(self) -> Settings:
         """``self``, or a :class:`UsageError` naming the setting (its field, in ``params``) that cannot work."""
         if self.arch not in network.ARCHITECTURES:
             raise UsageError(f"unknown architecture {self.arch!r}; choose one of {', '.join(network.ARCHITECTURES)}")

@@ -49,7 +49,7 @@ def dense_input(num_frames: int, key_frames, key_poses, mask_scale: float = 64.0
 def sparse_input(num_frames: int, key_frames, key_poses, coords) -> np.ndarray:
     """The sparse generator input ``(6 J, T)`` float32: ``key_poses (K, J, 3)`` where ``coords (K, J, 3)`` gives them."""
     key_poses = np.asarray(key_poses, dtype=np.float32)
-    K, J = key_poses.shape[:2]
+    _K, J = key_poses.shape[:2]
     pos = np.zeros((num_frames, J, 3), np.float32)
     mask = np.zeros((num_frames, J, 3), np.float32)
     pos[key_frames] = np.where(coords, key_poses, 0.0)

@@ -10,6 +10,8 @@ metres), and the losses are in that unit squared.
 
 from __future__ import annotations
 
+import itertools
+
 import torch
 
 #: Eq. 5: displacements over 1, 2, 4, ..., 128 frames
@@ -149,7 +151,7 @@ def dna_losses(poses, reps, valid, key_mask, min_frames: int, squared: bool = Tr
         l1.append(err.min(0).values.mean())
         keys = torch.nonzero(key_mask[b]).flatten().tolist()
         picked = []
-        for a, c in zip(keys, keys[1:]):
+        for a, c in itertools.pairwise(keys):
             count = (c - a) // min_frames
             if count:
                 picked.append(torch.topk(err[a:c].min(1).values, count, largest=False).values)

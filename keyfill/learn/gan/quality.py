@@ -145,7 +145,7 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
                 key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i))
         between = np.setdiff1d(np.arange(k[-1] + 1), k)
 
-        def world(q, root):
+        def world(q, root, between=between):
             return (relative_positions(q, off, par) + root[:, None])[between]
 
         if cfg.dna:

@@ -18,9 +18,9 @@ and ``lafan1`` otherwise.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 from keyfill.errors import UsageError
 

@@ -34,9 +34,9 @@ same way.
 from __future__ import annotations
 
 import fnmatch
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -269,8 +269,8 @@ def prepare(
     info = {
         "train_clips": len(train),
         "test_clips": len(test),
-        "train_windows": int(len(tq)),
-        "test_windows": int(len(q)),
+        "train_windows": len(tq),
+        "test_windows": len(q),
         "train_clips_too_short": t_skip,
         "test_clips_too_short": s_skip,
         "folded_root": corpus.folded,
@@ -360,8 +360,8 @@ def run(
                    facing_axis=facing_axis, progress=progress)
     results = evaluate(methods, proto.test, proto.stats, lengths)
     info = {**proto.info, "truth": truth_realism(proto.test, lengths)}
-    lines = [f"lafan1: {info['test_windows']} test windows from {info['test_clips']} clips, "
-             f"statistics from {info['train_windows']} windows of {info['train_clips']} clips"]
+    lines = [(f"lafan1: {info['test_windows']} test windows from {info['test_clips']} clips, "
+              f"statistics from {info['train_windows']} windows of {info['train_clips']} clips")]
     if info.get("test_clips_too_short", 0) + info.get("train_clips_too_short", 0):
         lines.append(f"skipped {info['test_clips_too_short']} test and {info['train_clips_too_short']} training "
                      f"clips shorter than a window")
@@ -397,6 +397,6 @@ def format_realism(results: dict[str, dict[int, dict[str, float]]], truth: dict[
     lines = [(f"{'':{width}} " + "  ".join(f"{labels[m]:<{block}}" for m in labels)).rstrip(),
              f"{'transition length':{width}} " + cells(lambda m, n: f"{n:>{cell}}")]
     for name, r in rows.items():
-        lines.append(f"{name:{width}} " + cells(lambda m, n: f"{r[n][m]:{cell}.2f}"))
+        lines.append(f"{name:{width}} " + cells(lambda m, n, r=r: f"{r[n][m]:{cell}.2f}"))
     return "\n".join(lines)
 

@@ -52,9 +52,11 @@ def _model_rig(skeleton_json: str) -> Rig:
     return make_rig(Skeleton.from_json(json.loads(skeleton_json)), label="the model's skeleton")
 
 
-def rigs(motion: Motion, model: Served, rig_map: dict | None, frame: int, hint: str) -> tuple[Rig, Rig]:
+def rigs(motion: Motion, model: Served, rig_map: dict | None, frame: int, hint: str,
+         what: str = "the motion") -> tuple[Rig, Rig]:
     """``(the motion's rig, the model's rig)``. When either skeleton is no humanoid, the model's own error
-    for another skeleton (ending with ``hint``), followed by why the motion cannot be retargeted.
+    for another skeleton (``what`` has another skeleton ..., ending with ``hint``), followed by why the motion
+    cannot be retargeted.
 
     The model's rig is computed once per skeleton and process."""
     import json
@@ -64,18 +66,19 @@ def rigs(motion: Motion, model: Served, rig_map: dict | None, frame: int, hint: 
     except DataError as e:
         try:
             model_hierarchy(model.skeleton, model.folded, motion.skeleton, motion.rotations[frame: frame + 1],
-                            motion.positions[frame: frame + 1], hint=hint)
+                            motion.positions[frame: frame + 1], what=what, hint=hint)
         except ModelError as mismatch:
             raise ModelError(f"{mismatch}; nor can it be retargeted: {e}", params=e.params) from None
         raise
 
 
-def on_model_skeleton(motion: Motion, model: Served, rig_map: dict | None = None, hint: str = "") -> Motion:
+def on_model_skeleton(motion: Motion, model: Served, rig_map: dict | None = None, hint: str = "",
+                      what: str = "the motion") -> Motion:
     """``motion`` as it is when the model serves its skeleton, else retargeted onto the model's skeleton (every
     frame, at the motion's own rate): how a Motion DNA clip of any humanoid reaches a model."""
     if fits(model, motion, 0):
         return motion
-    source, target = rigs(motion, model, rig_map, 0, hint)
+    source, target = rigs(motion, model, rig_map, 0, hint, what)
     return retarget(motion.replace(keys=None), source, target)
 
 

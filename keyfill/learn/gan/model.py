@@ -447,7 +447,7 @@ def complete(motion, keys, options):
         if options.dna is not None:
             dna_file, frames = parse_dna(options.dna)
             served = rig_bridge.Served(model.skeleton, model.fps, model.folded)
-            source = rig_bridge.on_model_skeleton(io.load(dna_file), served, hint=TRAIN_HINT)
+            source = rig_bridge.on_model_skeleton(io.load(dna_file), served, hint=TRAIN_HINT, what="the DNA motion")
         if options.dna_count is not None and model.config.dna:  # named as the option, not dna_poses' count
             check_count("dna_count", options.dna_count, model.config.max_frames)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)

@@ -92,6 +92,10 @@ SECTIONS = {
     "batch": Section(
         "Batch completion and the ONNX runtime", "One `keyfill complete IN/ -o OUT/` over many lamp files against "
         "single calls; start-up, latency and parity of onnxruntime against torch.", S.batch),
+    "retarget": Section(
+        "The human models on other rigs and frame rates", "Held-out Bandai-Namco dataset-2 clips retargeted onto the "
+        "Mixamo and CMU fixture rigs, completed on each rig by cubic and by the shipped transformer and gan through "
+        "retargeting (docs/retarget.md).", S.retarget),
     "convert_memory": Section(
         "`keyfill convert` of a big file: memory", "Peak resident memory (`wait4`) of converting a generated 150 MB "
         "BVH to USD and to BVH, beside the fixed overhead of converting a 4-frame file.", S.convert_memory),

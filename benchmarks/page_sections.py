@@ -387,3 +387,26 @@ def checks(goals: list[dict]) -> list[str]:
     rows = [[g["issue"], g["goal"], f"`{g['command']}`" if g.get("command") else "", f"{g['date']}, {g['machine']}",
              g["measured"], verdict(g["met"])] for g in goals]
     return table(["issue", "goal", "command", "measured on", "measured", ""], rows)
+
+
+def retarget(f: dict) -> list[str]:
+    """Gap errors through retargeting per rig and frame rate, each learned method beside cubic at its spacing."""
+    cols = [("cubic", "15"), ("transformer", "15"), ("cubic", "30"), ("transformer", "30"), ("cubic", "60"),
+            ("gan", "60")]
+    rows = []
+    for rig, by_fps in f["gap_error_cm"].items():
+        for fps, by_method in sorted(by_fps.items(), key=lambda item: int(item[0])):
+            cells = []
+            for method, step in cols:
+                value = by_method[method][step]
+                ratio = f["ratio_to_cubic"][rig][fps][method][step]
+                cells.append(num(value) if method == "cubic" else f"{num(value)} ({num(ratio)}x)")
+            rows.append([rig, fps] + cells)
+    rt, sp = f["round_trip"], f["speed"]
+    return [(f"{f['clips']} held-out `normal` clips (at most {f['max_frames']} frames), mean error of the mapped "
+             "joints over non-key frames in cm of the rig's units (ratio to cubic's); keys every N frames at 30 fps, "
+             "at the same times at 60 and 120 fps. Round trip Bandai -> Mixamo -> Bandai: at most "
+             f"{num(rt['max_error_cm'])} cm ({num(100 * rt['max_share_of_height'])} % of the height). One "
+             f"transformer completion of {sp['frames']:,} frames at {sp['fps']} fps: {num(sp['total_s'])} s, of "
+             f"which the bridge {num(100 * sp['bridge_share'], 0)} % beyond the model's own {num(sp['model_s'])} s."),
+            ""] + table(["rig", "fps"] + [f"{m} @{s}" for m, s in cols], rows)

@@ -122,3 +122,15 @@ def test_a_dna_clip_of_another_rig_is_retargeted_onto_the_model(tmp_path):
     own, other = io.load(outs["own"]), io.load(outs["mixamo"])
     assert own.skeleton.names == other.skeleton.names
     assert not np.allclose(own.rotations, other.rotations, atol=1e-3)  # the Mixamo poses steer it elsewhere
+
+
+def test_partial_keys_work_across_rigs(tmp_path, capsys):
+    src = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
+    out = tmp_path / "path.bvh"
+    assert main(["complete", str(src), "-o", str(out), "--keys", "0,30,68", "--key-joints", "mixamorig:Hips",
+                 "--key-positions", "--method", "gan", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["model"] == PARTIAL_MODEL.name and info["rig"]["hips"] == "mixamorig:Hips"
+    a, b = io.load(src), io.load(out)
+    np.testing.assert_allclose(b.positions[[0, 30, 68], 0], a.positions[[0, 30, 68], 0], atol=1e-9)
+    assert b.skeleton.names == a.skeleton.names

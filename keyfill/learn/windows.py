@@ -8,6 +8,8 @@ methods, which see windows in such a canonical frame. Quaternions are
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from keyfill import rotations as R
@@ -98,3 +100,19 @@ def window_motion(skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, fps: 
     pos = np.broadcast_to(skeleton.offsets, root.shape[:-1] + skeleton.offsets.shape).copy()
     pos[:, 0] = root
     return Motion(skeleton, fps, quats, pos)
+
+
+def binomial_lowpass(x: np.ndarray, order: int, axis: int) -> np.ndarray:
+    """``x`` filtered along ``axis`` with the binomial kernel of ``order`` (``order + 1`` taps, e.g. 4:
+    ``[1, 4, 6, 4, 1] / 16``, about a Gaussian of ``sqrt(order) / 2`` frames), the ends padded by repeating
+    the first and last values; ``order`` 0 or 1 returns ``x``. The numpy twin of the gan's
+    :func:`keyfill.learn.gan.rcfk.binomial_lowpass` (a test holds them equal)."""
+    half = order // 2
+    if half == 0:
+        return x
+    k = np.array([math.comb(2 * half, i) for i in range(2 * half + 1)], dtype=np.float64)
+    k /= k.sum()
+    moved = np.moveaxis(np.asarray(x, dtype=np.float64), axis, 0)
+    padded = np.concatenate([np.repeat(moved[:1], half, axis=0), moved, np.repeat(moved[-1:], half, axis=0)])
+    out = sum(w * padded[i: i + len(moved)] for i, w in enumerate(k))
+    return np.moveaxis(out, 0, axis)

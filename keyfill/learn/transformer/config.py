@@ -22,7 +22,10 @@ PREFILLS = tuple(PREFILL_FUNCTIONS)
 #: architecture settings added after the first models were written, with the value that behaves as before: at
 #: that value they are left out of a model's ``config.json`` and of what ``--resume`` compares, so older runs
 #: resume and retrain to the same bytes (:meth:`ModelConfig.recorded`)
-LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False}
+LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False,
+                      "output_smoothing": 0}
+#: the highest order of :attr:`ModelConfig.output_smoothing` (a 65-tap kernel: more than a window)
+MAX_SMOOTHING = 64
 #: each number of a :class:`ModelConfig`: (whole number?, lowest, highest); larger sizes would exhaust memory
 NUMBER_LIMITS = {"layers": (True, 1, 256), "d_model": (True, 1, 16384), "heads": (True, 1, 256),
                  "ffn": (True, 1, 65536), "max_frames": (True, 1, 100_000), "dropout": (False, 0, 0.99),
@@ -67,6 +70,7 @@ class ModelConfig:
     prefill: str = "interpolation"
     rotation_weight: float = 1.0
     key_distances: bool = False
+    output_smoothing: int = 0
 
     def __post_init__(self):
         for name, (whole, low, high) in NUMBER_LIMITS.items():  # before any arithmetic (heads 0, layers 1e9)
@@ -81,6 +85,9 @@ class ModelConfig:
         for name in ("residual", "key_distances"):
             if not isinstance(getattr(self, name), bool):
                 raise ModelError(f"{name} must be true or false, not {getattr(self, name)!r}")
+        s = self.output_smoothing
+        if type(s) is not int or not 0 <= s <= MAX_SMOOTHING or s % 2:
+            raise ModelError(f"output_smoothing must be an even order from 0 to {MAX_SMOOTHING}, not {s!r}")
 
     def recorded(self) -> dict:
         """The settings a model file and a checkpoint record: all but later ones at their old value."""

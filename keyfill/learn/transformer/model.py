@@ -61,6 +61,7 @@ from keyfill.errors import KeyfillError, ModelError
 from keyfill.learn.modelfile import torch_device
 from keyfill.learn.transformer.config import ModelConfig
 from keyfill.learn.transformer.features import IGNORED, Features, apply_transform, canonical_transform, frame_kinds
+from keyfill.learn.windows import binomial_lowpass
 from keyfill.motion import Skeleton
 
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
@@ -136,6 +137,8 @@ class CompletionModel:
             with torch.inference_mode():
                 k = torch.as_tensor(kinds, device=dev).expand(len(q), T)
                 y = self.network(torch.as_tensor(x, dtype=torch.float32, device=dev), k).double().cpu().numpy()
+        if self.config.output_smoothing:  # the network's correction, low-passed along time
+            y = x + binomial_lowpass(y - x, self.config.output_smoothing, axis=1)
         pq, pr = self.features.decode(y)
         outside = kinds == IGNORED
         pq[:, outside], pr[:, outside] = q[:, outside], r[:, outside]

@@ -224,6 +224,19 @@ def test_without_a_key_in_the_interval_the_foot_holds_its_median_and_keys_at_the
     assert report["skating_after"] < 1e-6 < report["skating_before"]
 
 
+def test_two_keys_in_one_contact_move_the_foot_from_one_to_the_other():
+    m = step(slide=0.012)
+    keys = Keys([0, 12, 17, 59])
+    out, _ = lock_feet(m, m.skeleton, keys)
+    P, P0 = world(out), world(m)
+    tol = 1e-6 * make_rig(m.skeleton).hip_height
+    assert np.abs(P[10:13, 3] - P0[12, 3]).max() < tol  # the first key's position up to it
+    assert np.abs(P[17:20, 3] - P0[17, 3]).max() < tol  # the last one's from it
+    u = ((np.arange(12, 18) - 12) / 5)[:, None]
+    assert np.abs(P[12:18, 3] - ((1 - u) * P0[12, 3] + u * P0[17, 3])).max() < tol  # linear between
+    check_exact_keys_and_bones(m, out, keys)
+
+
 def test_the_hips_come_down_where_a_leg_cannot_reach():
     # a nearly straight planted leg under hips walking at 0.45 m/s; the key at the end of the plant holds the
     # foot 12 cm ahead of where it lands, out of reach of the hips at their height in the first frames

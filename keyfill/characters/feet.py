@@ -195,6 +195,25 @@ def _check_motion(motion: Motion, rig: Rig) -> None:
         raise DataError("the motion is not on the rig's skeleton (their joints differ)")
 
 
+def _leg_world(rotations: np.ndarray, positions: np.ndarray, skeleton: Skeleton, joints) -> tuple[np.ndarray, ...]:
+    """World ``(rotations (F, J, 4), positions (F, J, 3))`` of ``joints`` and their ancestors by forward
+    kinematics of those joints alone (the legs of a 55-joint rig are 10); the other columns are undefined."""
+    parents = skeleton.parents
+    need = set()
+    for j in joints:
+        while j >= 0 and j not in need:
+            need.add(int(j))
+            j = int(parents[j])
+    sub = np.array(sorted(need))
+    where = {j: i for i, j in enumerate(sub)}
+    sub_parents = np.array([where[int(parents[j])] if parents[j] >= 0 else -1 for j in sub])
+    w, p = fk(rotations[:, sub], positions[:, sub], sub_parents)
+    F, J = rotations.shape[:2]
+    W, P = np.empty((F, J, 4)), np.empty((F, J, 3))
+    W[:, sub], P[:, sub] = w, p
+    return W, P
+
+
 def _frames(keys, num_frames: int, param: str = "keys") -> np.ndarray:
     """The key frame indices of ``keys`` (a :class:`Keys`, a sequence of ints or None: none), checked."""
     if keys is None:
@@ -235,9 +254,9 @@ def ground_height(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int
     if motion.num_frames == 0:
         raise DataError("the motion has no frames to find the ground in")
     idx = frames if len(frames) else slice(None)
-    pos = fk(motion.rotations[idx], motion.positions[idx], motion.skeleton.parents)[1]
-    up = _AXES[motion.skeleton.up_axis]
-    return float(pos[:, [j for _, j in contact_joints(rig)], up].min())
+    feet = [j for _, j in contact_joints(rig)]
+    pos = _leg_world(motion.rotations[idx], motion.positions[idx], motion.skeleton, feet)[1]
+    return float(pos[:, feet, _AXES[motion.skeleton.up_axis]].min())
 
 
 def _planted_heights(feet: np.ndarray, roles: list[str], ref: np.ndarray, ground: float | None, up: int,
@@ -316,7 +335,8 @@ def contacts(motion: Motion, rig: Rig | Skeleton, ground: float | None = None,
     """
     rig = _as_rig(rig)
     _check_motion(motion, rig)
-    feet = motion.world_positions()[:, [j for _, j in contact_joints(rig)]]
+    joints = [j for _, j in contact_joints(rig)]
+    feet = _leg_world(motion.rotations, motion.positions, motion.skeleton, joints)[1][:, joints]
     return _labels(feet, motion, rig, _frames(keys, motion.num_frames), _ground_value(ground), settings)
 
 
@@ -354,34 +374,65 @@ def _lock_offsets(p: np.ndarray, label: np.ndarray, keys: np.ndarray, ease: int,
     averaged by weight, so the offset is continuous.
     """
     F = len(p)
-    total = np.zeros((F, 3))
-    weight = np.zeros(F)
     starts, ends = _runs(label)
-    for s, e in zip(starts, ends):
-        i, k = np.searchsorted(keys, s), np.searchsorted(keys, e, side="right")
-        ease_in = min(ease, s - keys[i - 1] - 1) if i > 0 else ease  # 0 at the key before
-        ease_out = min(ease, keys[k] - e - 1) if k < len(keys) else ease  # 0 at the key after
-        lo, hi = max(0, s - ease_in), min(F - 1, e + ease_out)
-        t = np.arange(lo, hi + 1)
-        w = np.ones(len(t))
-        w[t < s] = _smoothstep(1 - (s - t[t < s]) / (ease_in + 1))
-        w[t > e] = _smoothstep(1 - (t[t > e] - e) / (ease_out + 1))
-        ks = keys[i:k]
-        inside = np.arange(s, e + 1)
-        if len(ks) == 0:
-            frames = inside[free[inside] < 1] if free is not None and np.any(free[inside] < 1) else inside
-            target = np.broadcast_to(np.median(p[frames], axis=0), (len(inside), 3))
-        elif len(ks) == 1:
-            target = np.broadcast_to(p[ks[0]], (len(inside), 3))
-        else:
-            target = np.stack([np.interp(inside, ks, p[ks, i]) for i in range(3)], axis=-1)
-        offset = np.empty((len(t), 3))
-        offset[s - lo:e - lo + 1] = target - p[inside]
-        offset[:s - lo] = offset[s - lo]  # the eases blend the offset at the interval's ends
-        offset[e - lo + 1:] = offset[e - lo]
-        total[t] += w[:, None] * offset
-        weight[t] += w
+    if len(starts) == 0:
+        return np.zeros((F, 3)), np.zeros(F), 0
+    # every (interval, frame) pair of the intervals and their eases, all intervals at once
+    i0, i1 = np.searchsorted(keys, starts), np.searchsorted(keys, ends, side="right")  # the keys inside: i0:i1
+    before = np.where(i0 > 0, starts - keys[np.maximum(i0 - 1, 0)] - 1, ease)  # frames after the key before
+    after = np.where(i1 < len(keys), keys[np.minimum(i1, len(keys) - 1)] - ends - 1, ease)
+    ease_in, ease_out = np.minimum(ease, before), np.minimum(ease, after)
+    lo, hi = np.maximum(0, starts - ease_in), np.minimum(F - 1, ends + ease_out)
+    seg, t = _spans(lo, hi)
+    s, e = starts[seg], ends[seg]
+    x = np.where(t < s, 1 - (s - t) / (ease_in[seg] + 1), np.where(t > e, 1 - (t - e) / (ease_out[seg] + 1), 1.0))
+    w = x * x * (3 - 2 * x)
+    inside = np.clip(t, s, e)  # the eases blend the offset at the interval's ends
+    target = np.empty((len(t), 3))
+    count = (i1 - i0)[seg]
+    one = count == 1
+    target[one] = p[keys[i0[seg[one]]]]
+    many = count > 1
+    if np.any(many):  # linear between the keys, (1 - u) a + u b: exactly a key's position at the key
+        tm, sm = inside[many], seg[many]
+        j = np.clip(np.searchsorted(keys, tm, side="right") - 1, i0[sm], i1[sm] - 2)
+        u = np.clip((tm - keys[j]) / (keys[j + 1] - keys[j]), 0.0, 1.0)[:, None]  # held beyond the end keys
+        target[many] = (1 - u) * p[keys[j]] + u * p[keys[j + 1]]
+    none = count == 0
+    if np.any(none):
+        target[none] = _medians(p, starts, ends, i1 - i0 == 0, free)[seg[none]]
+    offset = w[:, None] * (target - p[inside])
+    total = np.stack([np.bincount(t, weights=offset[:, c], minlength=F) for c in range(3)], axis=-1)
+    weight = np.bincount(t, weights=w, minlength=F)
     return total / np.maximum(weight, 1.0)[:, None], np.minimum(weight, 1.0), len(starts)
+
+
+def _spans(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(span index, frame)`` of every frame of the spans ``lo[i]..hi[i]`` (inclusive), span after span."""
+    n = hi - lo + 1
+    seg = np.repeat(np.arange(len(n)), n)
+    return seg, np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + lo[seg]
+
+
+def _medians(p: np.ndarray, starts: np.ndarray, ends: np.ndarray, wanted: np.ndarray,
+             free: np.ndarray | None) -> np.ndarray:
+    """``(I, 3)``: per interval (where ``wanted``), the median of ``p (F, 3)`` over its frames, or over those where
+    ``free < 1`` when there are any."""
+    seg, f = _spans(starts, ends)
+    keep = wanted[seg]
+    if free is not None:
+        sel = free[f] < 1
+        some = np.bincount(seg, weights=sel, minlength=len(starts)) > 0
+        keep &= sel | ~some[seg]
+    seg, f = seg[keep], f[keep]
+    out = np.zeros((len(starts), 3))
+    n = np.bincount(seg, minlength=len(starts))
+    first = np.cumsum(n) - n
+    has = n > 0
+    for c in range(3):
+        v = p[f, c][np.lexsort((p[f, c], seg))]  # sorted within each interval
+        out[has, c] = 0.5 * (v[(first + (n - 1) // 2)[has]] + v[(first + n // 2)[has]])
+    return out
 
 
 def _key_fade(frames: np.ndarray, num_frames: int, ease: int) -> np.ndarray:
@@ -462,7 +513,8 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     key_frames = _frames(motion.keys if keys is None else keys, F)
     chains, cols = foot_chains(rig), contact_joints(rig)
     column = {role: i for i, (role, _) in enumerate(cols)}
-    W, P = motion.world()
+    foot_joints = [j for chain in chains.values() for j in chain if j is not None]
+    W, P = _leg_world(motion.rotations, motion.positions, sk, foot_joints)
     feet = P[:, [j for _, j in cols]]
     if F == 0:
         raise DataError("the motion has no frames to lock the feet of")
@@ -517,7 +569,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     if len(frames):
         _solve_legs(rotations, W, P, frames, legs, chains, sides, sk.parents, shift, targets, changed)
     locked = motion.replace(rotations=rotations, positions=positions)
-    P_new = fk(rotations, positions, sk.parents)[1]
+    P_new = _leg_world(rotations, positions, sk, foot_joints)[1]
     miss = np.linalg.norm(P_new[:, legs[:, 2]] - targets, axis=-1) > 1e-6 * H
     report = {
         "skating_before": _skating(feet, labels, up, fps),

@@ -169,7 +169,7 @@ def machine_text(machine: dict) -> str:
 
 
 def provenance(record: dict) -> list[str]:
-    """List items: how to reproduce a record, where and when it was measured, and a note."""
+    """List items: how to reproduce a record, and where and when it was measured (with its note)."""
     lines = [f"* Reproduce: `{record['command']}`"] if record.get("command") else []
     if record["source"] == "run":
         at = f"at commit {record['commit'][:10]}" if record.get("commit") else "outside git"
@@ -178,12 +178,13 @@ def provenance(record: dict) -> list[str]:
         source = f"written by `{record['script']}` {at} in {S.num(record.get('wall_seconds'), 0)} s"
     else:
         source = record["source"]
+    note = f" Note: {record['note']}." if record.get("note") else ""
     if record.get("machine"):
         lines.append(f"* Measured {record['date']} on {machine_text(record['machine'])}; "
-                     f"{load_text(record['load_average'])}; {source}.")
+                     f"{load_text(record['load_average'])}; {source}.{note}")
     else:
-        lines.append(f"* Source: {source}.")
-    return lines + ([f"* Note: {record['note']}."] if record.get("note") else [])
+        lines.append(f"* Source: {source}.{note}")
+    return lines
 
 
 def goal_lines(record: dict) -> list[str]:

@@ -108,7 +108,8 @@ def convert_memory(f: dict) -> list[str]:
     lines = [(f"A {f['file_mb']} MiB BVH ({num(f['frames'], 0)} frames, CMU skeleton); the fixed overhead (a 4-frame "
              f"file) is {f['overhead_mb']} MiB; medians of {f['repeat']}."), ""]
     rows = [[f"`.{fmt}`", num(r["peak_mb"], 0), num(r["peak_over_file"], 1), num(r["peak_minus_overhead_over_file"], 1),
-             num(r["seconds"], 0), num(r["output_mb"], 0)] for fmt, r in f["outputs"].items()]
+             num(r["seconds"], 0), num(r["output_mb"], 0)]
+            for fmt, r in ((fmt, f["outputs"][fmt]) for fmt in in_order(f["outputs"], ("usda", "bvh")))]
     return lines + table(["convert to", "peak RSS MiB", "/ file", "beyond the overhead / file", "wall s",
                           "output MiB"], rows)
 

@@ -21,21 +21,19 @@ still on it.
   slower than ``speed_leave``. Then contact intervals shorter than ``min_contact_s`` are dropped.
 
 Locking (:func:`lock_feet`, in the manner of Kovar, Schreiner and Gleicher 2002, "Footskate cleanup"). In
-each contact interval of a foot joint, the joint stays at one world position: the key's where the interval
-holds a key frame (several keys: their positions, linearly between them, so every key stays exact), else the
-median over the interval. The foot keeps its world orientation, so the held joint decides where the other
-goes: where the toe is in contact the toe is held (the foot pivots about it as the heel lifts, as real feet
-do) and the ankle follows the foot; where only the ankle is in contact (the heel strikes first) the ankle is
-held (``lock_toes=False``: the ankles only, the toes following). The held position is eased in before an
-interval and out after it over ``ease_s`` (the lock's offset at the interval's first or last frame, blended
-in with a smoothstep weight: the result is continuous and the foot's path before and after only shifts). The
-leg is solved for the ankle's target with :func:`keyfill.kinematics.two_bone_ik`, the knee bending towards
-the side it bends to in the motion. Where a leg cannot reach its target (more than ``max_reach`` of its
-length), the hips come down along the up axis by what it lacks, smoothed over the ease and never more than
-``max_hip_drop``; a leg with no contact then keeps its ankle where it was. Only the local rotations of thighs, shins and feet and the hips' translation change, so bone lengths stay
-exact; frames of ``keys`` come back bit-identical: a lock is the key's own position at a key in its interval,
-and an ease that would reach over a key is shortened to end at it, so every correction is zero at the keys by
-construction (and the hips' smoothing fades out towards them).
+each contact interval a foot joint stays at one world position: the key's where the interval holds a key
+(several: linearly between their positions), else the interval's median. The foot keeps its world
+orientation, so the held joint places the other: where the toe is in contact it is held (the foot pivots
+about it as the heel lifts) and the ankle follows; where only the ankle is (the heel strikes first) the
+ankle is held (``lock_toes=False``: ankles only). The lock's offset at an interval's first and last frame is
+eased in before it and out after it over ``ease_s`` with a smoothstep weight, so the result is continuous
+and the free path only shifts. Each leg is solved for its ankle's target by
+:func:`keyfill.kinematics.two_bone_ik`, the knee bending to the side it bends to in the motion. Where a leg
+cannot reach (beyond ``max_reach`` of its length) the hips come down along the up axis by what it lacks,
+smoothed, at most ``max_hip_drop``; a free leg then keeps its ankle where it was. Only the local rotations of
+thighs, shins and feet and the hips' translation change, so bone lengths stay exact. Frames of ``keys`` come
+back bit-identical: at a key in an interval the lock is the key's own position, and an ease that would reach
+over a key is shortened to end at it, so every correction is zero at the keys by construction.
 
 Quaternions are (w, x, y, z), Hamilton product (:mod:`keyfill.rotations`); positions in the skeleton's units.
 """
@@ -86,7 +84,8 @@ class FootSettings:
             come down (a fully straight knee pops).
         max_hip_drop: ``0.1 H``: the most the hips come down to let a leg reach (beyond it the foot gives:
             the leg points straight at its target, and the report counts the frame as unreached).
-        lock_toes: ``True``: hold the toe where only the toe is in contact (heel off); False locks ankles only.
+        lock_toes: ``True``: hold a toe wherever it is in contact, the ankle following the foot (the heel
+            lifts about it); False holds the ankles only, the toes following.
     """
 
     height_enter: float = 0.03
@@ -102,13 +101,10 @@ class FootSettings:
     lock_toes: bool = True
 
     def __post_init__(self):
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name == "lock_toes":
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value < 0:
-                raise UsageError(f"{f.name} must be a number of at least 0, got {value!r}", params=f.name)
+        for name in (f.name for f in fields(self) if f.name != "lock_toes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0 or value == math.inf:
+                raise UsageError(f"{name} must be a number of at least 0, got {value!r}", params=name)
         if self.height_enter > self.height_leave:
             raise UsageError(f"height_enter ({self.height_enter}) must not exceed height_leave "
                              f"({self.height_leave})", params=("height_enter", "height_leave"))
@@ -139,11 +135,10 @@ def _as_rig(rig: Rig | Skeleton) -> Rig:
     try:
         return make_rig(rig)
     except DataError:
-        from keyfill.characters import humanoid
+        from keyfill.characters import humanoid  # which of the legs' roles the mapper found
 
         found = humanoid._find(humanoid._Rig(rig, "the skeleton"), {})
-        missing = [r for r in ("hips",) + tuple(f"{r}_{s}" for s in SIDES for r in _LEG_ROLES)
-                   if found.get(r) is None]
+        missing = [r for r in ("hips", *(f"{r}_{s}" for s in SIDES for r in _LEG_ROLES)) if found.get(r) is None]
         if not missing:
             raise
         raise DataError(f"the skeleton has no legs to put on the ground: found no joint for the roles "
@@ -164,18 +159,22 @@ def foot_chains(rig: Rig | Skeleton) -> dict[str, tuple[int, int, int, int | Non
     if missing:
         raise DataError(f"the rig has no legs to put on the ground: it lacks the roles {', '.join(missing)}; "
                         f"name them in a rig_map and make the Rig with it", params="rig_map")
-    out = {}
-    for s in SIDES:
-        chain = [limbs[f"{r}_{s}"] for r in _LEG_ROLES] + [limbs.get(f"toe_{s}")]
-        for upper, lower in itertools.pairwise(chain):
-            j = lower
-            while j is not None and j >= 0 and j != upper:
-                j = int(parents[j])
-            if lower is not None and j != upper:
+    out = {s: tuple([limbs[f"{r}_{s}"] for r in _LEG_ROLES] + [limbs.get(f"toe_{s}")]) for s in SIDES}
+    for s, chain in out.items():
+        for upper, lower in itertools.pairwise(j for j in chain if j is not None):
+            if upper not in _ancestors(parents, lower):
                 names = rig.skeleton.names
                 raise DataError(f"the {s} leg is not a chain: {names[lower]!r} is not below {names[upper]!r}",
                                 params="rig_map")
-        out[s] = tuple(chain)
+    return out
+
+
+def _ancestors(parents: np.ndarray, j: int) -> list[int]:
+    """``j``'s ancestors, nearest first."""
+    out = []
+    while parents[j] >= 0:
+        j = int(parents[j])
+        out.append(j)
     return out
 
 
@@ -199,12 +198,7 @@ def _leg_world(rotations: np.ndarray, positions: np.ndarray, skeleton: Skeleton,
     """World ``(rotations (F, J, 4), positions (F, J, 3))`` of ``joints`` and their ancestors by forward
     kinematics of those joints alone (the legs of a 55-joint rig are 10); the other columns are undefined."""
     parents = skeleton.parents
-    need = set()
-    for j in joints:
-        while j >= 0 and j not in need:
-            need.add(int(j))
-            j = int(parents[j])
-    sub = np.array(sorted(need))
+    sub = np.array(sorted({int(k) for j in joints for k in [j, *_ancestors(parents, j)]}))
     where = {j: i for i, j in enumerate(sub)}
     sub_parents = np.array([where[int(parents[j])] if parents[j] >= 0 else -1 for j in sub])
     w, p = fk(rotations[:, sub], positions[:, sub], sub_parents)
@@ -231,10 +225,10 @@ def _ground_value(ground) -> float | None:
     try:
         value = float(ground)
     except (TypeError, ValueError):
-        raise UsageError(f"ground must be a number (a height along the up axis), got {ground!r}",
-                         params="ground") from None
+        value = math.nan
     if not math.isfinite(value):
-        raise UsageError(f"ground must be a finite height, got {ground!r}", params="ground")
+        raise UsageError(f"ground must be a finite number (a height along the up axis), got {ground!r}",
+                         params="ground")
     return value
 
 
@@ -314,8 +308,7 @@ def _drop_short(state: np.ndarray, min_frames: int) -> np.ndarray:
     x = np.moveaxis(state, -2, -1).reshape(-1, state.shape[-2])  # (B, F)
     B, F = x.shape
     edges = np.diff(np.pad(x.astype(np.int8), ((0, 0), (1, 1))), axis=1)  # +1 at starts, -1 past ends
-    rows, starts = np.nonzero(edges == 1)
-    _, ends = np.nonzero(edges == -1)
+    (rows, starts), (_, ends) = np.nonzero(edges == 1), np.nonzero(edges == -1)
     short = ends - starts < min_frames
     marks = np.zeros((B, F + 1), dtype=np.int64)
     np.add.at(marks, (rows[short], starts[short]), 1)
@@ -335,25 +328,18 @@ def contacts(motion: Motion, rig: Rig | Skeleton, ground: float | None = None,
     """
     rig = _as_rig(rig)
     _check_motion(motion, rig)
-    joints = [j for _, j in contact_joints(rig)]
-    feet = _leg_world(motion.rotations, motion.positions, motion.skeleton, joints)[1][:, joints]
-    return _labels(feet, motion, rig, _frames(keys, motion.num_frames), _ground_value(ground), settings)
-
-
-def _labels(feet, motion, rig, ref, ground, settings):
-    roles = [r for r, _ in contact_joints(rig)]
-    up = _AXES[motion.skeleton.up_axis]
-    floor, _ = _planted_heights(feet, roles, ref, ground, up, rig.hip_height, settings)
-    return label_contacts(feet, floor, fps=motion.fps, up_axis=motion.skeleton.up_axis,
-                          hip_height=rig.hip_height, settings=settings)
+    sk, cols = motion.skeleton, contact_joints(rig)
+    if motion.num_frames == 0:
+        return np.zeros((0, len(cols)), dtype=bool)
+    joints = [j for _, j in cols]
+    feet = _leg_world(motion.rotations, motion.positions, sk, joints)[1][:, joints]
+    floor, _ = _planted_heights(feet, [r for r, _ in cols], _frames(keys, motion.num_frames), _ground_value(ground),
+                                _AXES[sk.up_axis], rig.hip_height, settings)
+    return label_contacts(feet, floor, fps=motion.fps, up_axis=sk.up_axis, hip_height=rig.hip_height,
+                          settings=settings)
 
 
 # --- locking ------------------------------------------------------------------------------------------------
-
-
-def _smoothstep(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3 - 2 * x)
 
 
 def _runs(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -424,11 +410,9 @@ def _medians(p: np.ndarray, starts: np.ndarray, ends: np.ndarray, wanted: np.nda
         sel = free[f] < 1
         some = np.bincount(seg, weights=sel, minlength=len(starts)) > 0
         keep &= sel | ~some[seg]
-    seg, f = seg[keep], f[keep]
-    out = np.zeros((len(starts), 3))
+    seg, f, out = seg[keep], f[keep], np.zeros((len(starts), 3))
     n = np.bincount(seg, minlength=len(starts))
-    first = np.cumsum(n) - n
-    has = n > 0
+    first, has = np.cumsum(n) - n, n > 0
     for c in range(3):
         v = p[f, c][np.lexsort((p[f, c], seg))]  # sorted within each interval
         out[has, c] = 0.5 * (v[(first + (n - 1) // 2)[has]] + v[(first + n // 2)[has]])
@@ -442,7 +426,8 @@ def _key_fade(frames: np.ndarray, num_frames: int, ease: int) -> np.ndarray:
     t = np.arange(num_frames)
     i = np.searchsorted(frames, t)
     left, right = frames[np.clip(i - 1, 0, len(frames) - 1)], frames[np.clip(i, 0, len(frames) - 1)]
-    return _smoothstep(np.minimum(np.abs(t - left), np.abs(right - t)) / (ease + 1))
+    x = np.minimum(1.0, np.minimum(np.abs(t - left), np.abs(right - t)) / (ease + 1))
+    return x * x * (3 - 2 * x)  # smoothstep
 
 
 def _hip_drop(targets, thighs, reach, up: int, cap: float) -> np.ndarray:
@@ -468,10 +453,6 @@ def _smooth_drop(need: np.ndarray, ease: int, fade: np.ndarray) -> np.ndarray:
     m = maximum_filter1d(need, size=4 * r + 1, mode="nearest")
     smooth = uniform_filter1d(uniform_filter1d(m, 2 * r + 1, mode="nearest"), 2 * r + 1, mode="nearest")
     return np.maximum(need, smooth * fade)
-
-
-def _same_hemisphere(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    return np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -q, q)
 
 
 def _skating(feet: np.ndarray, labels: np.ndarray, up: int, fps: float) -> float | None:
@@ -513,24 +494,20 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     key_frames = _frames(motion.keys if keys is None else keys, F)
     chains, cols = foot_chains(rig), contact_joints(rig)
     column = {role: i for i, (role, _) in enumerate(cols)}
+    if F == 0:
+        raise DataError("the motion has no frames to lock the feet of")
     foot_joints = [j for chain in chains.values() for j in chain if j is not None]
     W, P = _leg_world(motion.rotations, motion.positions, sk, foot_joints)
     feet = P[:, [j for _, j in cols]]
-    if F == 0:
-        raise DataError("the motion has no frames to lock the feet of")
     floor, ground_used = _planted_heights(feet, [r for r, _ in cols], key_frames, _ground_value(ground), up, H,
                                           settings)
     if labels is None:
         labels = label_contacts(feet, floor, fps=fps, up_axis=sk.up_axis, hip_height=H, settings=settings)
-    else:
-        labels = np.asarray(labels)
-        if labels.shape != (F, len(cols)):
-            raise UsageError(f"labels must be (frames, foot joints) = {(F, len(cols))}, got {labels.shape}",
-                             params="labels")
-        labels = labels.astype(bool)
-    ease = settings.ease_frames(fps)
-    key_fade = _key_fade(key_frames, F, ease)
-    sides = list(chains)
+    elif np.shape(labels) != (F, len(cols)):
+        raise UsageError(f"labels must be (frames, foot joints) = {(F, len(cols))}, got {np.shape(labels)}",
+                         params="labels")
+    labels = np.asarray(labels, dtype=bool)
+    ease, sides = settings.ease_frames(fps), list(chains)
     offsets, intervals = [], 0
     for s in sides:
         _, _, foot, toe = chains[s]
@@ -551,20 +528,18 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     length = np.linalg.norm(knees - thighs, axis=-1) + np.linalg.norm(ankles - knees, axis=-1)
     reach = np.maximum(settings.max_reach * length, np.linalg.norm(ankles - thighs, axis=-1))
     need = _hip_drop(targets, thighs, reach, up, settings.max_hip_drop * H)
-    drop = _smooth_drop(need, ease, key_fade)
-    drop[drop < 1e-12 * H] = 0.0
-    drop[key_frames] = 0.0
+    drop = _smooth_drop(need, ease, _key_fade(key_frames, F, ease))
+    drop[(drop < 1e-12 * H) | np.isin(np.arange(F), key_frames)] = 0.0
     shift = np.zeros((F, 3))
     shift[:, up] = -drop
-    changed = (np.any(offsets != 0, axis=-1) | (drop > 0)[:, None])  # (F, 2)
+    changed = np.any(offsets != 0, axis=-1) | (drop > 0)[:, None]  # (F, 2)
     changed[key_frames] = False
     rotations, positions = motion.rotations.copy(), motion.positions.copy()
     if np.any(drop > 0):
         mover = _translated_joint(sk, rig.roles.hips)
         parent = sk.parents[mover]
         local = shift if parent < 0 else R.quat_rotate(R.quat_conjugate(W[:, parent]), shift)
-        rows = drop > 0
-        positions[rows, mover] += local[rows]
+        positions[drop > 0, mover] += local[drop > 0]
     frames = np.flatnonzero(changed.any(axis=1))
     if len(frames):
         _solve_legs(rotations, W, P, frames, legs, chains, sides, sk.parents, shift, targets, changed)
@@ -588,12 +563,8 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
 def _translated_joint(skeleton: Skeleton, hips: int) -> int:
     """The joint whose translation moves the hips: the hips, or their nearest ancestor with position channels
     when they have none (a file writes only channels), else the hips."""
-    j = hips
-    while j >= 0:
-        if any(c in POSITION_CHANNELS for c in skeleton.channels[j]):
-            return j
-        j = int(skeleton.parents[j])
-    return hips
+    return next((j for j in [hips, *_ancestors(skeleton.parents, hips)]
+                 if any(c in POSITION_CHANNELS for c in skeleton.channels[j])), hips)
 
 
 def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, targets, changed) -> None:
@@ -624,5 +595,6 @@ def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, ta
             shin: R.quat_mul(R.quat_conjugate(R.quat_mul(qa_i, Wi[:, parents[shin]])), R.quat_mul(qba_i, Wi[:, shin])),
             foot: R.quat_mul(R.quat_conjugate(R.quat_mul(qba_i, Wi[:, parents[foot]])), Wi[:, foot]),
         }
-        for j, q in new.items():
-            rotations[rows, j] = _same_hemisphere(R.quat_normalize(q), rotations[rows, j])
+        for j, q in new.items():  # in the old rotation's hemisphere
+            q = R.quat_normalize(q)
+            rotations[rows, j] = np.where(np.sum(q * rotations[rows, j], axis=-1, keepdims=True) < 0, -q, q)

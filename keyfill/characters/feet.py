@@ -189,9 +189,12 @@ def contact_joints(rig: Rig | Skeleton) -> list[tuple[str, int]]:
     return out
 
 
-def _check_motion(motion: Motion, rig: Rig) -> None:
+def _motion_rig(motion: Motion, rig: Rig | Skeleton) -> Rig:
+    """:func:`_as_rig` of ``rig``, checked to be ``motion``'s skeleton."""
+    rig = _as_rig(rig)
     if motion.skeleton is not rig.skeleton and motion.skeleton.names != rig.skeleton.names:
         raise DataError("the motion is not on the rig's skeleton (their joints differ)")
+    return rig
 
 
 def _leg_world(rotations: np.ndarray, positions: np.ndarray, skeleton: Skeleton, joints) -> tuple[np.ndarray, ...]:
@@ -242,8 +245,7 @@ def ground_height(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int
     value = _ground_value(ground)
     if value is not None:
         return value
-    rig = _as_rig(rig)
-    _check_motion(motion, rig)
+    rig = _motion_rig(motion, rig)
     frames = _frames(keys, motion.num_frames)
     if motion.num_frames == 0:
         raise DataError("the motion has no frames to find the ground in")
@@ -326,8 +328,7 @@ def contacts(motion: Motion, rig: Rig | Skeleton, ground: float | None = None,
     (else all frames) as :func:`ground_height` does. The rule and the defaults: the module docstring and
     :class:`FootSettings`. Pure: the same motion gives the same labels (corpus labels come from here too).
     """
-    rig = _as_rig(rig)
-    _check_motion(motion, rig)
+    rig = _motion_rig(motion, rig)
     sk, cols = motion.skeleton, contact_joints(rig)
     if motion.num_frames == 0:
         return np.zeros((0, len(cols)), dtype=bool)
@@ -434,8 +435,7 @@ def _hip_drop(targets, thighs, reach, up: int, cap: float) -> np.ndarray:
     """``(F,)`` how far the hips must come down so each leg reaches its target (legs stacked on axis 1):
     the least ``d >= 0`` with ``|target - (thigh - d up)| <= reach``, at most ``cap``."""
     v = targets - thighs  # (F, 2, 3)
-    vu = v[..., up]
-    n2 = np.sum(v * v, axis=-1)
+    vu, n2 = v[..., up], np.sum(v * v, axis=-1)
     disc = vu * vu - n2 + reach * reach
     need = np.where(disc >= 0, -vu - np.sqrt(np.maximum(disc, 0)), -vu)
     need = np.where(n2 <= reach * reach, 0.0, need)
@@ -458,10 +458,8 @@ def _smooth_drop(need: np.ndarray, ease: int, fade: np.ndarray) -> np.ndarray:
 def _skating(feet: np.ndarray, labels: np.ndarray, up: int, fps: float) -> float | None:
     """Mean horizontal speed (units/s) of foot joints ``(F, n, 3)`` over frame pairs in contact on both."""
     both = labels[1:] & labels[:-1]
-    if not both.any():
-        return None
     step = np.linalg.norm(np.diff(feet[..., [a for a in range(3) if a != up]], axis=0), axis=-1)
-    return float(step[both].mean() * fps)
+    return float(step[both].mean() * fps) if both.any() else None
 
 
 def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | None = None,
@@ -487,8 +485,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
         ``hip_drop_max`` (units); ``unreached_frames`` (frames where an ankle misses its target by more than
         1e-6 of the hip height: the hips' drop was capped); ``ground``; ``meters_per_unit``.
     """
-    rig = _as_rig(rig)
-    _check_motion(motion, rig)
+    rig = _motion_rig(motion, rig)
     sk, F, fps = motion.skeleton, motion.num_frames, motion.fps
     up, H = _AXES[sk.up_axis], rig.hip_height
     key_frames = _frames(motion.keys if keys is None else keys, F)

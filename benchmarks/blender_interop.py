@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "tests" / "interop"))
 
 from blender_check import blender_deviation, blender_missing
 
-from keyfill import io  # noqa: E402
+from keyfill import io
 
 FIXTURES = ROOT.parent / "shared" / "data" / "bvh_fixtures"
 SUFFIXES = (".bvh", ".usda", ".usdc")

@@ -123,8 +123,9 @@ def viz(f: dict) -> list[str]:
         size = "" if r.get("bytes") is None else f"{r['bytes'] / 1000:,.0f} kB"
         goal = f"< {r['goal_s']:g} s" if "goal_s" in r else ""
         rows.append([name, num(r.get("seconds")), num(r.get("cpu_seconds")), size, goal])
-    split = "; ".join(f"{name.strip()} {num(r['cpu_seconds'])} CPU-s" for name, r in res.items()
-                      if name.startswith("  "))
+    stages = [name for name in res if name.startswith("  ")]  # the split of one GIF: setup, frames, encoding
+    stages.sort(key=lambda name: ("setup" not in name, "encoding" in name))
+    split = "; ".join(f"{name.strip()} {num(res[name]['cpu_seconds'])} CPU-s" for name in stages)
     speedup = res.get("matplotlib FuncAnimation + PillowWriter (peer)", {}).get("keyfill_speedup_cpu")
     text = f"Medians of {f['repeat']} runs."
     text += f" keyfill's GIF takes {speedup:.1f}x less CPU than matplotlib's own route." if speedup else ""

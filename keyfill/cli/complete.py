@@ -49,6 +49,13 @@ from keyfill.learn.registry import ALIASES, METHODS
               help='Humanoid roles the mapper does not find in IN\'s skeleton, as TOML lines role = "JointName" '
                    "(e.g. hand_l = \"L_Wrist\"); for the methods whose human models serve any humanoid rig "
                    "through retargeting (see 'keyfill info IN --rig' and docs/retarget.md).")
+@click.option("--feet", type=click.Choice(["lock", "free"]),
+              help="lock: hold each foot still while it touches the ground (legs solved with two-bone IK, keys "
+                   "exact; docs/feet.md); free: the method's output as it is. Default: lock for the learned human "
+                   "methods (transformer, gan) when IN has legs, free for the others.")
+@click.option("--ground", type=float, metavar="HEIGHT",
+              help="Height of the ground along the up axis, in IN's units, for --feet (default: the lowest foot "
+                   "at the keys).")
 @click.option("--runtime", type=click.Choice(["auto", "torch", "onnx"]), default="auto", show_default=True,
               help="Run a learned model with torch or its exported ONNX graph (onnxruntime, no torch import; see "
                    "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
@@ -58,8 +65,8 @@ from keyfill.learn.registry import ALIASES, METHODS
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
-             device, dna, dna_count, rig_map, runtime, fmt, in_fmt, workers, scheduler, connect_timeout, force,
-             batch_size, as_json):
+             device, dna, dna_count, rig_map, feet, ground, runtime, fmt, in_fmt, workers, scheduler, connect_timeout,
+             force, batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -110,13 +117,15 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete walk.bvh --keys 0,300,600 --method gan --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
       keyfill complete mixamo.bvh --key-every 10 --method transformer -o out.bvh     (retargeted to the model)
       keyfill complete robot.bvh --key-every 10 --method transformer --rig-map robot.toml -o out.bvh
+      keyfill complete walk.bvh --key-every 30 --method cubic --feet lock -o walk_planted.bvh
+      keyfill complete walk.bvh --key-every 30 --method transformer --feet free -o walk_raw.bvh
     """
     from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
 
     options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime, dna=dna,
-                              dna_count=dna_count, rig_map=rig_map)
+                              dna_count=dna_count, rig_map=rig_map, feet=feet, ground=ground)
     if rig_map is not None:  # a damaged rig map is refused before any file is read
         from keyfill.characters.humanoid import read_rig_map
 

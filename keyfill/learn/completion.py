@@ -8,8 +8,10 @@ with every frame filled and ``keys`` attached.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
+from keyfill.errors import UsageError
 from keyfill.limits import check_seed
 from keyfill.motion import Motion
 
@@ -30,6 +32,10 @@ class CompleteOptions:
         dna_count: how many representative poses the Motion DNA takes (None: one per 3 s of gap).
         rig_map: a TOML file of humanoid role -> joint name(s) for methods that serve any humanoid rig
             (:mod:`keyfill.learn.rig_bridge`); None maps the roles from the skeleton's names and hierarchy.
+        feet: ``"lock"`` holds the feet still where they touch the ground
+            (:func:`keyfill.characters.feet.lock_feet`), ``"free"`` leaves the method's output as it is;
+            None: ``"lock"`` for the learned human methods when the skeleton has legs, else ``"free"``.
+        ground: the ground's height along the up axis (skeleton units) for ``feet``; None: from the keys.
     """
 
     model: str | None = None
@@ -40,9 +46,15 @@ class CompleteOptions:
     dna: str | None = None
     dna_count: int | None = None
     rig_map: str | None = None
+    feet: str | None = None
+    ground: float | None = None
 
     def __post_init__(self):
         check_seed(self.seed)
+        if self.feet not in (None, "lock", "free"):
+            raise UsageError(f"feet is lock or free, not {self.feet!r}", params="feet")
+        if self.ground is not None and not (isinstance(self.ground, (int, float)) and math.isfinite(self.ground)):
+            raise UsageError(f"ground must be a finite number, not {self.ground!r}", params="ground")
 
 
 @dataclass

@@ -28,7 +28,7 @@ import importlib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from keyfill.errors import KeyfillError, ModelError, UsageError
+from keyfill.errors import DataError, KeyfillError, ModelError, UsageError
 from keyfill.learn.completion import CompleteOptions, Completion
 from keyfill.motion import Keys, Motion
 
@@ -202,10 +202,10 @@ def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
                          params=("dna", "dna_count"))
     if not m.learned and options.model is not None:
         raise UsageError(f"model applies to learned methods, not to {m.name!r}", params="model")
-    if options.rig_map is not None and not m.humanoid:
+    if options.rig_map is not None and not m.humanoid and options.feet != "lock":
         raise UsageError(f"rig_map applies to methods whose models serve any humanoid rig "
-                         f"({', '.join(n.name for n in METHODS.values() if n.humanoid)}), not to {m.name!r}",
-                         params="rig_map")
+                         f"({', '.join(n.name for n in METHODS.values() if n.humanoid)}) and to feet lock, "
+                         f"not to {m.name!r}", params="rig_map")
     from keyfill.learn.onnx import is_graph
 
     if options.model is not None and not is_graph(options.model):
@@ -233,8 +233,36 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
             raise result
     else:
         result = m.function()(motion, keys, options)
+    result = with_feet(m, result, keys, options)
     result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
     return result
+
+
+def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOptions) -> Completion:
+    """``result`` with its feet locked (:func:`keyfill.characters.feet.lock_feet`) when ``options.feet`` is
+    ``"lock"``, or is None for a learned human method on a skeleton with legs; ``info`` says which, with the
+    foot skating (cm/s) before and after."""
+    if options.feet == "free" or (options.feet is None and not m.humanoid):
+        return result
+    from keyfill.characters.feet import lock_feet
+    from keyfill.characters.humanoid import read_rig_map
+    from keyfill.characters.retarget import make_rig
+
+    rig_map = read_rig_map(options.rig_map) if options.rig_map is not None else None
+    try:
+        rig = make_rig(result.motion.skeleton, rig_map=rig_map)
+    except DataError as e:
+        if options.feet is None:  # the default: lock where there are legs
+            result.info["feet"] = "free"
+            return result
+        raise DataError(f"feet lock needs a skeleton with legs: {e}", params=("feet",) + e.params) from None
+    locked, report = lock_feet(result.motion, rig, keys, ground=options.ground)
+    cm = 100.0 * result.motion.skeleton.meters_per_unit
+    before, after = report["skating_before"], report["skating_after"]
+    result.info.update({"feet": "lock", "foot_skating_cm_s": {
+        "before": None if before is None else before * cm, "after": None if after is None else after * cm},
+        "contact_intervals": report["intervals"]})
+    return Completion(locked, result.info)
 
 
 def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOptions) -> Completion | None:
@@ -249,7 +277,8 @@ def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOption
     model = rig_bridge.served(m.implementation().model_path(options, keys))
     if not rig_bridge.needed(model, motion, keys):
         return None
-    return rig_bridge.complete_on_model_rig(motion, keys, lambda mm, kk: complete(mm, kk, m.name, options),
+    inner = replace(options, feet="free")  # the feet are locked once, on the motion's own rig
+    return rig_bridge.complete_on_model_rig(motion, keys, lambda mm, kk: complete(mm, kk, m.name, inner),
                                             model, options, hint=getattr(m.implementation(), "TRAIN_HINT", ""))
 
 
@@ -335,15 +364,16 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
         for i, motion, keys in ready:
             try:
                 bridged = _on_model_rig(m, motion, keys, options)
+                if bridged is not None:
+                    bridged = with_feet(m, bridged, keys, options)
+                    bridged.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames,
+                                    **bridged.info}
             except KeyfillError as e:
                 bridged = e
             if bridged is None:
                 direct.append((i, motion, keys))
             else:
                 results[i] = bridged
-                if isinstance(bridged, Completion):
-                    bridged.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames,
-                                    **bridged.info}
         ready = direct
     graph = _graph(m, options)
     many = getattr(m.implementation(), "complete_many", None) if m.learned and graph is None else None
@@ -356,6 +386,11 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
         outs = [_one(m.function(), motion, keys, options) for _, motion, keys in ready]
     for (i, motion, keys), out in zip(ready, outs):
         if isinstance(out, Completion):
+            try:
+                out = with_feet(m, out, keys, options)
+            except KeyfillError as e:
+                results[i] = e
+                continue
             out.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **out.info}
         results[i] = out
     return results

@@ -96,6 +96,9 @@ SECTIONS = {
         "The human models on other rigs and frame rates", "Held-out Bandai-Namco dataset-2 clips retargeted onto the "
         "Mixamo and CMU fixture rigs, completed on each rig by cubic and by the shipped transformer and gan through "
         "retargeting (docs/retarget.md).", S.retarget),
+    "feet": Section(
+        "Feet on the ground: raw and locked", "Every method with its feet free and locked (`keyfill complete --feet "
+        "lock`), on held-out clips of styles no shipped model saw (docs/feet.md).", S.feet),
     "convert_memory": Section(
         "`keyfill convert` of a big file: memory", "Peak resident memory (`wait4`) of converting a generated 150 MB "
         "BVH to USD and to BVH, beside the fixed overhead of converting a 4-frame file.", S.convert_memory),

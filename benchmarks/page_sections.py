@@ -393,23 +393,49 @@ def checks(goals: list[dict]) -> list[str]:
 
 
 def retarget(f: dict) -> list[str]:
-    """Gap errors through retargeting per rig and frame rate, each learned method beside cubic at its spacing."""
+    """Gap errors through retargeting per rig (each cell: 30 / 60 / 120 fps), the learned methods beside cubic."""
     cols = [("cubic", "15"), ("transformer", "15"), ("cubic", "30"), ("transformer", "30"), ("cubic", "60"),
             ("gan", "60")]
     rows = []
     for rig, by_fps in f["gap_error_cm"].items():
-        for fps, by_method in sorted(by_fps.items(), key=lambda item: int(item[0])):
-            cells = []
-            for method, step in cols:
-                value = by_method[method][step]
-                ratio = f["ratio_to_cubic"][rig][fps][method][step]
-                cells.append(num(value) if method == "cubic" else f"{num(value)} ({num(ratio)}x)")
-            rows.append([rig, fps] + cells)
+        fps_list = sorted(by_fps, key=int)
+        cells = []
+        for method, step in cols:
+            values = " / ".join(num(by_fps[fps][method][step]) for fps in fps_list)
+            ratio = f["ratio_to_cubic"][rig][fps_list[0]][method][step]
+            cells.append(values if method == "cubic" else f"{values} ({num(ratio)}x)")
+        rows.append([rig] + cells)
     rt, sp = f["round_trip"], f["speed"]
+    fps_text = " / ".join(sorted(next(iter(f["gap_error_cm"].values())), key=int))
     return [(f"{f['clips']} held-out `normal` clips (at most {f['max_frames']} frames), mean error of the mapped "
-             "joints over non-key frames in cm of the rig's units (ratio to cubic's); keys every N frames at 30 fps, "
-             "at the same times at 60 and 120 fps. Round trip Bandai -> Mixamo -> Bandai: at most "
-             f"{num(rt['max_error_cm'])} cm ({num(100 * rt['max_share_of_height'])} % of the height). One "
-             f"transformer completion of {sp['frames']:,} frames at {sp['fps']} fps: {num(sp['total_s'])} s, of "
-             f"which the bridge {num(100 * sp['bridge_share'], 0)} % beyond the model's own {num(sp['model_s'])} s."),
-            ""] + table(["rig", "fps"] + [f"{m} @{s}" for m, s in cols], rows)
+             f"joints over non-key frames in cm of the rig's units at {fps_text} fps (ratio to cubic's at 30); keys "
+             "every N frames at 30 fps, at the same times at the other rates. Round trip Bandai -> Mixamo -> "
+             f"Bandai: at most {num(rt['max_error_cm'])} cm ({num(100 * rt['max_share_of_height'])} % of the "
+             f"height). One transformer completion of {sp['frames']:,} frames at {sp['fps']} fps: "
+             f"{num(sp['total_s'])} s, of which the bridge {num(100 * sp['bridge_share'], 0)} % beyond the model's "
+             f"own {num(sp['model_s'])} s."), ""] + table(["rig"] + [f"{m} @{s}" for m, s in cols], rows)
+
+
+def feet(f: dict) -> list[str]:
+    """Foot skating, jitter and gap error of each method raw -> locked, per style set and key spacing."""
+    methods = ("linear", "cubic", "transformer", "gan")
+    rows = []
+    for name, by_gap in f["scores"].items():
+        for gap, row in by_gap.items():
+            real = row["real"]
+            cells = [f"{num(real['foot_skating_cm_s'], 1)}, {num(real['jitter_m_s3'], 0)}"]
+            for m in methods:
+                if m not in row:
+                    cells.append("-")
+                    continue
+                r, lk = row[m]["raw"], row[m]["locked"]
+                cells.append(f"{num(r['foot_skating_cm_s'], 1)} -> {num(lk['foot_skating_cm_s'], 1)}, "
+                             f"{num(r['jitter_m_s3'], 0)} -> {num(lk['jitter_m_s3'], 0)}, "
+                             f"{num(r['gap_error_cm'])} -> {num(lk['gap_error_cm'])}")
+            rows.append([name, gap] + cells)
+    sp = f["speed"]
+    return [(f"Each cell: foot skating (cm/s), jitter (m/s^3) and gap error (cm), raw -> locked; real clips: skating, "
+             f"jitter. {', '.join(f'{k}: {v}' for k, v in f['clips'].items())} clips of {f['seconds']} s. "
+             f"`lock_feet` on {sp['frames']:,} frames: {num(1e3 * sp['lock_s'], 1)} ms against the gan "
+             f"completion's {num(1e3 * sp['complete_s'], 1)} ms."), ""] + table(
+        ["held-out style", "keys every", "real"] + list(methods), rows)

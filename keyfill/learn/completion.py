@@ -34,7 +34,7 @@ class CompleteOptions:
             (:mod:`keyfill.learn.rig_bridge`); None maps the roles from the skeleton's names and hierarchy.
         feet: ``"lock"`` holds the feet still where they touch the ground
             (:func:`keyfill.characters.feet.lock_feet`), ``"free"`` leaves the method's output as it is;
-            None: ``"lock"`` for the learned human methods when the skeleton has legs, else ``"free"``.
+            None: ``"free"`` (docs/feet.md says why locking is not the default yet).
         ground: the ground's height along the up axis (skeleton units) for ``feet``; None: from the keys.
     """
 

@@ -439,3 +439,11 @@ def feet(f: dict) -> list[str]:
              f"`lock_feet` on {sp['frames']:,} frames: {num(1e3 * sp['lock_s'], 1)} ms against the gan "
              f"completion's {num(1e3 * sp['complete_s'], 1)} ms."), ""] + table(
         ["held-out style", "keys every", "real"] + list(methods), rows)
+
+
+def formats(f: dict) -> list[str]:
+    """Write and read seconds and file size per format."""
+    rows = [[suffix, num(r["write_s"], 3), num(r["read_s"], 3), num(r["bytes"] / 1e6, 1)]
+            for suffix, r in f["formats"].items()]
+    return [f"Medians of {f['repeat']} runs after a warm-up."] + [""] + table(
+        ["format", "write s", "read s", "MB"], rows)

@@ -24,13 +24,16 @@ demo: $(STAMP)
 	$(BIN)/keyfill complete examples/lamp/keys.usda -o $(OUT)/lamp_arnn.usda --method arnn
 	$(BIN)/keyfill complete examples/lamp/keys.usda -o $(OUT)/lamp_cubic.usda --method cubic
 	$(BIN)/keyfill plot examples/lamp/truth.usda $(OUT)/lamp_cubic.usda $(OUT)/lamp_arnn.usda --labels truth,cubic,arnn -o $(OUT)/lamp_arnn.png
-	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_gan.usda --method gan --seed 1
+	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_gan.usda --method gan --seed 1 --feet lock
+	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_gan_raw.usda --method gan --seed 1 --feet free
 	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_cubic.usda --method cubic
 	$(BIN)/keyfill preview $(OUT)/human_cubic.usda $(OUT)/human_gan.usda --labels cubic,gan --view side -o $(OUT)/human.png
+	$(BIN)/keyfill preview $(OUT)/human_gan_raw.usda $(OUT)/human_gan.usda --labels "gan raw,gan feet locked" --view side --frames 0:100 -o $(OUT)/human_feet.png
+	$(BIN)/keyfill plot $(OUT)/human_gan_raw.usda $(OUT)/human_gan.usda --labels "gan raw,gan feet locked" --contacts --positions --joints Toes_L,Toes_R --channels y,z --frames 0:100 -o $(OUT)/human_feet_contacts.png
 	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_transformer.usda --method transformer
 	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_cubic.usda --method cubic
 	$(BIN)/keyfill preview $(OUT)/human15_cubic.usda $(OUT)/human15_transformer.usda --labels cubic,transformer --view side -o $(OUT)/human15.png
-	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model, CC BY-NC 4.0, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_cubic.usda, human.png, human15_transformer.usda, human15_cubic.usda, human15.png)"
+	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model, CC BY-NC 4.0, with its feet locked and raw, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_gan_raw.usda, human_cubic.usda, human.png, human_feet.png (frames 0-99, raw against locked feet), human_feet_contacts.png (toe curves and foot contacts, frames 0-99), human15_transformer.usda, human15_cubic.usda, human15.png)"
 
 test: $(STAMP)
 	@command -v npm >/dev/null && $(MAKE) --no-print-directory gltf-validator \

@@ -20,12 +20,23 @@ from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labe
 @click.option("--frames", metavar="A:B", help="Frames A to B-1 (Python slice; 10:, :30 and -50: work too).")
 @click.option("--positions", is_flag=True, help="Plot world positions JOINT.x/.y/.z (forward kinematics) "
                                                 "instead of the file's channels.")
+@click.option("--contacts", is_flag=True,
+              help="Draw each file's foot contacts in bands under the curves: one row per foot joint (ankle, "
+                   "toe; left, then right), shaded where it touches the ground (the rule of --feet lock, "
+                   "docs/feet.md; the ground from the file's keys). Needs a skeleton with legs.")
+@click.option("--rig-map", type=click.Path(exists=True, dir_okay=False), metavar="FILE.toml",
+              help="With --contacts: the humanoid roles the mapper cannot find, as lines role = \"JointName\" "
+                   "(docs/retarget.md), e.g. foot_l = \"LeftAnkle\".")
+@click.option("--ground", type=float, metavar="HEIGHT",
+              help="With --contacts: the ground's height along the up axis, in the files' units (default: "
+                   "the lowest foot at each file's keys, else over all its frames).")
 @click.option("--labels", metavar="NAMES",
               help="Legend names for the files, comma-separated, in order (default: the file names).")
 @keys_options
 @click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when a FILE is '-').")
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def plot(files, output, joints, channels, frames, positions, labels, keys_text, key_every, in_fmt, as_json):
+def plot(files, output, joints, channels, frames, positions, contacts, rig_map, ground, labels, keys_text, key_every,
+         in_fmt, as_json):
     """Draw the animation curves of FILES, overlaid, one panel per variable.
 
     Each panel is one animation variable over the frames: a BVH channel as
@@ -34,6 +45,9 @@ def plot(files, output, joints, channels, frames, positions, labels, keys_text, 
     --positions, or, for the hopping lamp, one of its six variables. Every
     file gets its own colour and a legend entry; keys (recorded in the file,
     or given with --keys / --key-every) are open circles on the curves.
+    --contacts adds, under the curves, a band per file of where each foot
+    joint is on the ground, so locked feet (complete --feet lock) can be
+    seen against raw ones.
 
     \b
     Examples:
@@ -41,14 +55,21 @@ def plot(files, output, joints, channels, frames, positions, labels, keys_text, 
       keyfill plot truth.usda cubic.usda arnn.usda --labels truth,cubic,arnn -o compare.svg
       keyfill plot walk.bvh --joints Hips,LowerLeg_L --channels Xrotation -o knee.pdf
       keyfill plot walk.bvh --positions --joints Hand_L --frames 0:120 -o hand.png
+      keyfill plot raw.usda locked.usda --labels raw,locked --contacts --positions --joints Toes_L --channels y -o feet.png
     """
+    from keyfill.characters.humanoid import read_rig_map
     from keyfill.viz import PLOT_SUFFIXES, check_suffix
     from keyfill.viz.curves import plot as draw
 
     check_suffix(output, PLOT_SUFFIXES)
+    if not contacts and (rig_map is not None or ground is not None):
+        raise click.UsageError(f"{'--rig-map' if rig_map is not None else '--ground'} needs --contacts")
+    rig_map = read_rig_map(rig_map) if rig_map is not None else None
     motions, names = load_labelled(files, labels, in_fmt, keys_text, key_every)
-    info = draw(motions, names, output, joints=joints, channels=channels, frames=frames, positions=positions)
+    info = draw(motions, names, output, joints=joints, channels=channels, frames=frames, positions=positions,
+                contacts=contacts, rig_map=rig_map, ground=ground)
     if as_json:
         emit_json(info.as_dict())
     else:
-        say(f"wrote {output}: {len(info.panels)} panels ({', '.join(info.panels)}) of {len(files)} file(s)")
+        bands = f" and the foot contacts of {len(files)} file(s)" if contacts else ""
+        say(f"wrote {output}: {len(info.panels)} panels ({', '.join(info.panels)}) of {len(files)} file(s){bands}")

@@ -14,6 +14,8 @@ What a panel shows (Zhang & van de Panne 2018, Figures 5 and 8-13):
 
 The x axis is the frame number in the file (a ``--frames`` range keeps the
 original numbering); keys (``Motion.keys``) are open circles on each file's curve.
+With ``contacts=True`` each file's foot contacts are bands under the curves
+(:mod:`keyfill.viz.contacts`).
 """
 
 from __future__ import annotations
@@ -207,10 +209,15 @@ class PlotInfo:
     panels: tuple[str, ...]
     labels: tuple[str, ...]
     frames: tuple[int, int]
+    #: per file with ``contacts=True``: foot joint name -> contact intervals ``[first, last]`` (inclusive)
+    contacts: tuple[dict[str, list[list[int]]], ...] = ()
 
     def as_dict(self) -> dict:
-        return {"output": self.output, "panels": list(self.panels), "files": list(self.labels),
-                "frames": list(self.frames)}
+        d = {"output": self.output, "panels": list(self.panels), "files": list(self.labels),
+             "frames": list(self.frames)}
+        if self.contacts:
+            d["contacts"] = [{"file": label, "joints": joints} for label, joints in zip(self.labels, self.contacts)]
+        return d
 
 
 def plot(
@@ -222,19 +229,46 @@ def plot(
     channels: Sequence[str] | None = None,
     frames: str | None = None,
     positions: bool = False,
+    contacts: bool = False,
+    rig_map: dict | None = None,
+    ground: float | None = None,
 ) -> PlotInfo:
     """Draw the animation curves of ``motions`` overlaid and write ``output`` (.png, .svg, .pdf).
 
     Panels come from the first motion (see :func:`select_panels`); every other
     motion must have the same variables. Lamps show their six variables
     unless ``joints`` or ``positions`` ask for channels or world positions.
-    ``frames`` is ``"A:B"`` (see :func:`keyfill.viz.frame_range`). The file is
+    ``frames`` is ``"A:B"`` (see :func:`keyfill.viz.frame_range`).
+    ``contacts``: a band of foot contacts per file under the curves
+    (:func:`keyfill.viz.contacts.contact_bands`, with ``rig_map`` and
+    ``ground``; a skeleton without legs is a :class:`DataError`). The file is
     written atomically.
     """
     from keyfill.files import atomic_output
     from keyfill.viz import style
 
     fmt = check_suffix(str(output), PLOT_SUFFIXES).lstrip(".")
+    with style.style():
+        fig, info = _draw(motions, labels, str(output), joints=joints, channels=channels, frames=frames,
+                          positions=positions, contacts=contacts, rig_map=rig_map, ground=ground)
+        with atomic_output(output) as tmp:
+            style.save_figure(fig, tmp, fmt)
+    return info
+
+
+def figure(motions: Sequence[Motion], labels: Sequence[str], **options):
+    """``(matplotlib Figure, PlotInfo)``: what :func:`plot` draws (same ``options``), without writing a file.
+    Contact bands are the axes whose ``get_label()`` is ``"contacts: LABEL"``."""
+    from keyfill.viz import style
+
+    with style.style():
+        return _draw(motions, labels, "", **options)
+
+
+def _draw(motions, labels, output: str, *, joints=None, channels=None, frames=None, positions=False,
+          contacts=False, rig_map=None, ground=None):
+    from keyfill.viz import style
+
     if len(labels) != len(motions):
         raise UsageError(f"{len(labels)} labels for {len(motions)} files")
     use_lamp = (not joints and not positions
@@ -257,43 +291,49 @@ def plot(
             cols = [lookup[name] for name in names]
         keys = cut.keys.frames if cut.keys is not None else np.zeros(0, dtype=np.int64)
         series.append((label, idx, curves.values[:, cols], keys))
+    bands = []
+    if contacts:
+        from keyfill.viz.contacts import contact_bands
+
+        bands = [contact_bands(m, label, s[1], rig_map=rig_map, ground=ground)
+                 for m, label, s in zip(motions, labels, series)]
 
     P = len(names)
     cells = _layout(panel_joints)
     nrows = max(r for r, _ in cells) + 1
     ncols = max(c for _, c in cells) + 1
-    with style.style():
-        fig, axes = _figure(style, nrows, ncols)
-        used = set(cells)
-        for r in range(nrows):
-            for c in range(ncols):
-                if (r, c) not in used:
-                    axes[r, c].set_axis_off()
-        for p in range(P):
-            row, col = cells[p]
-            ax = axes[row, col]
-            for n, (_, x, values, keys) in enumerate(series):
-                color = style.FILE_COLORS[n % len(style.FILE_COLORS)]
-                ax.plot(x, values[:, p], color=color, lw=1.3, zorder=2 + n)
-                if len(keys):
-                    ax.plot(x[keys], values[keys, p], ls="none", marker="o", ms=5.5, mew=1.3, mfc="none",
-                            mec=color, zorder=10 + n)
-            _flat_limits(ax, [values[:, p] for _, _, values, _ in series], units[p])
-            ax.set_title(names[p], loc="left", color=style.TEXT_COLOR)
-            ax.set_ylabel(units[p])
-            ax.grid(True, color=style.AXIS_GRID_COLOR, lw=0.6)
-            ax.margins(x=0.01, y=0.1)
-            if (row + 1, col) not in used:
-                ax.tick_params(labelbottom=True)
-        fig.supxlabel("frame", fontsize=8, y=0.16 / fig.get_figheight())  # 0.16 in above the bottom
-        handles = _legend_handles(series, style)
-        fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 1.0), ncols=min(len(handles), 6),
-                   frameon=False)
-        with atomic_output(output) as tmp:
-            style.save_figure(fig, tmp, fmt)
+    fig, axes = _figure(style, nrows, ncols, bands)
+    used = set(cells)
+    for r in range(nrows):
+        for c in range(ncols):
+            if (r, c) not in used:
+                axes[r, c].set_axis_off()
+    for p in range(P):
+        row, col = cells[p]
+        ax = axes[row, col]
+        for n, (_, x, values, keys) in enumerate(series):
+            color = style.FILE_COLORS[n % len(style.FILE_COLORS)]
+            ax.plot(x, values[:, p], color=color, lw=1.3, zorder=2 + n)
+            if len(keys):
+                ax.plot(x[keys], values[keys, p], ls="none", marker="o", ms=5.5, mew=1.3, mfc="none",
+                        mec=color, zorder=10 + n)
+        _flat_limits(ax, [values[:, p] for _, _, values, _ in series], units[p])
+        ax.set_title(names[p], loc="left", color=style.TEXT_COLOR)
+        ax.set_ylabel(units[p])
+        ax.grid(True, color=style.AXIS_GRID_COLOR, lw=0.6)
+        ax.margins(x=0.01, y=0.1)
+        if (row + 1, col) not in used:
+            ax.tick_params(labelbottom=True)
+    if bands:
+        _draw_bands(fig, axes, bands, style)
+    fig.supxlabel("frame", fontsize=8, y=0.16 / fig.get_figheight())  # 0.16 in above the bottom
+    handles = _legend_handles(series, style)
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 1.0), ncols=min(len(handles), 6),
+               frameon=False)
     first = [int(s[1][0]) for s in series]
     last = [int(s[1][-1]) for s in series]
-    return PlotInfo(str(output), names, tuple(labels), (min(first), max(last)))
+    info = PlotInfo(output, names, tuple(labels), (min(first), max(last)), tuple(b.intervals() for b in bands))
+    return fig, info
 
 
 #: fixed figure layout in inches (a layout engine would cost half the drawing time)
@@ -302,17 +342,52 @@ _PANEL_WIDTH = {1: 6.4, 2: 4.7, 3: 3.7}
 _LEFT, _RIGHT, _COLUMN_GAP = 0.75, 0.2, 0.85
 
 
-def _figure(style, nrows: int, ncols: int):
-    """A figure with ``nrows`` x ``ncols`` panels sharing the x axis, laid out in fixed inches."""
+#: with contact bands: the space between the curves' frame numbers and the first band, and between bands
+_BANDS_GAP, _BAND_GAP = 0.3, 0.12
+
+
+def _bands_height(bands) -> float:
+    from keyfill.viz.contacts import band_height
+
+    if not bands:
+        return 0.0
+    return _BANDS_GAP + sum(band_height(b) for b in bands) + (len(bands) - 1) * _BAND_GAP
+
+
+def _figure(style, nrows: int, ncols: int, bands=()):
+    """A figure with ``nrows`` x ``ncols`` panels sharing the x axis, laid out in fixed inches, with room for
+    the contact ``bands`` below them."""
     width = _LEFT + ncols * _PANEL_WIDTH[ncols] + (ncols - 1) * _COLUMN_GAP + _RIGHT
-    height = _TOP + nrows * _PANEL_HEIGHT + (nrows - 1) * _ROW_GAP + _BOTTOM
+    below = _BOTTOM + _bands_height(bands)
+    height = _TOP + nrows * _PANEL_HEIGHT + (nrows - 1) * _ROW_GAP + below
     fig = style.new_figure(width, height)
     axes = fig.subplots(nrows, ncols, sharex=True, squeeze=False, gridspec_kw={
         "left": _LEFT / width, "right": 1 - _RIGHT / width,
-        "top": 1 - _TOP / height, "bottom": _BOTTOM / height,
+        "top": 1 - _TOP / height, "bottom": below / height,
         "hspace": _ROW_GAP / _PANEL_HEIGHT, "wspace": _COLUMN_GAP / _PANEL_WIDTH[ncols],
     })
     return fig, axes
+
+
+def _draw_bands(fig, axes, bands, style) -> None:
+    """Each file's contact bands under the panels, under every column (so a frame lies under the same frame
+    of the curves above it), the title and joint names in the first column, the frame numbers under the last
+    file's. The first column's axes are labelled ``contacts: LABEL``, the others ``contacts: LABEL, column C``."""
+    from keyfill.viz.contacts import BAND_ROW, BAND_TITLE, draw_bands
+
+    height = fig.get_figheight()
+    top = _BOTTOM + _bands_height(bands) - _BANDS_GAP  # inches above the bottom
+    for n, b in enumerate(bands):
+        rows = len(b.joints) * BAND_ROW
+        top -= BAND_TITLE
+        for c in range(axes.shape[1]):
+            box = axes[0, c].get_position()
+            name = f"contacts: {b.label}" if c == 0 else f"contacts: {b.label}, column {c + 1}"
+            ax = fig.add_axes((box.x0, (top - rows) / height, box.width, rows / height), sharex=axes[0, c],
+                              label=name)
+            draw_bands(ax, b, style.FILE_COLORS[n % len(style.FILE_COLORS)], style, names=c == 0)
+            ax.tick_params(axis="x", labelbottom=n == len(bands) - 1)
+        top -= rows + _BAND_GAP
 
 
 def _layout(joints: list[str | None]) -> list[tuple[int, int]]:

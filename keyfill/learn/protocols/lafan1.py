@@ -43,7 +43,7 @@ import numpy as np
 from keyfill.errors import DataError, UsageError
 from keyfill.learn.corpus import Corpus, load_corpus
 from keyfill.learn.protocols import metrics
-from keyfill.learn.windows import align_windows, global_pose
+from keyfill.learn.windows import align_windows, global_pose, window_motion
 from keyfill.motion import Skeleton
 
 N_PAST = 10  #: context frames
@@ -156,9 +156,10 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
 
     Every frame between the first and the last key that is not a key is hidden
     (NaN) from the methods and scored. Returns ``{method: {"L2Q", "L2P", "NPSS",
-    "skate", "jitter"}}``: the protocol's three metrics on the hidden frames, and
-    foot skating (cm/s) and jitter (m/s^3) of :mod:`keyfill.learn.protocols.metrics` over
-    the hidden frames and the two frames on each side (:func:`realism_span`).
+    "skate", "jitter"[, "skate_locked", "jitter_locked"]}}``: the protocol's three metrics on the hidden frames,
+    and foot skating (cm/s) and jitter (m/s^3) of :mod:`keyfill.learn.protocols.metrics` over
+    the hidden frames and the two frames on each side (:func:`realism_span`), of the raw output and, for a
+    humanoid test skeleton, of the output with its feet locked (:func:`locked_windows`).
     """
     keys = np.asarray(keys, dtype=np.int64)
     if len(test.quats) == 0:
@@ -175,6 +176,7 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
     g_q, g_p = global_pose(gt_q[:, hidden], gt_r[:, hidden], skel.offsets, skel.parents)
     span = realism_span(hidden, T)
     _, ground = global_pose(gt_q, gt_r, skel.offsets, skel.parents)
+    rig = _rig(skel)
     out = {}
     for name, method in methods.items():
         p_q, p_r = method(skel, given_q, given_r, keys)
@@ -187,7 +189,33 @@ def score_keys(methods: dict[str, Method], test: TestSet, stats: Statistics, key
             "NPSS": metrics.npss(g_q, pr_q),
             **realism_scores(test, p_q[:, span], p_r[:, span], ground),
         }
+        if rig is not None:  # the same output with its feet locked, as `keyfill complete --feet lock` writes it
+            l_q, l_r = locked_windows(test, rig, p_q, p_r, keys)
+            locked = realism_scores(test, l_q[:, span], l_r[:, span], ground)
+            out[name].update({"skate_locked": locked["skate"], "jitter_locked": locked["jitter"]})
     return out
+
+
+def _rig(skeleton: Skeleton):
+    """The humanoid rig of the test skeleton, or None when it has no legs to lock (then no locked scores)."""
+    from keyfill.characters.retarget import make_rig
+
+    try:
+        return make_rig(skeleton)
+    except DataError:
+        return None
+
+
+def locked_windows(test: TestSet, rig, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    """Windows ``quats (N, T, J, 4)``, ``root (N, T, 3)`` with their feet locked between ``keys``
+    (:func:`keyfill.characters.feet.lock_feet`, window by window)."""
+    from keyfill.characters.feet import lock_feet
+
+    out_q, out_r = np.empty_like(quats), np.empty_like(root)
+    for b in range(len(quats)):
+        locked, _ = lock_feet(window_motion(test.skeleton, quats[b], root[b], test.fps), rig, keys)
+        out_q[b], out_r[b] = locked.rotations, locked.positions[:, 0]
+    return out_q, out_r
 
 
 def realism_span(hidden: np.ndarray, num_frames: int) -> np.ndarray:
@@ -387,6 +415,8 @@ def format_realism(results: dict[str, dict[int, dict[str, float]]], truth: dict[
     rows = {**results, "ground truth": truth}
     width = max(len(n) for n in [*rows, "transition length"])
     labels = {"skate": "foot skating (cm/s)", "jitter": "jitter (m/s^3)"}
+    if all("skate_locked" in r[n] for r in results.values() for n in lengths):
+        labels.update({"skate_locked": "skating, feet locked", "jitter_locked": "jitter, feet locked"})
     # cells wide enough that each block holds its label
     cell = max(7, -(-(max(len(v) for v in labels.values()) + 1) // len(lengths)) - 1)
     block = (cell + 1) * len(lengths) - 1
@@ -397,6 +427,7 @@ def format_realism(results: dict[str, dict[int, dict[str, float]]], truth: dict[
     lines = [(f"{'':{width}} " + "  ".join(f"{labels[m]:<{block}}" for m in labels)).rstrip(),
              f"{'transition length':{width}} " + cells(lambda m, n: f"{n:>{cell}}")]
     for name, r in rows.items():
-        lines.append(f"{name:{width}} " + cells(lambda m, n, r=r: f"{r[n][m]:{cell}.2f}"))
+        lines.append(f"{name:{width}} " + cells(lambda m, n, r=r: f"{r[n][m]:{cell}.2f}" if m in r[n]
+                                                else f"{'-':>{cell}}"))
     return "\n".join(lines)
 

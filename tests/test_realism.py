@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import DATA
 from synthetic_corpus import walker_skeleton, write_corpus
 
 from keyfill.cli.main import main
@@ -73,3 +74,21 @@ def test_evaluate_reports_skating_and_jitter_beside_the_truth(tmp_path, capsys, 
     assert main(["evaluate", "cubic", str(tmp_path / "clips"), "--test-pattern", "*_calm_*", "--lengths", "5"]) == 0
     text = capsys.readouterr().out
     assert "foot skating (cm/s)" in text and "ground truth" in text
+
+
+def test_a_humanoid_test_set_is_also_scored_with_its_feet_locked():
+    from keyfill import interpolate, io
+    from keyfill.learn.protocols import lafan1
+
+    walk = io.load(DATA / "bvhtoolbox_test_freebvh_mixamo.bvh")  # only the hips carry a translation
+    J = walk.num_joints
+    test = lafan1.TestSet(walk.skeleton, walk.rotations[None], walk.positions[None, :, 0], ("walk",), walk.fps)
+    stats = lafan1.Statistics(np.zeros(J * 3), np.ones(J * 3))
+    keys = np.array([0, 20, 40, 60])
+    out = lafan1.score_keys({"linear": interpolate.linear_windows}, test, stats, keys)["linear"]
+    assert {"skate", "jitter", "skate_locked", "jitter_locked"} <= set(out)
+    q, r = interpolate.linear_windows(walk.skeleton, test.quats, test.root, keys)
+    lq, _ = lafan1.locked_windows(test, lafan1._rig(walk.skeleton), q, r, keys)
+    np.testing.assert_array_equal(lq[:, keys], q[:, keys])  # keys stay exact
+    assert not np.allclose(lq, q)  # and the legs moved where the feet touch the ground
+    assert out["skate_locked"] != out["skate"] and out["jitter_locked"] != out["jitter"]

@@ -1,6 +1,6 @@
-# keyfill: `make demo` and `make test` each create .venv, install keyfill with
-# pinned dependencies (torch==2.13.0, the local CPU build; the onnx extra for export and
-# the torch-free runtime) and run.
+# keyfill: `make demo` and `make test` each create .venv, install keyfill with every extra
+# (train: torch, pinned to 2.13.0, the local CPU build; sim: pybullet; dask; onnx: export) and
+# pinned dependencies, and run. `pip install .` alone installs none of the extras.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
@@ -14,7 +14,7 @@ OUT := out/demo
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx,train,sim,dask]'
 	@touch $(STAMP)
 
 demo: $(STAMP)

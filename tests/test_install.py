@@ -1,0 +1,28 @@
+"""The base install: no torch, pybullet or dask in keyfill's own requirements; extras bring them."""
+
+import re
+import tomllib
+from pathlib import Path
+
+PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
+HEAVY = {"torch", "pybullet", "dask"}
+
+
+def _names(requirements: list[str]) -> set[str]:
+    return {re.match(r"[A-Za-z0-9_.-]+", r).group(0).lower() for r in requirements}
+
+
+def test_the_base_install_needs_no_torch_pybullet_or_dask():
+    project = tomllib.loads(PYPROJECT.read_text())["project"]
+    assert not _names(project["dependencies"]) & HEAVY
+    extras = project["optional-dependencies"]
+    assert "torch" in _names(extras["train"]) and "pybullet" in _names(extras["sim"])
+    assert "dask" in _names(extras["dask"])
+    assert "onnxruntime" in _names(project["dependencies"])  # exported graphs run without any extra
+
+
+def test_make_installs_every_extra():
+    makefile = (PYPROJECT.parent / "Makefile").read_text()
+    installed = re.search(r"-e '\.\[([a-z,]+)\]'", makefile).group(1).split(",")
+    extras = tomllib.loads(PYPROJECT.read_text())["project"]["optional-dependencies"]
+    assert set(extras) <= set(installed)

@@ -147,3 +147,24 @@ def read_json_object(path: str | os.PathLike) -> dict:
     if not isinstance(data, dict):
         raise UsageError(f"{path}: the config must be a JSON object")
     return data
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """Whether ``a`` and ``b`` are one existing file (by name, or through a symbolic or hard link)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def refuse_overwriting_input(output: str | os.PathLike | None, inputs, force: bool = False) -> None:
+    """A :class:`UsageError` (exit 2) when ``output`` is one of the files ``inputs`` (``-`` and None are not
+    files), unless ``force``; checked before anything is written. Names the parameters ``output`` and
+    ``force``."""
+    if force or output is None or str(output) == "-":
+        return
+    for src in inputs:
+        if src is not None and str(src) != "-" and same_file(output, src):
+            also = "" if os.path.abspath(output) == os.path.abspath(src) else f" (through a link: {src})"
+            raise UsageError(f"output {output} is the input {src}{also}: writing it would overwrite the input; "
+                             "choose another output, or give force to overwrite it", params=("output", "force"))

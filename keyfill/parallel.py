@@ -23,7 +23,7 @@ import signal
 import threading
 import time
 
-from keyfill.errors import KeyfillError, UsageError
+from keyfill.errors import UsageError
 from keyfill.limits import MAX_CONNECT_SECONDS, MAX_WORKERS, check_count
 
 
@@ -93,22 +93,64 @@ class Processes:
         self.pool.shutdown(wait=True, cancel_futures=cancel)
 
 
+#: address schemes that name a host and a port, which :func:`probe_scheduler` can try before a client starts
+_HOST_PORT_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+
+def probe_scheduler(address: str, timeout: float) -> None:
+    """Refuse, as one :class:`UsageError` naming ``scheduler`` (exit 2), a scheduler address that is malformed or
+    that nobody answers at within ``timeout`` seconds, before any Dask client exists (a client whose start fails
+    leaves a background loop and a noisy ``Client.__del__`` behind)."""
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme in _HOST_PORT_SCHEMES:
+            host, _port = parse_host_port(location)
+            if not host:
+                raise ValueError(f"no host in {address!r}")
+    except (ValueError, TypeError) as e:
+        raise UsageError(f"scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})",
+                         params="scheduler") from None
+    if scheme not in _HOST_PORT_SCHEMES:
+        return  # inproc://, ucx://: the client reaches them itself
+
+    async def reach():
+        comm = await connect(address, timeout=timeout)
+        await comm.close()
+
+    try:
+        asyncio.run(asyncio.wait_for(reach(), timeout + 1.0))
+    except (OSError, TimeoutError) as e:
+        reason = " ".join(str(e).split()) or type(e).__name__
+        raise UsageError(f"cannot reach the scheduler {address} within connect_timeout {timeout:g} s ({reason})",
+                         params=("scheduler", "connect_timeout")) from None
+    except ValueError as e:
+        raise UsageError(f"scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})",
+                         params="scheduler") from None
+
+
 class DaskCluster:
     """A Dask distributed cluster."""
 
     def __init__(self, address: str, timeout: float):
         import logging
 
-        from distributed import Client
-
         # A refused connection is reported by our own message, not by distributed's retry warnings.
         log = logging.getLogger("distributed")
         level = log.level
         log.setLevel(logging.CRITICAL)
         try:
+            probe_scheduler(address, timeout)
+            from distributed import Client
+
             self.client = Client(address, timeout=f"{timeout}s", set_as_default=False)
         except (OSError, TimeoutError) as e:
-            raise KeyfillError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({e})") from None
+            raise UsageError(f"cannot reach the scheduler {address} within connect_timeout {timeout:g} s ({e})",
+                             params=("scheduler", "connect_timeout")) from None
         except ValueError as e:
             raise UsageError(f"scheduler {address!r} is not a scheduler address like tcp://host:8786 ({e})",
                              params="scheduler") from None
@@ -134,7 +176,7 @@ class DaskCluster:
         self.client.close()
 
 
-def check_options(workers: int | None, connect_timeout: float = 10.0) -> None:
+def check_options(workers: int | None, connect_timeout: float = 5.0) -> None:
     """:class:`UsageError` (naming the parameter) for ``workers`` or ``connect_timeout`` no executor can use."""
     if workers is not None:
         check_count("workers", workers, MAX_WORKERS)
@@ -143,7 +185,7 @@ def check_options(workers: int | None, connect_timeout: float = 10.0) -> None:
                          f"got {connect_timeout}", params="connect_timeout")
 
 
-def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = 10.0):
+def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = 5.0):
     """The executor for ``--workers`` / ``--scheduler``: ``(executor, jobs to keep in flight)``.
 
     ``workers`` defaults to one process per available core (1 runs everything

@@ -222,7 +222,8 @@ def test_unreachable_scheduler(tmp_path, capsys):
     rc, _out, err = simulate(["-o", str(folder), "--count", "1", "--scheduler", address, "--connect-timeout", "1"],
                             capsys)
     assert time.monotonic() - start < 30
-    assert rc == 1 and err.startswith(f"keyfill: error: cannot reach the Dask scheduler at {address} within 1 s")
+    assert rc == 2 and err.startswith(f"keyfill: error: cannot reach the --scheduler {address} within "
+                                      "--connect-timeout 1 s")
     assert len(err.strip().splitlines()) == 1
     assert not folder.exists()
 

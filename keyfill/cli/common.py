@@ -169,8 +169,10 @@ def batch_options(f):
     """``--workers``, ``--scheduler``, ``--connect-timeout``, ``--force`` and ``--batch-size`` of a batch command."""
     f = click.option("--batch-size", default=64, show_default=True, type=int, metavar="N",
                      help="Files per job (and per batch through a learned model).")(f)
-    f = click.option("--force", is_flag=True, help="Redo outputs that are newer than their input.")(f)
-    f = click.option("--connect-timeout", default=10.0, show_default=True, type=float, metavar="SECONDS",
+    f = click.option("--force", is_flag=True,
+                     help="Redo every output, also those the output folder's record says were made the same way "
+                          "(docs/batch.md), and allow an output that is one of the inputs.")(f)
+    f = click.option("--connect-timeout", default=5.0, show_default=True, type=float, metavar="SECONDS",
                      help="Give up reaching the --scheduler after this long.")(f)
     f = click.option("--scheduler", metavar="ADDRESS",
                      help="Run the batch on a Dask distributed cluster, e.g. tcp://host:8786.")(f)
@@ -188,7 +190,7 @@ def run_batch(inputs, outdir, fmt, job, spec, workers, scheduler, connect_timeou
 
     from keyfill.io.batch import plan, run
 
-    items = plan(inputs, outdir, fmt)
+    items = plan(inputs, outdir, fmt, force)
     if check is not None:
         check()
     module, attr = job.split(":")

@@ -78,9 +78,13 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     the suffix). A learned method loads its model once per process and
     completes up to --batch-size files in one batch; --workers N spreads the
     batches over local processes and --scheduler over a Dask cluster (the
-    outputs are the same bytes either way). Outputs newer than their input
-    are skipped, so an interrupted batch resumes (--force redoes them). A
-    bad input is reported with its reason and the others go on; the exit
+    outputs are the same bytes either way). OUTDIR/.keyfill-outputs.json
+    records how each output was made (the input's content, method, model,
+    keys, seed and options; docs/batch.md): a re-run skips only outputs made
+    the same way and redoes the others (--json counts them as redone), so an
+    interrupted batch resumes and a changed option leaves nothing stale;
+    --force redoes all. No output may be one of the inputs (through links
+    too) unless --force. A bad input is reported with its reason and the others go on; the exit
     code is then 1, and --json lists every input's outcome.
 
     Partial keys give only some joints (--key-joints), only positions
@@ -144,6 +148,10 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     if len(inputs) != 1:
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
+    from keyfill.files import refuse_overwriting_input
+
+    dna_files = [] if dna is None else [dna, dna.rpartition(":")[0]]  # FILE or FILE:FRAMES
+    refuse_overwriting_input(dst, [src, *dna_files], force)
     motion = io.load(src, input_format(src, in_fmt))
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)

@@ -46,8 +46,9 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
 
     Many files: `keyfill convert SRC... -o OUTDIR/ --format FMT` converts
     every SRC (files, folders recursively, globs) to OUTDIR with the same
-    relative names, skips outputs newer than their input (--force redoes
-    them), reports a bad input on its own line and goes on (exit code 1),
+    relative names, skips only outputs its record says were made the same
+    way (from the same input bytes; docs/batch.md) and redoes the others
+    (--force redoes all), reports a bad input on its own line and goes on (exit code 1),
     and runs on --workers local processes or a Dask --scheduler.
 
     \b
@@ -73,6 +74,9 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
     if len(paths) != 2:
         raise click.UsageError(f"got {len(paths)} paths: give SRC DST, or SRC... -o OUTDIR/")
     src, dst = paths
+    from keyfill.files import refuse_overwriting_input
+
+    refuse_overwriting_input(dst, [src], force)
 
     motion = io.load(src, input_format(src, in_fmt))
     if curves:

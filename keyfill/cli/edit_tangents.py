@@ -40,6 +40,7 @@ def output_options(f):
         is_flag=True,
         help="Keep the closest result of an edit that cannot reach its target instead of failing.",
     )(f)
+    f = click.option("--force", is_flag=True, help="Allow -o to be CURVES itself (overwrite the input).")(f)
     f = click.option(
         "--solver",
         default="daqp",
@@ -57,8 +58,11 @@ def output_options(f):
     )(f)
 
 
-def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, frame=None) -> None:
+def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, frame=None, force=False) -> None:
     """Read the curves, apply the edit file (``mode`` "tangents" or "pose"), write and report."""
+    from keyfill.files import refuse_overwriting_input
+
+    refuse_overwriting_input(dst, [curves_path, edit_path], force)
     from keyfill.edit import edits, solve
     from keyfill.edit.qp import check_solver
     from keyfill.errors import InfeasibleError
@@ -99,7 +103,7 @@ def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, f
     help="Edit file (TOML): points to move, pins, contacts, limits, stiffness, timing edits.",
 )
 @output_options
-def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
+def edit_tangents(curves_path, edit_path, dst, force, solver, best_effort, as_json):
     """Move points of the character between keys by changing only curve tangents.
 
     CURVES is a keyfill curves file (make one with `keyfill convert dense.bvh
@@ -115,4 +119,4 @@ def edit_tangents(curves_path, edit_path, dst, solver, best_effort, as_json):
       keyfill edit-tangents walk.usda --edit reach.toml -o walk_edited.usda
       keyfill edit-tangents walk.usda --edit reach.toml -o walk_edited.bvh --json
     """
-    run_edits("tangents", curves_path, edit_path, dst, solver, best_effort, as_json)
+    run_edits("tangents", curves_path, edit_path, dst, solver, best_effort, as_json, force=force)

@@ -20,7 +20,7 @@ from keyfill.cli.edit_tangents import output_options, run_edits
     "--frame", type=float, metavar="F", help="The key to change, for edits that name no frame (must be a key)."
 )
 @output_options
-def pose(curves_path, edit_path, frame, dst, solver, best_effort, as_json):
+def pose(curves_path, edit_path, frame, dst, force, solver, best_effort, as_json):
     """Change the key pose at frame F so that points reach their targets.
 
     The static case of tangent-space editing (Eq. 13 of Ciccone et al.
@@ -34,4 +34,4 @@ def pose(curves_path, edit_path, frame, dst, solver, best_effort, as_json):
     Examples:
       keyfill pose walk.usda --edit plant_foot.toml --frame 20 -o walk_planted.usda
     """
-    run_edits("pose", curves_path, edit_path, dst, solver, best_effort, as_json, frame=frame)
+    run_edits("pose", curves_path, edit_path, dst, solver, best_effort, as_json, frame=frame, force=force)

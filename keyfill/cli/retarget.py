@@ -49,8 +49,9 @@ def retarget(inputs, rig, dst, rig_map, to_rig_map, fmt, in_fmt, workers, schedu
 
     Many files: 'keyfill retarget IN... --to RIG -o OUTDIR/' works like
     'keyfill convert': inputs are files, folders and globs, each output gets
-    the input's relative name (--format sets the suffix), outputs newer than
-    their input are skipped (--force redoes them), a bad input is reported
+    the input's relative name (--format sets the suffix), outputs the
+    folder's record says were made the same way are skipped and the others
+    redone (docs/batch.md; --force redoes all), a bad input is reported
     on its own line and the others go on (exit code 1), and --workers or
     --scheduler spread the work.
 
@@ -86,6 +87,9 @@ def retarget(inputs, rig, dst, rig_map, to_rig_map, fmt, in_fmt, workers, schedu
     if len(inputs) != 1:
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
+    from keyfill.files import refuse_overwriting_input
+
+    refuse_overwriting_input(dst, [src, rig], force)
     report = retarget_file(src, rig, dst, rig_map, to_rig_map, input_format(src, in_fmt), output_format(dst, fmt))
     if as_json:
         emit_json(report)

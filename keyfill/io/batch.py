@@ -13,16 +13,33 @@ together (a learned method loads its model once per process and completes
 a chunk as one batch). Chunks are cut from the whole sorted input list,
 whatever is already done, so a file is always computed with the same
 neighbours: the outputs are the same bytes in one run, a resumed run, with any
-number of workers or on a cluster. Outputs that exist and are newer than their
-input are skipped (``force`` redoes them); a chunk with nothing left to do is
-not sent. Each item's outcome is a dict: ``input``, ``output``, ``status``
-(``done``, ``skipped``, ``failed``), ``error`` for a failure (and ``params``, the
-parameters its message names), and what the job reports. One failing input does not stop the others.
+number of workers or on a cluster. A chunk with nothing left to do is not sent.
+
+**How each output was made** is kept in the output folder's record,
+``OUTDIR/.keyfill-outputs.json`` (:class:`Record`, docs/batch.md): per output,
+the SHA-256 of its input's bytes, the digest of the *recipe* (everything that
+shapes the result: command, method, the model's identity, keys, seed, format,
+options, keyfill's version; the recipes themselves are kept too, so a re-run
+can say which option changed) and the output's size and mtime when it was
+written. A re-run skips an output only when all of these are unchanged; it
+redoes one whose record differs or is missing (an output an interrupted run
+wrote but did not record yet), and ``force`` redoes all. The record is
+rewritten atomically as chunks complete, so an interrupted run keeps what it
+finished. A record keyfill cannot read is a :class:`UsageError` naming it
+(``force`` starts a new one).
+
+Each item's outcome is a dict: ``input``, ``output``, ``status`` (``done``: a
+new output; ``redone``: an existing output replaced, with ``stale``, the
+reasons; ``skipped``; ``failed``), ``error`` for a failure (and ``params``, the
+parameters its message names), and what the job reports. One failing input does
+not stop the others.
 """
 
 from __future__ import annotations
 
 import glob
+import hashlib
+import json
 import os
 import time
 from collections.abc import Callable
@@ -46,6 +63,8 @@ class Item:
     dst: str
     #: do it even if the output is up to date (set by :func:`run` for the chunks it sends)
     write: bool = True
+    #: the output folder whose record (:class:`Record`) keeps how ``dst`` was made; None: not recorded
+    root: str | None = None
 
 
 def is_batch(inputs, output: str | None) -> bool:
@@ -96,7 +115,7 @@ def _prefix(parts):
     return out
 
 
-def plan(inputs, outdir: str | os.PathLike, format: str | None = None) -> list[Item]:
+def plan(inputs, outdir: str | os.PathLike, format: str | None = None, force: bool = False) -> list[Item]:
     """The items of a batch, sorted by input; refuses what cannot work before any work is done.
 
     Args:
@@ -104,8 +123,9 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None) -> list[I
         outdir: the output folder (created later if missing).
         format: output format (a name of :data:`keyfill.io.FORMATS`): the outputs' suffix; None keeps the
             input's.
+        force: allow an output that is one of the inputs (the same file, through links too); refused otherwise.
 
-    Errors name the parameters ``outdir`` and ``format`` (in ``params``).
+    Errors name the parameters ``outdir``, ``format`` and ``force`` (in ``params``).
     """
     out = Path(outdir)
     if out.exists() and not out.is_dir():
@@ -124,8 +144,6 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None) -> list[I
             if dst.suffix.lower() not in MOTION_SUFFIXES:
                 raise UsageError(f"{src}: unknown file type {src.suffix or '(no suffix)'!r}; give format",
                                  params="format")
-            if src.resolve() == dst.resolve():
-                raise UsageError(f"{src}: would be overwritten by its own output; choose another output folder")
             key = dst.resolve()
             if key in seen:
                 if seen[key].resolve() == src.resolve():
@@ -133,18 +151,174 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None) -> list[I
                 raise UsageError(f"{seen[key]} and {src} would both be written to {dst}; "
                                  "rename one, or complete them into different folders")
             seen[key] = src
-            items.append(Item(str(src), str(dst)))
+            items.append(Item(str(src), str(dst), root=str(out)))
     if not items:
         raise UsageError("no input files")
+    if not force:
+        refuse_inputs_as_outputs(items)
     return sorted(items, key=lambda i: i.src)
 
 
-def up_to_date(item: Item) -> bool:
-    """The output exists and is newer than its input."""
+def _file_id(path: str | os.PathLike) -> tuple[int, int] | None:
     try:
-        return Path(item.dst).stat().st_mtime_ns > Path(item.src).stat().st_mtime_ns
+        st = os.stat(path)
     except OSError:
-        return False
+        return None
+    return st.st_dev, st.st_ino
+
+
+def refuse_inputs_as_outputs(items: list[Item]) -> None:
+    """A :class:`UsageError` (exit 2) when an item's output is the file of one of the inputs: its own input or
+    another's, by name or through a symbolic or hard link."""
+    inputs = {}
+    for it in items:
+        fid = _file_id(it.src)
+        if fid is not None:
+            inputs.setdefault(fid, it.src)
+    for it in items:
+        fid = _file_id(it.dst)
+        if fid is not None and fid in inputs:
+            raise UsageError(f"{it.dst}: the output of {it.src} is the input {inputs[fid]}; writing it would "
+                             "overwrite that input: choose another output folder, or give force to overwrite it",
+                             params="force")
+
+
+# --- the record of how outputs were made -------------------------------------------------------------
+
+#: the record's file name in an output folder
+RECORD = ".keyfill-outputs.json"
+RECORD_FORMAT = "keyfill-outputs"
+RECORD_VERSION = 1
+
+#: (real path, size, mtime_ns) -> SHA-256: a file is read once per process while it is unchanged
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
+def file_sha256(path: str | os.PathLike) -> str | None:
+    """SHA-256 (hex) of the bytes of ``path``, or None when it cannot be read."""
+    try:
+        real = os.path.realpath(path)
+        st = os.stat(real)
+        key = (real, st.st_size, st.st_mtime_ns)
+        if key not in _DIGESTS:
+            h = hashlib.sha256()
+            with open(real, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+            _DIGESTS[key] = h.hexdigest()
+        return _DIGESTS[key]
+    except OSError:
+        return None
+
+
+def recipe_digest(recipe: dict) -> str:
+    """The digest of a recipe (its canonical JSON); equal recipes, equal digests."""
+    text = json.dumps(recipe, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _output_stamp(path: str) -> list[int] | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return [st.st_size, st.st_mtime_ns]
+
+
+class Record:
+    """How the outputs of one output folder were made: ``OUTDIR/.keyfill-outputs.json``.
+
+    ``{"format": "keyfill-outputs", "version": 1, "recipes": {digest: recipe}, "outputs": {name: entry}}``
+    where ``name`` is the output's path relative to the folder (``/``-separated) and ``entry`` is
+    ``{"input": path, "input_sha256": hex, "recipe": digest, "output": [size, mtime_ns]}``.
+    Entries of outputs a run does not touch are kept.
+    """
+
+    def __init__(self, folder: str | os.PathLike, recipes: dict | None = None, outputs: dict | None = None):
+        self.folder = Path(folder)
+        self.path = self.folder / RECORD
+        self.recipes: dict[str, dict] = recipes or {}
+        self.outputs: dict[str, dict] = outputs or {}
+
+    @classmethod
+    def read(cls, folder: str | os.PathLike, force: bool = False) -> Record:
+        """The record of ``folder`` (empty when it has none); one that cannot be read is a :class:`UsageError`
+        naming it, unless ``force`` (then a new record replaces it)."""
+        path = Path(folder) / RECORD
+        try:
+            text = path.read_bytes()
+        except FileNotFoundError:
+            return cls(folder)
+        except OSError as e:
+            if force:
+                return cls(folder)
+            raise UsageError(f"{path}: cannot read the record of this output folder ({e.strerror}); "
+                             "fix it, or give force to redo every output and write a new record",
+                             params="force") from None
+        try:
+            data = json.loads(text)
+            if not isinstance(data, dict) or data.get("format") != RECORD_FORMAT:
+                raise ValueError("not a keyfill output record")
+            if data.get("version") != RECORD_VERSION:
+                raise ValueError(f"a record of version {data.get('version')!r}, not {RECORD_VERSION}")
+            recipes, outputs = data.get("recipes"), data.get("outputs")
+            if not isinstance(recipes, dict) or not all(isinstance(r, dict) for r in recipes.values()):
+                raise ValueError("its recipes are not a JSON object of objects")
+            if not isinstance(outputs, dict) or not all(
+                    isinstance(e, dict) and isinstance(e.get("input_sha256"), str) and isinstance(e.get("recipe"), str)
+                    for e in outputs.values()):
+                raise ValueError("its outputs are not entries with input_sha256 and recipe")
+        except (ValueError, UnicodeDecodeError) as e:  # json.JSONDecodeError is a ValueError
+            if force:
+                return cls(folder)
+            reason = f"not valid JSON at line {e.lineno}" if isinstance(e, json.JSONDecodeError) else str(e)
+            raise UsageError(f"{path}: damaged or foreign record of this output folder ({reason}); "
+                             "remove it, or give force to redo every output and write a new record",
+                             params="force") from None
+        return cls(folder, recipes, outputs)
+
+    def name(self, item: Item) -> str:
+        return Path(os.path.relpath(item.dst, self.folder)).as_posix()
+
+    def stale(self, item: Item, input_sha: str | None, digest: str, recipe: dict) -> list[str]:
+        """Why the existing output of ``item`` is not known to be made from this input by ``recipe``: an empty
+        list when it is."""
+        entry = self.outputs.get(self.name(item))
+        if entry is None:
+            return ["no record of how the output was made"]
+        why = []
+        if input_sha is None or entry.get("input_sha256") != input_sha:
+            why.append("input changed")
+        if entry.get("recipe") != digest:
+            old = self.recipes.get(entry.get("recipe"), {})
+            changed = sorted(k for k in set(old) | set(recipe) if old.get(k) != recipe.get(k))
+            why.append("made with other " + (", ".join(changed) if changed and old else "options"))
+        if entry.get("output") != _output_stamp(item.dst):
+            why.append("output changed since it was written")
+        return why
+
+    def put(self, item: Item, input_sha: str | None, digest: str, recipe: dict) -> None:
+        stamp = _output_stamp(item.dst)
+        if input_sha is None or stamp is None:
+            self.outputs.pop(self.name(item), None)
+            return
+        self.recipes[digest] = recipe
+        self.outputs[self.name(item)] = {"input": item.src, "input_sha256": input_sha, "recipe": digest,
+                                         "output": stamp}
+
+    def drop(self, item: Item) -> None:
+        self.outputs.pop(self.name(item), None)
+
+    def write(self) -> None:
+        """Replace the record file atomically (the recipes no entry uses are left out)."""
+        from keyfill.files import atomic_output
+
+        used = {e["recipe"] for e in self.outputs.values()}
+        data = {"format": RECORD_FORMAT, "version": RECORD_VERSION,
+                "recipes": {k: v for k, v in self.recipes.items() if k in used}, "outputs": self.outputs}
+        self.folder.mkdir(parents=True, exist_ok=True)
+        with atomic_output(self.path) as tmp:
+            tmp.write_text(json.dumps(data, sort_keys=True, separators=(",", ":"), default=str) + "\n")
 
 
 @dataclass
@@ -164,14 +338,18 @@ class Summary:
 
     def to_dict(self) -> dict:
         return {"output": self.output, "inputs": len(self.files), "done": self.count("done"),
-                "skipped": self.count("skipped"), "failed": self.count("failed"), "seconds": self.seconds,
-                "files": self.files}
+                "redone": self.count("redone"), "skipped": self.count("skipped"), "failed": self.count("failed"),
+                "seconds": self.seconds, "files": self.files}
 
     def line(self, verb: str) -> str:
         """A one-line human summary."""
-        parts = [f"{verb} {self.count('done')} of {len(self.files)} files into {self.output} in {self.seconds:.1f} s"]
+        written = self.count("done") + self.count("redone")
+        parts = [f"{verb} {written} of {len(self.files)} files into {self.output} in {self.seconds:.1f} s"]
+        if self.count("redone"):
+            reasons = sorted({r for f in self.files if f["status"] == "redone" for r in f.get("stale", ())})
+            parts.append(f"{self.count('redone')} of them redone ({'; '.join(reasons)})")
         if self.count("skipped"):
-            parts.append(f"skipped {self.count('skipped')} whose output is newer than the input (--force redoes them)")
+            parts.append(f"skipped {self.count('skipped')} made the same way before (--force redoes them)")
         if self.count("failed"):
             parts.append(f"{self.count('failed')} failed")
         return "; ".join(parts)
@@ -215,13 +393,20 @@ def failure(item: Item, error: BaseException) -> dict:
 
 
 def run(items: list[Item], fn: Callable, spec, workers: int | None = None, scheduler: str | None = None,
-        force: bool = False, chunk: int = CHUNK, connect_timeout: float = 10.0,
-        on_chunk: Callable[[list[dict]], None] | None = None) -> Summary:
+        force: bool = False, chunk: int = CHUNK, connect_timeout: float = 5.0,
+        on_chunk: Callable[[list[dict]], None] | None = None, recipe: dict | None = None) -> Summary:
     """Do ``items`` with the job function ``fn(chunk, spec) -> outcomes``; see the module docstring.
+
+    ``recipe``: what shapes the outputs (JSON-ready), kept in the output folder's record; None takes
+    ``spec.recipe()`` where the spec has one, else the job's name and ``repr(spec)``. Items without a ``root``
+    (not planned by :func:`plan`) are not recorded and always done.
 
     The executor is started only when there is work; a Dask scheduler that
     cannot be reached is one :class:`KeyfillError` before any file is written.
     """
+    import dataclasses
+
+    from keyfill import __version__
     from keyfill.parallel import check_options
     from keyfill.parallel import executor as make_executor
 
@@ -229,20 +414,56 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
     if chunk < 1:
         raise UsageError(f"chunk must be at least 1, got {chunk}", params="chunk")
     start = time.perf_counter()
+    if recipe is None:
+        recipe = (spec.recipe() if hasattr(spec, "recipe")
+                  else {"job": f"{fn.__module__}:{fn.__qualname__}", "spec": repr(spec)})
+    recipe = {"keyfill": __version__, **recipe}
+    digest = recipe_digest(recipe)
+    records = {root: Record.read(root, force) for root in sorted({it.root for it in items if it.root is not None})}
     summary = Summary(output="")
     outcomes: dict[str, dict] = {}
+    shas: dict[str, str | None] = {}
+    why: dict[str, list[str]] = {}  # input -> why its existing output is replaced
     jobs = []
     for i in range(0, len(items), chunk):
         part = items[i: i + chunk]
-        todo = [force or not up_to_date(it) for it in part]
-        for it, t in zip(part, todo):
-            if not t:
-                outcomes[it.src] = {"input": it.src, "output": it.dst, "status": "skipped"}
+        todo = []
+        for it in part:
+            record = records.get(it.root)
+            shas[it.src] = sha = file_sha256(it.src) if record is not None else None
+            reasons = []
+            if _output_stamp(it.dst) is not None:
+                if force:
+                    reasons = ["force"]
+                elif record is None:
+                    reasons = ["not recorded"]
+                else:
+                    reasons = record.stale(it, sha, digest, recipe)
+                if not reasons:
+                    outcomes[it.src] = {"input": it.src, "output": it.dst, "status": "skipped"}
+                    todo.append(False)
+                    continue
+                why[it.src] = reasons
+            todo.append(True)
         if any(todo):
-            jobs.append([Item(it.src, it.dst, t) for it, t in zip(part, todo)])
+            jobs.append([dataclasses.replace(it, write=t) for it, t in zip(part, todo)])
     skipped = [outcomes[it.src] for it in items if it.src in outcomes]
     if skipped and on_chunk is not None:
         on_chunk(skipped)
+    dirty: set[str] = set()
+    pace = {"last": time.perf_counter(), "cost": 0.0}
+
+    def save_records(always: bool = False) -> None:
+        # rewritten as chunks complete, but never more than a tenth of the time on it
+        now = time.perf_counter()
+        if not dirty or (not always and now - pace["last"] < 10 * pace["cost"]):
+            return
+        for root in sorted(dirty):
+            records[root].write()
+        dirty.clear()
+        pace["last"] = time.perf_counter()
+        pace["cost"] = pace["last"] - now
+
     if jobs:
         # Reach the cluster before touching the output folder: an unreachable scheduler leaves nothing behind.
         executor, window = make_executor(workers if workers is not None else (1 if len(jobs) == 1 else None),
@@ -263,14 +484,30 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
                         raise
                     except Exception as e:  # noqa: BLE001 (a worker that died: its inputs failed, the others go on)
                         results = [failure(it, e) for it in job]
+                    reported = []
                     for it, res in zip(job, results):
-                        if it.write:
-                            outcomes[it.src] = res
+                        if not it.write:
+                            continue
+                        record = records.get(it.root)
+                        if res.get("status") == "done":
+                            if it.src in why:
+                                res = {**res, "status": "redone", "stale": why[it.src]}
+                            if record is not None:
+                                record.put(it, shas[it.src], digest, recipe)
+                        elif record is not None:
+                            record.drop(it)
+                        if record is not None:
+                            dirty.add(it.root)
+                        outcomes[it.src] = res
+                        reported.append(res)
+                    save_records()
                     if on_chunk is not None:
-                        on_chunk([r for it, r in zip(job, results) if it.write])
+                        on_chunk(reported)
         except BaseException:
             executor.close(cancel=True)
             raise
+        finally:
+            save_records(always=True)  # what is done stays done, also when the run is interrupted
         executor.close()
     summary.files = [outcomes[it.src] for it in items]
     summary.seconds = time.perf_counter() - start

@@ -40,6 +40,14 @@ class RetargetSpec:
     rig_map: str | None = None
     to_rig_map: str | None = None
 
+    def recipe(self) -> dict:
+        """What shapes every output, for the output folder's record: the rig and rig maps by their SHA-256."""
+        from keyfill.io.batch import file_sha256
+
+        return {"command": "retarget", "rig": file_sha256(self.rig),
+                "rig_map": None if self.rig_map is None else file_sha256(self.rig_map),
+                "to_rig_map": None if self.to_rig_map is None else file_sha256(self.to_rig_map)}
+
 
 def rig_of(skeleton: Skeleton, rig_map: str | None, label: str, param: str = "rig_map") -> Rig:
     """The :class:`~keyfill.characters.retarget.Rig` of ``skeleton`` with the rig map file ``rig_map`` (or

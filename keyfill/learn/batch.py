@@ -10,7 +10,9 @@ are :mod:`keyfill.io.batch`'s.
 from __future__ import annotations
 
 import contextlib
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 from keyfill.errors import FormatError, KeyfillError
 from keyfill.io.batch import Item, failure
@@ -26,6 +28,52 @@ class CompleteSpec:
     keys_text: str | None = None
     key_every: int | None = None
     fmt: str | None = None
+
+    def recipe(self) -> dict:
+        """What shapes every output of the batch, for the output folder's record (:mod:`keyfill.io.batch`): the
+        method, the model's identity (the SHA-256 of its config, weights and graph, not its path), the runtime
+        that will run it, the keys and every option; files the options name (rig map, Motion DNA) by their
+        SHA-256."""
+        from keyfill.io.batch import file_sha256
+        from keyfill.learn.registry import get
+
+        m, o = get(self.method), self.options
+        recipe = {"command": "complete", "method": m.name, "keys": self.keys_text, "key_every": self.key_every,
+                  "seed": o.seed, "exact_keys": o.exact_keys, "feet": o.feet, "ground": o.ground,
+                  "rig_map": None if o.rig_map is None else file_sha256(o.rig_map), "dna_count": o.dna_count,
+                  "format": self.fmt}
+        if o.dna is not None:
+            path, frames = o.dna, None
+            if not os.path.exists(path) and ":" in path:
+                path, _, frames = path.rpartition(":")
+            recipe["dna"] = {"sha256": file_sha256(path), "frames": frames}
+        if m.learned:
+            recipe.update(model_identity(m, o.model, o.runtime), device=o.device)
+        return recipe
+
+
+def model_identity(method, model: str | None, runtime: str = "auto") -> dict:
+    """``{"model": {...}, "runtime": ...}``: the content of the model a learned ``method`` (a registry entry)
+    completes with (``model``: a folder, a graph file or None for the shipped one) and the runtime that runs
+    it; reads no weights into a network."""
+    from keyfill.io.batch import file_sha256
+    from keyfill.learn import onnx
+
+    if onnx.is_graph(model):
+        return {"model": {"graph": file_sha256(model)}, "runtime": "onnx"}
+    folder = Path(model) if model is not None else method.default_model()
+    if folder is None:
+        return {"model": None, "runtime": runtime}
+    if folder.is_file():
+        folder = folder.parent
+    from keyfill.learn.modelfile import CONFIG, WEIGHTS
+
+    graph = folder / onnx.GRAPH
+    ident = {"config": file_sha256(folder / CONFIG), "weights": file_sha256(folder / WEIGHTS),
+             "graph": file_sha256(graph) if graph.is_file() else None}
+    if runtime == "auto":
+        runtime = "onnx" if graph.is_file() and method.onnx is not None and onnx.available() else "torch"
+    return {"model": ident, "runtime": runtime}
 
 
 @contextlib.contextmanager
@@ -85,7 +133,7 @@ def complete_chunk(chunk: list[Item], spec: CompleteSpec) -> list[dict | None]:
         if not it.write:
             continue
         try:
-            io.save(result.motion, it.dst, spec.fmt)
+            io.save(result.motion, it.dst, spec.fmt, source=it.src)  # as a single completion writes it
         except (KeyfillError, OSError) as e:
             outcomes[i] = failure(it, e if isinstance(e, KeyfillError) else FormatError(str(e)))
             continue

@@ -147,6 +147,26 @@ def test_convert_records_its_outputs_too(clips, tmp_path, capsys):
     assert counts(summary) == (0, 1, 2, 0) and summary["files"][0]["stale"] == ["input changed"]
 
 
+def test_a_gltf_input_is_its_json_and_its_buffer(tmp_path, capsys):
+    src = tmp_path / "in"
+    src.mkdir()
+    motion = io.load(MIXAMO)
+    io.save(motion, src / "walk.gltf")
+    rot = motion.rotations.copy()
+    rot[:, 1] = rot[::-1, 1]
+    io.save(motion.replace(rotations=rot), tmp_path / "other.gltf")
+    assert (src / "walk.bin").is_file() and (tmp_path / "other.bin").stat().st_size == (src / "walk.bin").stat().st_size
+    out = tmp_path / "out"
+    base = ("convert", src, "-o", out, "--format", "bvh")
+    assert counts(summary_of(capsys, *base)) == (1, 0, 0, 0)
+    gltf = (src / "walk.gltf").read_bytes()
+    shutil.copy(tmp_path / "other.bin", src / "walk.bin")  # the same .gltf, other buffer bytes
+    assert (src / "walk.gltf").read_bytes() == gltf
+    summary = summary_of(capsys, *base)
+    assert counts(summary) == (0, 1, 0, 0) and summary["files"][0]["stale"] == ["input changed"]
+    assert np.abs(io.load(out / "walk.bvh").rotations[:, 1] - rot[:, 1]).max() < 1e-4
+
+
 def test_an_interrupted_run_keeps_the_record_of_what_it_finished(clips, tmp_path):
     from keyfill.learn.batch import CompleteSpec, complete_chunk
     from keyfill.learn.completion import CompleteOptions

@@ -211,6 +211,28 @@ def file_sha256(path: str | os.PathLike) -> str | None:
         return None
 
 
+def input_sha256(path: str | os.PathLike) -> str | None:
+    """SHA-256 of the bytes that make up the motion file ``path``: the file, and for a ``.gltf`` also the files
+    its buffers and images name (the ``.bin`` beside it); None when the file cannot be read."""
+    digest = file_sha256(path)
+    if digest is None or Path(path).suffix.lower() != ".gltf":
+        return digest
+    try:
+        doc = json.loads(Path(path).read_bytes())
+    except (OSError, ValueError):
+        return digest  # the reader reports it
+    from urllib.parse import unquote
+
+    parts = [digest]
+    for key in ("buffers", "images"):
+        entries = doc.get(key) if isinstance(doc, dict) else None
+        for entry in entries if isinstance(entries, list) else ():
+            uri = entry.get("uri") if isinstance(entry, dict) else None
+            if isinstance(uri, str) and not uri.startswith("data:"):
+                parts.append(f"{uri}\0{file_sha256(Path(path).parent / unquote(uri))}")
+    return digest if len(parts) == 1 else hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
 def recipe_digest(recipe: dict) -> str:
     """The digest of a recipe (its canonical JSON); equal recipes, equal digests."""
     text = json.dumps(recipe, sort_keys=True, separators=(",", ":"), default=str)
@@ -230,7 +252,8 @@ class Record:
 
     ``{"format": "keyfill-outputs", "version": 1, "recipes": {digest: recipe}, "outputs": {name: entry}}``
     where ``name`` is the output's path relative to the folder (``/``-separated) and ``entry`` is
-    ``{"input": path, "input_sha256": hex, "recipe": digest, "output": [size, mtime_ns]}``.
+    ``{"input": path, "input_sha256": hex, "recipe": digest, "output": [size, mtime_ns]}``
+    (``input_sha256``: :func:`input_sha256`).
     Entries of outputs a run does not touch are kept.
     """
 
@@ -430,7 +453,7 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
         todo = []
         for it in part:
             record = records.get(it.root)
-            shas[it.src] = sha = file_sha256(it.src) if record is not None else None
+            shas[it.src] = sha = input_sha256(it.src) if record is not None else None
             reasons = []
             if _output_stamp(it.dst) is not None:
                 if force:

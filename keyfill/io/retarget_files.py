@@ -42,9 +42,9 @@ class RetargetSpec:
 
     def recipe(self) -> dict:
         """What shapes every output, for the output folder's record: the rig and rig maps by their SHA-256."""
-        from keyfill.io.batch import file_sha256
+        from keyfill.io.batch import file_sha256, input_sha256
 
-        return {"command": "retarget", "rig": file_sha256(self.rig),
+        return {"command": "retarget", "rig": input_sha256(self.rig),
                 "rig_map": None if self.rig_map is None else file_sha256(self.rig_map),
                 "to_rig_map": None if self.to_rig_map is None else file_sha256(self.to_rig_map)}
 

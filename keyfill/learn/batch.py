@@ -34,7 +34,7 @@ class CompleteSpec:
         method, the model's identity (the SHA-256 of its config, weights and graph, not its path), the runtime
         that will run it, the keys and every option; files the options name (rig map, Motion DNA) by their
         SHA-256."""
-        from keyfill.io.batch import file_sha256
+        from keyfill.io.batch import file_sha256, input_sha256
         from keyfill.learn.registry import get
 
         m, o = get(self.method), self.options
@@ -46,7 +46,7 @@ class CompleteSpec:
             path, frames = o.dna, None
             if not os.path.exists(path) and ":" in path:
                 path, _, frames = path.rpartition(":")
-            recipe["dna"] = {"sha256": file_sha256(path), "frames": frames}
+            recipe["dna"] = {"sha256": input_sha256(path), "frames": frames}
         if m.learned:
             recipe.update(model_identity(m, o.model, o.runtime), device=o.device)
         return recipe

@@ -22,6 +22,10 @@ import click
 from keyfill import __version__
 from keyfill.errors import KeyfillError
 
+#: modules of the optional extras (pyproject.toml) -> the extra that installs them
+EXTRAS = {"torch": "train", "pybullet": "sim", "dask": "dask", "distributed": "dask", "onnx": "onnx",
+          "onnxscript": "onnx"}
+
 #: subcommand -> "module:attribute". Modules are imported only when used, so
 #: ``keyfill info`` never pays for torch or pybullet.
 COMMANDS = {
@@ -188,6 +192,15 @@ def _main(args: list[str], debug: bool) -> int:
         _error("interrupted")
         return 130
     except BrokenPipeError:
+        return 1
+    except ModuleNotFoundError as e:  # an extra the base install leaves out (pyproject.toml)
+        if debug:
+            raise
+        extra = EXTRAS.get((e.name or "").split(".")[0])
+        if extra is None:
+            _error(f"internal error: {type(e).__name__}: {e} (run with --debug for the traceback)")
+            return 1
+        _error(f"this needs {e.name.split('.')[0]}, which the base install leaves out: pip install 'keyfill[{extra}]'")
         return 1
     except Exception as e:  # a bug: say so in one line unless --debug
         if debug:

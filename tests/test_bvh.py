@@ -237,3 +237,62 @@ def test_line_template_prints_every_value_as_percent_12g(columns, frames, seed):
     got = [line % tuple(row) for row in values[:, varying].tolist()]
     want = [" ".join(bvh.NUMBER_FORMAT % v for v in row) for row in values.tolist()]
     assert got == want
+
+
+# --- values as they came (issue 32) -------------------------------------------------------------------------------
+
+
+def _completed(src: Path, tmp_path: Path, keys: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The channel values of ``src`` and of its cubic completion from ``keys`` written as BVH by io.save."""
+    from keyfill import io
+    from keyfill.learn.registry import complete
+    from keyfill.motion import Keys
+
+    out = tmp_path / f"{src.stem}_completed.bvh"
+    io.save(complete(io.load(src), Keys(keys), "cubic").motion, out, source=src)
+    return bvh.parse_values(src.read_bytes())[2], bvh.parse_values(out.read_bytes())[2]
+
+
+@pytest.mark.parametrize("path", LOCAL_FIXTURES + shared_fixtures(), ids=lambda p: p.name)
+def test_key_frames_of_a_completed_bvh_carry_the_inputs_own_channel_values(path, tmp_path):
+    F = bvh.read(path).num_frames
+    if F < 3:
+        pytest.skip("fewer than 3 frames")
+    keys = [0, F // 2, F - 1]
+    given, written = _completed(path, tmp_path, keys)
+    assert np.abs(written[keys] - given[keys]).max(initial=0.0) <= 1e-6  # degrees (and file units)
+
+
+def test_the_frames_between_keys_are_unwrapped_towards_their_key(tmp_path):
+    """edge_layouts_crlf.bvh turns a joint through +-180 degrees: its Euler channels written without the input
+    come back a whole turn away from the input's at a key; with it, the key's own numbers, for the same
+    rotations."""
+    from keyfill import io
+    from keyfill.learn.registry import complete
+    from keyfill.motion import Keys
+
+    src = DATA / "edge_layouts_crlf.bvh"
+    motion = io.load(src)
+    keys = [0, motion.num_frames // 2, motion.num_frames - 1]
+    filled = complete(motion, Keys(keys), "cubic").motion
+    given = bvh.parse_values(src.read_bytes())[2]
+    plain = bvh.parse_values(bvh.dumps(filled))[2]
+    assert np.abs(plain[keys] - given[keys]).max() == pytest.approx(360.0)  # what the writer alone gives
+    _, written = _completed(src, tmp_path, keys)
+    assert np.abs(written[keys] - given[keys]).max() <= 1e-6
+    sk = filled.skeleton  # the same rotations either way (whole turns, or the other Euler solution at a key)
+    assert R.quat_angle(bvh.channels_to_pose(written, sk)[0], bvh.channels_to_pose(plain, sk)[0]).max() < 1e-9
+
+
+def test_a_template_of_another_layout_changes_nothing(tmp_path):
+    cmu, mixamo = DATA / "cmu_02_03_cgspeed_first4frames.bvh", DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
+    motion = bvh.read(cmu)
+    values = bvh.pose_to_channels(motion)
+    assert np.array_equal(bvh.follow_template(values, motion, mixamo), values)
+    assert np.array_equal(bvh.follow_template(values, motion, tmp_path / "missing.bvh"), values)
+
+
+def test_written_bvh_has_no_negative_zero_of_its_own():
+    motion = bvh.read(DATA / "edge_layouts_crlf.bvh")
+    tokens = bvh.dumps(motion).split()
+    assert "-0" not in tokens

@@ -38,9 +38,9 @@ def test_info_json(capsys):
     code, out, _err = run(capsys, "info", MIXAMO, "--json")
     assert code == 0
     d = json.loads(out)
-    assert d["frames"] == 69 and d["num_joints"] == 55 and d["num_channels"] == 168 and d["fps"] == 30
-    assert d["joints"][0]["name"] == "mixamorig:Hips" and d["joints"][0]["euler_order"] == "ZYX"
-    assert d["joints"][1]["parent"] == "mixamorig:Hips"
+    assert d["frames"] == 69 and d["joints"] == 55 and d["channels"] == 168 and d["fps"] == 30
+    assert d["hierarchy"][0]["name"] == "mixamorig:Hips" and d["hierarchy"][0]["euler_order"] == "ZYX"
+    assert d["hierarchy"][1]["parent"] == "mixamorig:Hips"
     assert d["keys"] is None
     lo, hi = np.array(d["bounding_box"]["min"]), np.array(d["bounding_box"]["max"])
     assert np.all(hi > lo)

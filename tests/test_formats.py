@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from io import BytesIO, TextIOWrapper
 from pathlib import Path
 
 import pytest
@@ -41,7 +42,7 @@ def test_the_formats_page_lists_the_table():
         assert (suffix, family, description.replace("`", "")) == (spec.suffixes[0], spec.family, spec.description)
 
 
-def test_library_errors_name_parameters_and_the_cli_its_flags(capsys, tmp_path):
+def test_library_errors_name_parameters_and_the_cli_its_flags(capsys, tmp_path, monkeypatch):
     with pytest.raises(UsageError, match="^chunk must be at least 1, got 0$") as e:
         batch.run([], None, None, chunk=0)
     assert e.value.params == ("chunk",)
@@ -49,8 +50,10 @@ def test_library_errors_name_parameters_and_the_cli_its_flags(capsys, tmp_path):
     assert code == 2 and err == "keyfill: error: --batch-size must be at least 1, got 0\n"
     with pytest.raises(UsageError, match=r"^writing '-' needs format \(bvh, usda, usdc, usd, glb or gltf\)$"):
         io.format_of("-")
+    monkeypatch.setattr("sys.stdin", TextIOWrapper(BytesIO(b"not a motion file")))
     code, _, err = run(capsys, "info", "-")
-    assert code == 2 and err == "keyfill: error: reading '-' needs --format (bvh, usda, usdc, usd, glb or gltf)\n"
+    assert code == 2 and err == ("keyfill: error: cannot tell the format of standard input from its first bytes; "
+                                 "give --in-format (bvh, usda, usdc, usd, glb or gltf)\n")
     (tmp_path / "notes.txt").write_text("x")
     with pytest.raises(UsageError, match="; give format$"):
         batch.plan([tmp_path / "notes.txt"], tmp_path / "o")

@@ -286,7 +286,7 @@ def test_several_skins_and_animations_read_the_first_and_say_so(capsys, tmp_path
     doc["animations"].append(dict(doc["animations"][0], name="Run"))
     path = write_glb(tmp_path / "two.glb", doc, binary)
     code, out, err = run(capsys, "info", path, "--json")
-    assert code == 0 and json.loads(out)["num_joints"] == 3
+    assert code == 0 and json.loads(out)["joints"] == 3
     notes = err.strip().splitlines()
     assert notes == [f"keyfill: note: {path}: 2 skins; reading the first ('Rig')",
                      f"keyfill: note: {path}: 2 animations; reading the first ('Walk')"]
@@ -306,8 +306,8 @@ def test_cli_convert_info_complete_on_glb(capsys, tmp_path):
     assert code == 0 and "wrote" in err
     code, out, _ = run(capsys, "info", glb_path, "--json")
     info = json.loads(out)
-    assert code == 0 and (info["frames"], info["fps"], info["num_joints"]) == (69, 30.0, 55)
-    assert info["meters_per_unit"] == 0.01 and info["joints"][0]["channels"][0] == "Xposition"
+    assert code == 0 and (info["frames"], info["fps"], info["joints"]) == (69, 30.0, 55)
+    assert info["meters_per_unit"] == 0.01 and info["hierarchy"][0]["channels"][0] == "Xposition"
     code, _, err = run(capsys, "complete", glb_path, "--key-every", "10", "-o", tmp_path / "filled.glb")
     assert code == 0, err
     filled, source = io.load(tmp_path / "filled.glb"), io.load(glb_path)

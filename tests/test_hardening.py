@@ -339,9 +339,14 @@ def test_bare_keyfill_prints_the_help_as_written(capsys):
 @pytest.mark.parametrize("command", [["convert", "-", "out.usda"], ["complete", "-", "-o", "out.usda", "--keys", "0,1"],
                                      ["plot", "-", "-o", "out.png"]])
 def test_reading_stdin_asks_for_in_format(capsys, monkeypatch, tmp_path, command):
+    """Standard input is recognised by its first bytes; what is no motion file asks for --in-format."""
+    from io import BytesIO, TextIOWrapper
+
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.stdin", TextIOWrapper(BytesIO(b"no motion here\n")))
     code, _, err = run(capsys, *command)
-    assert code == 2 and "reading '-' needs --in-format" in one_error_line(err)
+    assert code == 2 and "cannot tell the format of standard input" in one_error_line(err)
+    assert "give --in-format" in err
 
 
 def test_a_key_out_of_a_file_is_bad_data_not_bad_usage(capsys, tmp_path):

@@ -178,3 +178,34 @@ def test_not_a_usd_file(tmp_path):
     p.write_text("this is not usd\n")
     with pytest.raises(FormatError, match="not a readable USD file"):
         io.load(p)
+
+
+# --- values as they came (issue 32) -------------------------------------------------------------------------------
+
+
+def test_usd_round_trip_writes_the_decimals_that_went_in(tmp_path):
+    src = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
+    assert "-0.2399 " in src.read_text()
+    io.save(io.load(src), tmp_path / "walk.usda")
+    text = (tmp_path / "walk.usda").read_text()
+    tokens = text.replace(",", " ").replace("(", " ").replace(")", " ").replace("[", " ").replace("]", " ").split()
+    assert "-0" not in tokens
+    io.save(io.load(tmp_path / "walk.usda"), tmp_path / "back.bvh")
+    back = (tmp_path / "back.bvh").read_text()
+    assert "-0.2399 " in back and "-0.239899992943" not in back
+    assert "-0" not in back.split()
+    given, written = bvh.parse_values(src.read_bytes())[2], bvh.parse_values(back.encode())[2]
+    pos = [i for i, c in enumerate(c for chans in bvh.read(src).skeleton.channels for c in chans)
+           if c.endswith("position")]
+    assert np.array_equal(written[:, pos], given[:, pos])  # every translation: the input's own numbers
+
+
+def test_shortest_decimal_rounds_to_the_stored_float():
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.normal(0, 100, 2000), rng.normal(0, 1e-5, 500), [0.0, -0.0, 1e30, -2.5e-30],
+                        np.round(rng.normal(0, 100, 500), 4)]).astype(np.float32)
+    d = usd.shortest_decimal(x.astype(np.float64))
+    assert np.array_equal(d.astype(np.float32), x) and not np.signbit(d[x == 0]).any()
+    for a, b in zip(x.tolist(), d.tolist()):  # never longer than Python's shortest repr of the float32
+        assert len(repr(b).replace("e-0", "e-").lstrip("-")) <= len(np.format_float_positional(np.float32(a), unique=True, trim="-").lstrip("-")) + 6
+    assert usd.shortest_decimal(np.float32([-0.2399])).tolist() == [-0.2399]

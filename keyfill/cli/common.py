@@ -18,7 +18,8 @@ FORMAT_CHOICE = click.Choice(list(io.FORMATS), case_sensitive=False)
 
 
 #: library parameters whose flag is not ``--`` + the name with dashes
-FLAG_OF = {"learning_rate": "--lr", "chunk": "--batch-size", "outdir": "-o", "output": "-o", "keys_text": "--keys"}
+FLAG_OF = {"learning_rate": "--lr", "chunk": "--batch-size", "outdir": "-o", "output": "-o", "keys_text": "--keys",
+           "in_format": "--in-format"}
 
 
 def flag(param: str) -> str:
@@ -43,6 +44,40 @@ def verbosity(ctx: click.Context | None = None) -> int:
             return ctx.obj["verbosity"]
         ctx = ctx.parent
     return 0
+
+
+def _global_option(ctx, param, value):
+    """``-q``, ``-v`` and ``--debug`` after the subcommand: they add to those given before it."""
+    if value:
+        ctx.ensure_object(dict)
+        if param.name == "debug":
+            ctx.obj["debug"] = True
+        else:
+            ctx.obj["verbosity"] = ctx.obj.get("verbosity", 0) + (value if param.name == "verbose" else -value)
+    return value
+
+
+def with_global_options(command: click.Command) -> click.Command:
+    """``command`` (and, for a group, each subcommand it makes) accepting the group's ``-q``, ``-v`` and
+    ``--debug`` after its name too (``keyfill info walk.bvh -q``); hidden from its ``--help``."""
+    if getattr(command, "_global_options", False):
+        return command
+    taken = {o for p in command.params for o in getattr(p, "opts", ())}
+    for opts, name, count in ((("-q", "--quiet"), "quiet", True), (("-v", "--verbose"), "verbose", True),
+                              (("--debug",), "debug", False)):
+        if not taken & set(opts):
+            command.params.append(click.Option([*opts, name], count=count, is_flag=not count, hidden=True,
+                                               expose_value=False, callback=_global_option))
+    if isinstance(command, click.Group):
+        get = command.get_command
+
+        def get_command(ctx, name):
+            sub = get(ctx, name)
+            return None if sub is None else with_global_options(sub)
+
+        command.get_command = get_command
+    command._global_options = True
+    return command
 
 
 def progress(iterable=None, **kwargs):
@@ -74,6 +109,20 @@ def say(message: str, min_verbosity: int = 0) -> None:
     """A human-readable line on stderr (so stdout stays clean for data and JSON)."""
     if verbosity() >= min_verbosity:
         click.echo(message, err=True)
+
+
+def in_format_option(f):
+    """``--in-format``: the input's format, the same in every command that reads motion files."""
+    return click.option("--in-format", "in_fmt", type=FORMAT_CHOICE,
+                        help="Input format [default: from the suffix; for '-', from the first bytes].")(f)
+
+
+def meters_per_unit_option(f):
+    """``--meters-per-unit``: the units of an input whose format records none (BVH)."""
+    return click.option(
+        "--meters-per-unit", type=float, metavar="M",
+        help="The size of one unit of a BVH input in metres (BVH files do not say; without this keyfill assumes "
+             "centimetres, 0.01). Files that record their units (USD, glTF) keep their own.")(f)
 
 
 def keys_options(f):
@@ -134,9 +183,8 @@ def output_format(path: str, fmt: str | None) -> str | None:
 
 
 def input_format(path: str, fmt: str | None) -> str | None:
-    """``--in-format`` is required for ``-`` (stdin) and otherwise overrides the suffix."""
-    if path == "-" and fmt is None:
-        raise UsageError(f"reading '-' needs --in-format ({io.listing(io.FORMATS)})")
+    """``--in-format`` overrides the suffix; without it ``-`` (stdin) is recognised by its first bytes
+    (:func:`keyfill.io.sniff`)."""
     return fmt
 
 

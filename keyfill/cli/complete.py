@@ -10,6 +10,7 @@ from keyfill.cli.common import (
     apply_partial_keys,
     batch_options,
     emit_json,
+    in_format_option,
     input_format,
     keys_options,
     output_format,
@@ -29,8 +30,8 @@ from keyfill.learn.registry import ALIASES, METHODS
                    "(OUTDIR/).")
 @keys_options
 @partial_keys_options
-@click.option("--method", type=click.Choice(sorted([*METHODS, *ALIASES])), default="cubic", show_default=True,
-              help="In-betweening method.")
+@click.option("--method", type=click.Choice(sorted([*METHODS, *ALIASES])),
+              help="In-betweening method [default: the kind of the --model folder or graph, else cubic].")
 @click.option("--model", type=click.Path(exists=True),
               help="Model folder for a learned method (default: the model shipped for it, if any), or a graph file "
                    "(.onnx) written by 'keyfill export'.")
@@ -60,7 +61,7 @@ from keyfill.learn.registry import ALIASES, METHODS
                    "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
                    "one.")
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when IN is '-').")
+@in_format_option
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
@@ -109,7 +110,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     Examples:
       keyfill complete keys.usda -o filled.usda
       keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
-      keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info - --format bvh
+      keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info -
       keyfill complete character.glb --key-every 10 -o filled.glb       (keeps the meshes of character.glb)
       keyfill complete hops/ --method arnn -o filled/ --workers 2
       keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
@@ -126,6 +127,10 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
+    from keyfill.learn.registry import kind_of
+
+    if method is None:  # a model names its own method
+        method = kind_of(model) if model is not None else "cubic"
 
     options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime, dna=dna,
                               dna_count=dna_count, rig_map=rig_map, feet=feet, ground=ground)

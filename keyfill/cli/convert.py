@@ -8,8 +8,10 @@ from keyfill.cli.common import (
     FORMAT_CHOICE,
     batch_options,
     emit_json,
+    in_format_option,
     input_format,
     keys_options,
+    meters_per_unit_option,
     output_format,
     resolve_keys,
     run_batch,
@@ -23,14 +25,15 @@ from keyfill.cli.common import (
               help="Output folder: every SRC (files, folders, globs) is converted into it.")
 @click.option("--format", "fmt", type=FORMAT_CHOICE,
               help="Output format (needed when DST is '-'; with -o, the outputs' suffix).")
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when SRC is '-').")
+@in_format_option
+@meters_per_unit_option
 @click.option("--curves", is_flag=True,
               help="Fit editable Bezier curves through the keys and write a curves file (USD only).")
 @keys_options
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, scheduler, connect_timeout, force,
-            batch_size, as_json):
+def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_every, workers, scheduler,
+            connect_timeout, force, batch_size, as_json):
     """Convert a motion file between BVH, USD (.usda, .usdc, .usd) and glTF (.glb, .gltf).
 
     Formats come from the suffixes; '-' reads standard input or writes
@@ -57,16 +60,18 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
       keyfill convert walk.usdc walk.bvh
       keyfill convert walk.bvh walk.glb
       keyfill convert walk.bvh walk_curves.usda --curves --keys 0,10,20,30
-      cat walk.bvh | keyfill convert - - --in-format bvh --format usda > walk.usda
+      cat walk.bvh | keyfill convert - - --format usda > walk.usda
+      keyfill convert cmu.bvh cmu.usda --meters-per-unit 0.056444     (metersPerUnit as stated)
       keyfill convert mocap/ -o usd/ --format usdc --workers 2
     """
     from keyfill import io
     from keyfill.errors import UsageError
 
     if outdir is not None:
-        if curves or keys_text is not None or key_every is not None or in_fmt is not None:
-            raise UsageError("-o OUTDIR converts motion files by their suffixes; --curves, --keys, --key-every "
-                             "and --in-format take one SRC and DST")
+        if curves or keys_text is not None or key_every is not None or in_fmt is not None \
+                or meters_per_unit is not None:
+            raise UsageError("-o OUTDIR converts motion files by their suffixes; --curves, --keys, --key-every, "
+                             "--in-format and --meters-per-unit take one SRC and DST")
         return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", None, workers, scheduler,
                          connect_timeout, force, batch_size, as_json, "converted")
     if len(paths) == 1:
@@ -78,7 +83,7 @@ def convert(paths, outdir, fmt, in_fmt, curves, keys_text, key_every, workers, s
 
     refuse_overwriting_input(dst, [src], force)
 
-    motion = io.load(src, input_format(src, in_fmt))
+    motion = io.load(src, input_format(src, in_fmt), meters_per_unit)
     if curves:
         from keyfill.edit.fit import fit
         from keyfill.io import usd_curves as curvefile

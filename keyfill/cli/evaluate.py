@@ -19,6 +19,20 @@ def _lengths(text: str) -> tuple[int, ...]:
     return values
 
 
+def _model(method_or_model: str) -> dict:
+    """``model`` (an id: the folder's name) and ``model_path`` of what was scored (None for a baseline)."""
+    from pathlib import Path
+
+    from keyfill.learn.registry import METHODS
+
+    m = METHODS.get(method_or_model)
+    if m is not None:
+        path = m.default_model() if m.learned else None
+    else:  # a model folder, or a baseline only the protocols know (zero-velocity)
+        path = Path(method_or_model) if Path(method_or_model).exists() else None
+    return {"model": None if path is None else path.name, "model_path": None if path is None else str(path.resolve())}
+
+
 @click.command()
 @click.argument("method_or_model")
 @click.argument("data", nargs=-1, required=True, type=click.Path(exists=True))
@@ -68,7 +82,7 @@ def evaluate(method_or_model, data, protocol, test_pattern, train_pattern, lengt
                  lengths=_lengths(lengths), fold=fold_root, facing_axis=facing_axis, baselines=baselines,
                  device=device, progress=lambda files: progress(files, desc="reading clips", unit="file"))
     if as_json:
-        emit_json(result.as_json())
+        emit_json({**result.as_json(), "input": list(data), "output": None, **_model(method_or_model)})
         return
     for line in result.lines:
         say(line)

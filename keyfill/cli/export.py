@@ -55,7 +55,8 @@ def export(model, dst, as_json):
     getattr(importlib.import_module(module), attr)(loaded, Path(folder), out)
     if model in METHODS:
         label = f"the built-in {Path(folder).name} model"
-    info = {"model": label, "kind": method.name, "output": str(out), "bytes": out.stat().st_size}
+    info = {"input": model, "output": str(out), "model": Path(folder).name, "model_path": str(Path(folder).resolve()),
+            "kind": method.name, "bytes": out.stat().st_size}
     if as_json:
         emit_json(info)
     else:

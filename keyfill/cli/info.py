@@ -5,26 +5,33 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json
+from keyfill.cli.common import FORMAT_CHOICE, emit_json, in_format_option, meters_per_unit_option
 
 
-def describe(motion, path: str) -> dict:
-    """A JSON-ready summary of ``motion``: skeleton, timing, keys, bounding box."""
+def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = False) -> dict:
+    """A JSON-ready summary of ``motion``: skeleton, timing, keys, bounding box (docs/json.md).
+
+    ``fmt``: the format the file was read as; ``units_assumed``: its format records no units (BVH) and none
+    were given, so ``meters_per_unit`` is keyfill's assumption (centimetres), not the file's word.
+    """
     sk = motion.skeleton
     world = motion.world_positions() if motion.num_frames else np.zeros((0, sk.num_joints, 3))
     box = None
     if motion.num_frames:
         box = {"min": world.min(axis=(0, 1)).tolist(), "max": world.max(axis=(0, 1)).tolist()}
     return {
-        "file": path,
+        "input": path,
+        "output": None,
+        "format": fmt,
         "frames": motion.num_frames,
         "fps": motion.fps,
         "duration_s": motion.duration,
-        "num_joints": sk.num_joints,
-        "num_channels": sk.num_channels,
+        "joints": sk.num_joints,
+        "channels": sk.num_channels,
         "meters_per_unit": sk.meters_per_unit,
+        "units_assumed": units_assumed,
         "up_axis": sk.up_axis,
-        "joints": [
+        "hierarchy": [
             {
                 "name": sk.names[j],
                 "parent": sk.names[sk.parents[j]] if sk.parents[j] >= 0 else None,
@@ -41,7 +48,9 @@ def describe(motion, path: str) -> dict:
 
 @click.command()
 @click.argument("file", type=click.Path(dir_okay=False, allow_dash=True))
-@click.option("--format", "fmt", type=FORMAT_CHOICE, help="Input format (needed when FILE is '-').")
+@in_format_option
+@click.option("--format", "fmt", type=FORMAT_CHOICE, hidden=True, help="Old name of --in-format.")
+@meters_per_unit_option
 @click.option("--representative", type=int, metavar="N",
               help="Also list the N representative frames (largest joint-rotation change; the frames a Motion DNA "
                    "takes from this file, see docs/gan.md).")
@@ -52,11 +61,13 @@ def describe(motion, path: str) -> dict:
               help='Give roles the mapper does not find, as TOML lines role = "JointName" (e.g. hand_l = "L_Wrist"; '
                    "spine = [...] for the chain); implies --rig.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
-def info(file, fmt, representative, rig, rig_map, as_json):
+def info(file, in_fmt, fmt, meters_per_unit, representative, rig, rig_map, as_json):
     """Show what a motion file (BVH, USD or glTF) holds.
 
     Skeleton (joints, channels, Euler orders), frame count, frame rate,
-    duration, keys and the world-space bounding box.
+    duration, units, keys and the world-space bounding box. BVH files
+    record no units: they are reported as centimetres assumed, unless
+    --meters-per-unit states them.
 
     With --rig: the humanoid role of each joint (hips, spine chain, neck,
     head, per side clavicle, upper arm, forearm, hand, thigh, shin, foot,
@@ -70,15 +81,18 @@ def info(file, fmt, representative, rig, rig_map, as_json):
     Examples:
       keyfill info walk.bvh
       keyfill info keys.usda --json | jq .keys
-      cat walk.bvh | keyfill info - --format bvh
+      cat walk.bvh | keyfill info -                      (the format from the first bytes)
+      keyfill info cmu.bvh --meters-per-unit 0.056444     (CMU's inches x 0.45 per unit)
       keyfill info salsa.bvh --representative 8 --json | jq .representative_frames
       keyfill info character.bvh --rig
       keyfill info character.bvh --rig-map character.toml --json | jq .rig
     """
     from keyfill import io
 
-    motion = io.load(file, fmt)
-    d = describe(motion, file)
+    if in_fmt is not None and fmt is not None and in_fmt != fmt:
+        raise click.UsageError("--format is the old name of --in-format; give one")
+    motion, read_as = io.load_format(file, in_fmt or fmt, meters_per_unit)
+    d = describe(motion, file, read_as, units_assumed=not io.FORMATS[read_as].units and meters_per_unit is None)
     if representative is not None:
         from keyfill.learn.representative import representative_frames
 
@@ -95,8 +109,12 @@ def info(file, fmt, representative, rig, rig_map, as_json):
         emit_json(d)
         return
     click.echo(f"{file}: {d['frames']} frames at {d['fps']:g} fps ({d['duration_s']:.3f} s), "
-               f"{d['num_joints']} joints, {d['num_channels']} channels")
-    click.echo(f"units: {d['meters_per_unit']:g} m, up axis {d['up_axis']}")
+               f"{d['joints']} joints, {d['channels']} channels")
+    if d["units_assumed"]:
+        units = f"cm assumed; {read_as.upper()} does not say (--meters-per-unit states them)"
+    else:
+        units = f"{d['meters_per_unit']:g} m"
+    click.echo(f"units: {units}, up axis {d['up_axis']}")
     keys = d["keys"]
     click.echo(f"keys: {', '.join(map(str, keys)) if keys is not None else 'none recorded'}")
     if representative is not None:
@@ -104,12 +122,12 @@ def info(file, fmt, representative, rig, rig_map, as_json):
     if d["bounding_box"]:
         lo, hi = d["bounding_box"]["min"], d["bounding_box"]["max"]
         click.echo("bounding box: " + " ".join(f"{a}[{l:.4g}, {h:.4g}]" for a, l, h in zip("xyz", lo, hi)))
-    parents = {j["name"]: j["parent"] for j in d["joints"]}
+    parents = {j["name"]: j["parent"] for j in d["hierarchy"]}
 
     def depth(name):
         return 0 if parents[name] is None else 1 + depth(parents[name])
 
-    rows = [("  " * depth(j["name"]) + j["name"], j["euler_order"], " ".join(j["channels"]) or "-") for j in d["joints"]]
+    rows = [("  " * depth(j["name"]) + j["name"], j["euler_order"], " ".join(j["channels"]) or "-") for j in d["hierarchy"]]
     width = max(len(r[0]) for r in rows)
     for name, order, chans in rows:
         click.echo(f"  {name:<{width}}  {order}  {chans}")

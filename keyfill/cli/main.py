@@ -58,9 +58,11 @@ class LazyGroup(click.Group):
         return sorted(set(super().list_commands(ctx)) | set(self._available()))
 
     def get_command(self, ctx, name):
+        from keyfill.cli.common import with_global_options
+
         if name in self.lazy and name in self._available():
             module, attr = self.lazy[name].split(":")
-            return getattr(importlib.import_module(module), attr)
+            return with_global_options(getattr(importlib.import_module(module), attr))
         return super().get_command(ctx, name)
 
 
@@ -95,8 +97,21 @@ def cli(ctx, quiet, verbose, debug):
     ctx.obj["debug"] = debug
 
 
-def _error(message: str) -> None:
-    click.echo(f"keyfill: error: {' '.join(str(message).split())}", err=True)
+#: set by :func:`main` when the command line asks for ``--json``: errors are then also a JSON object on stdout
+_json_errors = False
+
+
+def _error(message: str, exit_code: int = 1, file=None, line: int | None = None) -> None:
+    """The one ``keyfill: error:`` line on stderr; with ``--json`` also ``{"error": {...}}`` on stdout
+    (docs/json.md)."""
+    message = " ".join(str(message).split())
+    click.echo(f"keyfill: error: {message}", err=True)
+    if _json_errors:
+        import json
+
+        error = {"message": message, "file": None if file is None else str(file), "line": line,
+                 "exit_code": exit_code}
+        click.echo(json.dumps({"error": error}, indent=2, sort_keys=True))
 
 
 class Terminated(KeyboardInterrupt):
@@ -142,8 +157,12 @@ def _note(message: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (also used by ``python -m keyfill``)."""
+    global _json_errors
     args = list(sys.argv[1:] if argv is None else argv)
-    debug = "--debug" in args
+    # looked for before parsing, so that errors of the parsing itself obey them (before or after the subcommand)
+    options = args[:args.index("--")] if "--" in args else args
+    debug = "--debug" in options
+    _json_errors = "--json" in options
     from keyfill import progress
 
     progress.listen(_progress_bar)
@@ -166,9 +185,9 @@ def _main(args: list[str], debug: bool) -> int:
         # click turns Ctrl-C (and our SIGTERM) into Abort; the signal is its cause
         cause = e if isinstance(e, Terminated) else e.__cause__
         if isinstance(cause, Terminated):
-            _error("terminated")
+            _error("terminated", 128 + cause.signum)
             return 128 + cause.signum
-        _error("interrupted")
+        _error("interrupted", 130)
         return 130
     except click.UsageError as e:
         if debug:
@@ -178,7 +197,7 @@ def _main(args: list[str], debug: bool) -> int:
             click.echo(e.ctx.get_help())
             return 2
         cmd = e.ctx.command_path if e.ctx is not None else "keyfill"
-        _error(f"{e.format_message()} (see '{cmd} --help')")
+        _error(f"{e.format_message()} (see '{cmd} --help')", 2)
         return 2
     except KeyfillError as e:
         if debug:
@@ -186,10 +205,11 @@ def _main(args: list[str], debug: bool) -> int:
         if not getattr(e, "reported", False):
             from keyfill.cli.common import flag_words
 
-            _error(flag_words(str(e), getattr(e, "params", ())))
+            _error(flag_words(str(e), getattr(e, "params", ())), e.exit_code, getattr(e, "path", None),
+                   getattr(e, "line", None))
         return e.exit_code
     except KeyboardInterrupt:
-        _error("interrupted")
+        _error("interrupted", 130)
         return 130
     except BrokenPipeError:
         return 1

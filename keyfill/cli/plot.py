@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labelled, say
+from keyfill.cli.common import emit_json, in_format_option, keys_options, load_labelled, say
 
 
 @click.command()
@@ -33,7 +33,7 @@ from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labe
 @click.option("--labels", metavar="NAMES",
               help="Legend names for the files, comma-separated, in order (default: the file names).")
 @keys_options
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when a FILE is '-').")
+@in_format_option
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def plot(files, output, joints, channels, frames, positions, contacts, rig_map, ground, labels, keys_text, key_every,
          in_fmt, as_json):
@@ -69,7 +69,7 @@ def plot(files, output, joints, channels, frames, positions, contacts, rig_map, 
     info = draw(motions, names, output, joints=joints, channels=channels, frames=frames, positions=positions,
                 contacts=contacts, rig_map=rig_map, ground=ground)
     if as_json:
-        emit_json(info.as_dict())
+        emit_json({"input": list(files), **info.as_dict()})
     else:
         bands = f" and the foot contacts of {len(files)} file(s)" if contacts else ""
         say(f"wrote {output}: {len(info.panels)} panels ({', '.join(info.panels)}) of {len(files)} file(s){bands}")

@@ -6,7 +6,7 @@ import re
 
 import click
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, keys_options, load_labelled, progress, say
+from keyfill.cli.common import emit_json, in_format_option, keys_options, load_labelled, progress, say
 
 
 def _size(ctx, param, value):
@@ -35,7 +35,7 @@ def _size(ctx, param, value):
               help="Picture size in pixels (for a filmstrip: one frame). Default: fitted to the motion.")
 @click.option("--labels", metavar="NAMES", help="Names for the files, comma-separated (default: file names).")
 @keys_options
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when a FILE is '-').")
+@in_format_option
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def preview(files, output, view, frames, step, trail, fps, size, labels, keys_text, key_every, in_fmt, as_json):
     """Draw stick figures of FILES (overlaid, one colour each) from a fixed camera.
@@ -64,7 +64,7 @@ def preview(files, output, view, frames, step, trail, fps, size, labels, keys_te
     info = draw(motions, names, output, view=view, frames=frames, step=step, trail=trail, fps=fps, size=size,
                 progress=progress)
     if as_json:
-        emit_json(info.as_dict())
+        emit_json({"input": list(files), **info.as_dict()})
     else:
         what = {"gif": f"{len(info.frames)}-frame GIF at {info.fps:g} fps" if info.fps else "",
                 "filmstrip": f"filmstrip of {len(info.frames)} frames",

@@ -5,7 +5,16 @@ from __future__ import annotations
 import click
 
 from keyfill import io
-from keyfill.cli.common import FORMAT_CHOICE, batch_options, emit_json, input_format, output_format, run_batch, say
+from keyfill.cli.common import (
+    FORMAT_CHOICE,
+    batch_options,
+    emit_json,
+    in_format_option,
+    input_format,
+    output_format,
+    run_batch,
+    say,
+)
 
 _MAP = "TOML lines role = \"JointName\", e.g. hand_l = \"L_Wrist\"; spine = [...] for the chain"
 
@@ -24,7 +33,7 @@ _MAP = "TOML lines role = \"JointName\", e.g. hand_l = \"L_Wrist\"; spine = [...
               help=f"Roles the mapper does not find in RIG's skeleton ({_MAP}).")
 @click.option("--format", "fmt", type=FORMAT_CHOICE,
               help="Output format (needed when the output is '-'; with -o OUTDIR/, the outputs' suffix).")
-@click.option("--in-format", "in_fmt", type=FORMAT_CHOICE, help="Input format (needed when IN is '-').")
+@in_format_option
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def retarget(inputs, rig, dst, rig_map, to_rig_map, fmt, in_fmt, workers, scheduler, connect_timeout, force,

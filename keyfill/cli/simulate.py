@@ -67,8 +67,8 @@ def simulate(folder, count, seed, iterations, workers, fmt, scheduler, connect_t
                         scheduler=scheduler, force=force, max_runs=max_runs, connect_timeout=connect_timeout,
                         on_run=on_run)
     info = summary.to_dict()
-    if as_json:
-        emit_json(info)
+    if as_json:  # docs/json.md: the dataset folder is the output
+        emit_json({**{k: v for k, v in info.items() if k != "folder"}, "input": None, "output": str(info["folder"])})
     elif info.get("already_done"):
         say(f"{folder} already holds {info['sequences']} sequences; nothing to do")
     else:

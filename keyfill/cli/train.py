@@ -81,8 +81,10 @@ def _command(method: registry.Method) -> click.Command:
         if outcome.model is None:  # a process other than rank 0 of a torchrun job: rank 0 reports
             return
         summary, text = spec.finished(task, outcome)
-        if as_json:
-            emit_json(summary)
+        if as_json:  # docs/json.md: the model an id (the folder's name) and its path
+            folder = Path(summary.get("output") or output)
+            emit_json({**summary, "input": list(data), "output": str(folder), "model": folder.name,
+                       "model_path": str(folder.resolve())})
         else:
             say(text)
 

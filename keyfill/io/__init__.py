@@ -5,7 +5,8 @@ reader ``read(path, label=None) -> Motion`` (``label`` names the file in error
 messages), its writer ``write(motion, path, **options)``, its suffixes and a
 description. The command-line choices, the suffixes a batch picks from a
 folder, and every message that lists formats read it. The format comes from
-the suffix or from ``format=`` (required for ``-``, standard input or output).
+the suffix or from ``format=`` (required for ``-`` as standard output; standard input without it is
+recognised by its first bytes, :func:`sniff`).
 BVH is :mod:`keyfill.io.bvh`; USD is :mod:`keyfill.io.usd` (UsdSkel), read
 through :func:`keyfill.io.usd_curves.read_motion` so that a keyfill curves file
 gives its Bezier curves baked at every frame; glTF 2.0 is :mod:`keyfill.io.gltf`.
@@ -39,19 +40,27 @@ class Format:
     description: str
     #: suffix of a second file the writer puts beside the output (a ``.gltf``'s ``.bin``), or None
     sidecar: str | None = None
-    #: the writer takes ``template=``: a file of the same family whose content beyond the motion it keeps
+    #: the writer takes ``template=``: a file of the same family whose content beyond the motion it keeps (a
+    #: glTF's meshes; a BVH's own Euler values at the frames whose rotations are unchanged)
     template: bool = False
+    #: the bytes a file of this format starts with (after white space), for :func:`sniff`; None: not sniffed so
+    magic: bytes | None = None
+    #: the file records its units (USD ``metersPerUnit``, glTF meters); BVH does not (assumed cm)
+    units: bool = True
 
 
 _USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
 _GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.io.gltf_write:write", "template": True}
 #: format name -> :class:`Format`, in the order messages list them
 FORMATS = {f.name: f for f in (
-    Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text"),
-    Format("usda", "usd", *_USD, (".usda",), "USD text (UsdSkel)"),
-    Format("usdc", "usd", *_USD, (".usdc",), "USD binary crate (UsdSkel)"),
+    Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text",
+           magic=b"HIERARCHY", units=False, template=True),
+    Format("usda", "usd", *_USD, (".usda",), "USD text (UsdSkel)", magic=b"#usda"),
+    Format("usdc", "usd", *_USD, (".usdc",), "USD binary crate (UsdSkel)",
+           magic=b"PXR-USDC"),
     Format("usd", "usd", *_USD, (".usd",), "USD, text or crate (written as crate)"),
-    Format("glb", suffixes=(".glb",), description="glTF 2.0 binary (skin + animation)", **_GLTF),
+    Format("glb", suffixes=(".glb",), description="glTF 2.0 binary (skin + animation)", magic=b"glTF",
+           **_GLTF),
     Format("gltf", suffixes=(".gltf",), description="glTF 2.0 JSON with a .bin beside it (embedded on standard output)",
            sidecar=".bin", **_GLTF),
 )}
@@ -102,19 +111,73 @@ def _function(target: str):
     return getattr(importlib.import_module(module), name)
 
 
-def load(path: str | os.PathLike, format: str | None = None) -> Motion:
-    """Read a motion file (``"-"``: standard input, with ``format``)."""
-    fmt = format_of(path, format, reading=True)
-    read = _function(FORMATS[fmt].reader)
+def sniff(data: bytes) -> str | None:
+    """The format of a file's first bytes ``data``, from the ``magic`` of :data:`FORMATS`, or None.
+
+    BVH starts with ``HIERARCHY`` (after white space or a byte-order mark), USD text with ``#usda``, a USD
+    crate with ``PXR-USDC``, binary glTF with ``glTF``, and glTF JSON is an object with an ``"asset"`` key.
+    """
+    import json
+
+    text = data.lstrip(b"\xef\xbb\xbf \t\r\n")
+    for f in FORMATS.values():
+        if f.magic and text.startswith(f.magic):
+            return f.name
+    if text.startswith(b"{"):
+        try:
+            doc = json.loads(data.decode("utf-8-sig"))
+        except (UnicodeDecodeError, ValueError):
+            return None
+        if isinstance(doc, dict) and "asset" in doc:
+            return "gltf"
+    return None
+
+
+def load(path: str | os.PathLike, format: str | None = None, meters_per_unit: float | None = None) -> Motion:
+    """Read a motion file (``"-"``: standard input, in ``format`` or else the one :func:`sniff` finds).
+
+    ``meters_per_unit`` states the units of a format that records none (BVH, :attr:`Format.units`); without
+    it such a file is assumed in centimetres (0.01). A format that records its units ignores it.
+    """
+    return load_format(path, format, meters_per_unit)[0]
+
+
+def load_format(path: str | os.PathLike, format: str | None = None,
+                meters_per_unit: float | None = None) -> tuple[Motion, str]:
+    """:func:`load`, and the name of the format the file was read as (sniffed for standard input)."""
+    if meters_per_unit is not None and not (0 < meters_per_unit < float("inf")):
+        raise UsageError(f"meters_per_unit must be a positive number, got {meters_per_unit!r}",
+                         params="meters_per_unit")
+    fmt, motion = _read(path, format)
+    if meters_per_unit is not None and not FORMATS[fmt].units:
+        motion = motion.replace(skeleton=motion.skeleton.replace(meters_per_unit=float(meters_per_unit)))
+    return motion, fmt
+
+
+def _read(path, format):
     if str(path) == STDIO:
+        try:
+            data = sys.stdin.buffer.read()
+        except (OSError, AttributeError) as e:
+            raise FormatError(f"cannot read standard input ({e})", "<stdin>") from None
+        if format is None:
+            format = sniff(data)
+            if format is None:
+                # the word of the input's format parameter, as the CLI spells it
+                raise UsageError(f"cannot tell the format of standard input from its first bytes; give in_format "
+                                 f"({listing(FORMATS)})", params="in_format")
+        fmt = format_of(path, format, reading=True)
+        read = _function(FORMATS[fmt].reader)
         with tempfile.TemporaryDirectory() as tmp:
             p = Path(tmp) / ("stdin" + FORMATS[fmt].suffixes[0])
-            p.write_bytes(sys.stdin.buffer.read())
-            return read(p, label="<stdin>")
+            p.write_bytes(data)
+            return fmt, read(p, label="<stdin>")
+    fmt = format_of(path, format, reading=True)
+    read = _function(FORMATS[fmt].reader)
     p = Path(path)
     if not p.is_file():
         raise FormatError("no such file" if not p.exists() else "not a file", p)
-    return read(p)
+    return fmt, read(p)
 
 
 def save(motion: Motion, path: str | os.PathLike, format: str | None = None, source: str | os.PathLike | None = None,

@@ -12,7 +12,10 @@ component on that axis), as Blender, MotionBuilder and bvhio read them.
 Writing keeps each joint's channel order, the hierarchy order and the End
 Sites, writes numbers with 12 significant digits (round trips to 1e-12
 relative; never ``%f``), and keeps Euler curves continuous: no 360-degree
-jumps and no flips between the two Euler solutions of a rotation.
+jumps and no flips between the two Euler solutions of a rotation. Given the
+BVH file the motion came from (``template``), frames whose rotations are
+unchanged keep that file's own channel values, and the frames between them
+are unwrapped towards them (:func:`follow_template`).
 """
 
 from __future__ import annotations
@@ -280,6 +283,18 @@ def _values(raw: bytes, begin: int, num_frames: int, num_channels: int, label, f
 
 def parse(raw: bytes | str, path=None) -> Motion:
     """Parse BVH text (bytes or str) into a :class:`Motion`; ``path`` only labels errors."""
+    skeleton, fps, values = parse_values(raw, path)
+    label = path if path is not None else "<bvh>"
+    try:
+        rot, pos = channels_to_pose(values, skeleton)
+        del values
+        return Motion(skeleton, fps, rot, pos)
+    except DataError as e:
+        raise FormatError(str(e), label) from None
+
+
+def parse_values(raw: bytes | str, path=None) -> tuple[Skeleton, float, np.ndarray]:
+    """``(skeleton, fps, (F, C) channel values as the file writes them)`` of BVH text; ``path`` labels errors."""
     if isinstance(raw, str):
         raw = raw.encode("utf-8")
     label = path if path is not None else "<bvh>"
@@ -348,11 +363,9 @@ def parse(raw: bytes | str, path=None) -> Motion:
             channels=tuple(h.channels),
             end_sites=tuple(h.end_sites),
         )
-        rot, pos = channels_to_pose(values, skeleton)
-        del values
-        return Motion(skeleton, _snap_fps(frame_time), rot, pos)
     except DataError as e:
         raise FormatError(str(e), label) from None
+    return skeleton, _snap_fps(frame_time), values
 
 
 def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384) -> tuple[np.ndarray, np.ndarray]:
@@ -472,11 +485,63 @@ def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
     return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, values[0].tolist())), varying
 
 
-def _pieces(motion: Motion, rows: int = 4096):
+#: a frame's rotation is "unchanged" from the template's when they differ by less than this (radians)
+SAME_ROTATION_RAD = 1e-9
+
+
+def follow_template(values: np.ndarray, motion: Motion, template: str | Path) -> np.ndarray:
+    """``values`` (``(F, C)`` channels of ``motion``, :func:`pose_to_channels`) with the Euler angles of the BVH
+    file ``template`` (e.g. the input ``motion`` was completed from) where they can be kept.
+
+    At each frame where a joint's rotation is unchanged from the template's (within :data:`SAME_ROTATION_RAD`;
+    a completion's keys), its rotation channels take the template's own values (``-177.333`` stays
+    ``-177.333``, not ``182.667``), and so do position channels equal to within 1e-12 of the file's scale.
+    The frames after such a frame, up to the next one, are shifted by the whole turns per channel that put
+    them next to it (the frames before the first, next to the first): still continuous, and unwrapped
+    towards their neighbours. A template of another channel layout, or one that cannot be read, changes
+    nothing.
+    """
+    sk = motion.skeleton
+    try:
+        tsk, _, tvalues = parse_values(Path(template).read_bytes(), template)
+    except (OSError, FormatError):
+        return values
+    if tsk.names != sk.names or tsk.channels != sk.channels or not len(values) or not len(tvalues):
+        return values
+    n = min(len(values), len(tvalues))
+    trot, _ = channels_to_pose(tvalues[:n], tsk)
+    same = R.quat_angle(motion.rotations[:n], trot) < SAME_ROTATION_RAD  # (n, J)
+    scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
+    values = values.copy()
+    frames = np.arange(len(values))
+    col = 0
+    for j, chans in enumerate(sk.channels):
+        cols = np.arange(col, col + len(chans))
+        col += len(chans)
+        rot = cols[[c not in POSITION_CHANNELS for c in chans]]
+        pos = cols[[c in POSITION_CHANNELS for c in chans]]
+        if len(pos):
+            close = np.abs(values[:n, pos] - tvalues[:n, pos]) <= 1e-12 * scale
+            values[:n, pos] = np.where(close, tvalues[:n, pos], values[:n, pos])
+        anchors = np.flatnonzero(same[:, j])
+        if not len(rot) or not len(anchors):
+            continue
+        v, t = values[:, rot], tvalues[anchors][:, rot]
+        turns = 360.0 * np.round((t - v[anchors]) / 360.0)  # (A, r) the whole turns between the two
+        segment = np.maximum(np.searchsorted(anchors, frames, side="right") - 1, 0)
+        v = v + turns[segment]
+        v[anchors] = t
+        values[:, rot] = v
+    return values
+
+
+def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None):
     """BVH text of ``motion`` in pieces: the header, then about ``rows`` motion lines at a time."""
     sk = motion.skeleton
     limits.check_values(motion)
-    values = pose_to_channels(motion)
+    values = pose_to_channels(motion) + 0.0  # no -0 of the arithmetic (a template's own -0 stays)
+    if template is not None:
+        values = follow_template(values, motion, template)
     children: list[list[int]] = [[] for _ in range(sk.num_joints)]
     for j, p in enumerate(sk.parents):
         if p >= 0:
@@ -511,11 +576,13 @@ def dumps(motion: Motion) -> str:
     return "".join(_pieces(motion))
 
 
-def write(motion: Motion, path: str | Path) -> None:
+def write(motion: Motion, path: str | Path, template: str | Path | None = None) -> None:
     """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`).
 
+    ``template``: the BVH file ``motion`` came from; frames whose rotations it
+    holds unchanged keep its own channel values (:func:`follow_template`).
     The motion lines are formatted and written a block at a time, so writing
     needs little memory beyond the motion's channel values.
     """
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.writelines(_pieces(motion))
+        f.writelines(_pieces(motion, template=template))

@@ -29,7 +29,9 @@ are USD's interpolation of the samples and the sample times become the keys of
 the motion.
 
 USD stores translations and rotations as 32-bit floats: a round trip through
-USD keeps about 7 significant digits.
+USD keeps about 7 significant digits. Translations are written without
+negative zeros and read back as the shortest decimal that rounds to the
+stored float (:func:`shortest_decimal`): ``-0.2399`` comes back as ``-0.2399``.
 """
 
 from __future__ import annotations
@@ -81,7 +83,37 @@ def joint_paths(skeleton: Skeleton) -> list[str]:
 
 
 def _quat_to_xyzw(q: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(q[..., [1, 2, 3, 0]], dtype=np.float32)
+    return _float32(q[..., [1, 2, 3, 0]])
+
+
+def _float32(values: np.ndarray) -> np.ndarray:
+    """``values`` as the 32-bit floats USD stores, with no negative zero (USD's text would write ``-0``)."""
+    return np.ascontiguousarray(values, dtype=np.float32) + np.float32(0.0)
+
+
+def shortest_decimal(values: np.ndarray) -> np.ndarray:
+    """The 32-bit floats ``values`` (read from USD) as the doubles of their shortest decimals: ``-0.2399``
+    stored as float32 reads back as the double ``-0.2399``, not ``-0.239899992943``, so a round trip writes
+    the number that went in. Each value is the double nearest to the decimal of fewest significant digits
+    (1 to 9) that rounds to the same float32; no negative zero."""
+    x = np.asarray(values, dtype=np.float64)
+    x32 = x.astype(np.float32)
+    out = x.copy()
+    todo = np.isfinite(x) & (x != 0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        exponent = np.floor(np.log10(np.abs(np.where(todo, x, 1.0)))).astype(np.int64)
+        for digits in range(1, 10):
+            if not todo.any():
+                break
+            k = digits - 1 - exponent  # decimal places
+            up = np.where(k >= 0, k, 0)
+            down = np.where(k < 0, -k, 0)
+            # one correctly rounded operation on exact operands: the double nearest to the decimal
+            candidate = np.where(k >= 0, np.round(x * 10.0 ** up) / 10.0 ** up, np.round(x / 10.0 ** down) * 10.0 ** down)
+            hit = todo & (candidate.astype(np.float32) == x32)
+            out[hit] = candidate[hit]
+            todo &= ~hit
+    return out + 0.0
 
 
 def _matrices(Gf, Vt, rot: np.ndarray, pos: np.ndarray):
@@ -91,7 +123,7 @@ def _matrices(Gf, Vt, rot: np.ndarray, pos: np.ndarray):
         m = Gf.Matrix4d(1.0)
         m.SetRotateOnly(Gf.Quatd(float(q[0]), Gf.Vec3d(*map(float, q[1:]))))
         m.SetTranslateOnly(Gf.Vec3d(*map(float, t)))
-        out.append(m)
+        out.append(Gf.Matrix4d(*[v + 0.0 for row in m for v in row]))  # no -0 in the text
     return Vt.Matrix4dArray(out)
 
 
@@ -132,7 +164,7 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
         "names": Vt.StringArray(list(sk.names)),
         "channels": Vt.StringArray([" ".join(c) for c in sk.channels]),
         "endSiteJoints": Vt.IntArray([j for j, _ in sk.end_sites]),
-        "endSiteOffsets": Vt.Vec3dArray([Gf.Vec3d(*map(float, o)) for _, o in sk.end_sites]),
+        "endSiteOffsets": Vt.Vec3dArray([Gf.Vec3d(*(float(v) + 0.0 for v in o)) for _, o in sk.end_sites]),
     }
     if motion.keys is not None:
         custom["keys"] = Vt.IntArray(motion.keys.to_list())
@@ -160,7 +192,7 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
         for a in range(0, len(frames), block):
             chunk = frames[a : a + block]
             rot = _quat_to_xyzw(motion.rotations[chunk])
-            pos = np.ascontiguousarray(motion.positions[chunk], dtype=np.float32)
+            pos = _float32(motion.positions[chunk])
             for k, f in enumerate(chunk):
                 layer.SetTimeSample(t_path, f, Vt.Vec3fArray.FromNumpy(pos[k]))
                 layer.SetTimeSample(r_path, f, Vt.QuatfArray.FromNumpy(rot[k]))
@@ -354,8 +386,8 @@ def _read_stage(stage, label) -> Motion:
     with progress.task("reading USD", samples, " samples") as update:
         for attr, out, width in ((t_attr, pos, 3), (r_attr, rot, 4)):
             values = _resolved(attr, frame_times, n, width, held, Usd, label, update)
-            if values is not None:
-                out[:, to_skel] = values[..., [3, 0, 1, 2]] if width == 4 else values
+            if values is not None:  # translations as the decimals that went in (float32 noise off)
+                out[:, to_skel] = values[..., [3, 0, 1, 2]] if width == 4 else shortest_decimal(values)
             del values
         scales = _samples(s_attr, 3, Usd, label, update)
         if scales is not None:

@@ -167,6 +167,14 @@ def method_for_model(path: str | Path) -> Method:
                      f"(known kinds: {', '.join(m.name for m in learned())})")
 
 
+def kind_of(model: str | Path) -> str:
+    """The method name of a model folder (the ``kind`` of its config) or of an exported ``.onnx`` graph (its
+    metadata): what ``keyfill complete --model FOLDER`` runs without ``--method``."""
+    from keyfill.learn.onnx import is_graph, open_graph
+
+    return open_graph(model).kind if is_graph(model) else method_for_model(model).name
+
+
 def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, object]:
     """``(label, method, loaded model)`` for a learned method's name (its shipped model) or a model folder."""
     if name_or_path in METHODS:
@@ -234,8 +242,40 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     else:
         result = m.function()(motion, keys, options)
     result = with_feet(m, result, keys, options)
-    result.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **result.info}
+    result.info = reported(m, motion, keys, options, result)
     return result
+
+
+def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, result: Completion) -> dict:
+    """``result.info`` in the one shape of every method (docs/json.md): ``method``, ``keys``, ``frames`` (a
+    count), ``model`` (an id: the model folder's or graph's name) with ``model_path``, and ``key_residual``:
+    ``{"position": file units, "rotation_rad": radians, "removed": bool}``, the largest difference of the
+    method's own frames at the keys from the keys, and whether exact keys removed it."""
+    info = dict(result.info)
+    if "key_residual" not in info:
+        if "key_residual_position" in info:  # measured by snap_to_keys before it removed it
+            block = {"position": info.pop("key_residual_position"),
+                     "rotation_rad": info.pop("key_residual_rotation_rad"), "removed": True}
+        elif "key_residual_removed" in info or "key_residual_left" in info:  # the lamp's (kept: docs/arnn.md)
+            r = info.get("key_residual_removed", info.get("key_residual_left"))
+            block = {"position": r["position_m"], "rotation_rad": r["angle_rad"],
+                     "removed": "key_residual_removed" in info}
+        else:  # a method that reports none: its frames at the keys as they are
+            from keyfill.learn.exact_keys import snap_to_keys
+
+            measured = snap_to_keys(result.motion, motion, keys)[1] if len(keys) >= 2 else {}
+            block = {"position": measured.get("key_residual_position", 0.0),
+                     "rotation_rad": measured.get("key_residual_rotation_rad", 0.0), "removed": False}
+        info["key_residual"] = block
+    if not m.learned:
+        info.update(model=None, model_path=None)
+    elif "model_path" not in info:
+        path = info.get("model") if info.get("model") and Path(str(info.get("model"))).exists() else None
+        chosen = getattr(m.implementation(), "model_path", None)  # the model these keys use (gan: partial keys)
+        path = path or (chosen(options, keys) if chosen is not None else options.model or m.default_model())
+        info["model_path"] = None if path is None else str(Path(path).resolve())
+        info["model"] = None if path is None else (Path(path).stem if str(path).endswith(".onnx") else Path(path).name)
+    return {"method": m.name, "keys": keys.to_list(), "frames": motion.num_frames, **info}
 
 
 def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOptions) -> Completion:
@@ -364,8 +404,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
                 bridged = _on_model_rig(m, motion, keys, options)
                 if bridged is not None:
                     bridged = with_feet(m, bridged, keys, options)
-                    bridged.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames,
-                                    **bridged.info}
+                    bridged.info = reported(m, motion, keys, options, bridged)
             except KeyfillError as e:
                 bridged = e
             if bridged is None:
@@ -389,7 +428,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
             except KeyfillError as e:
                 results[i] = e
                 continue
-            out.info = {"method": method, "keys": keys.to_list(), "frames": motion.num_frames, **out.info}
+            out.info = reported(m, motion, keys, options, out)
         results[i] = out
     return results
 

@@ -213,8 +213,9 @@ class PlotInfo:
     contacts: tuple[dict[str, list[list[int]]], ...] = ()
 
     def as_dict(self) -> dict:
+        first, last = self.frames  # docs/json.md: frames a count, frame_range the first and last (inclusive)
         d = {"output": self.output, "panels": list(self.panels), "files": list(self.labels),
-             "frames": list(self.frames)}
+             "frames": last - first + 1, "frame_range": [first, last]}
         if self.contacts:
             d["contacts"] = [{"file": label, "joints": joints} for label, joints in zip(self.labels, self.contacts)]
         return d

@@ -48,8 +48,9 @@ class PreviewInfo:
     fps: float | None  # GIF playback rate
 
     def as_dict(self) -> dict:
-        return {"output": self.output, "kind": self.kind, "view": self.view, "frames": list(self.frames),
-                "size": list(self.size), "fps": self.fps}
+        # docs/json.md: frames a count, frames_drawn the frame numbers shown
+        return {"output": self.output, "kind": self.kind, "view": self.view, "frames": len(self.frames),
+                "frames_drawn": list(self.frames), "size": list(self.size), "fps": self.fps}
 
 
 class StickRenderer:

@@ -200,6 +200,11 @@ def test_train_evaluate_export_and_the_model_names_its_method(capsys, tmp_path, 
     check_schema(d)
     assert d["input"] == str(model) and d["model"] == "lamp" and d["kind"] == "arnn"
 
+    pytest.importorskip("onnxruntime")  # a graph names its method too; its id is the file's stem
+    code, d = run_json(capsys, "complete", src, "--model", tmp_path / "lamp.onnx", "-o", tmp_path / "g.usda", "--json")
+    assert code == 0 and d["method"] == "arnn" and d["model"] == "lamp" and d["runtime"] == "onnx"
+    assert d["model_path"] == str((tmp_path / "lamp.onnx").resolve())
+
 
 # --- the error object -----------------------------------------------------------------------------
 
@@ -229,3 +234,16 @@ def test_without_json_nothing_reaches_stdout_on_failure(capsys, tmp_path):
     assert main(["info", str(tmp_path / "missing.bvh")]) == 1
     out, err = capsys.readouterr()
     assert out == "" and err.startswith("keyfill: error: ")
+
+
+def test_key_residual_measured_at_the_keys_equals_snap_to_keys_report():
+    from keyfill.learn.exact_keys import key_residual, snap_to_keys
+
+    walk = io.load(MIXAMO)
+    rng = np.random.default_rng(3)
+    noisy = walk.replace(positions=walk.positions + rng.normal(0, 0.1, walk.positions.shape))
+    for keys in (Keys([0, 30, 68]), Keys([0, 30, 68]).restrict(walk.skeleton, ["mixamorig:Hips"], "position")):
+        report = snap_to_keys(noisy, walk, keys)[1]
+        measured = key_residual(noisy, walk, keys)
+        assert measured["key_residual_position"] == report["key_residual_position"] > 0
+        assert measured["key_residual_rotation_rad"] == report["key_residual_rotation_rad"]

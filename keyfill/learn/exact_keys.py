@@ -56,6 +56,19 @@ def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict
     return pred.replace(rotations=rot, positions=pos, keys=keys), report
 
 
+def key_residual(pred: Motion, source: Motion, keys: Keys) -> dict:
+    """The report of :func:`snap_to_keys` without the correction: how far ``pred``'s frames at ``keys`` are from
+    ``source``'s (only the channels partial keys give), reading the key frames alone."""
+    k = keys.frames
+    res_pos = source.positions[k] - pred.positions[k]
+    angle = R.quat_angle(source.rotations[k], pred.rotations[k])
+    if keys.partial:
+        rot_mask, pos_mask = keys.channel_masks(pred.skeleton)
+        res_pos, angle = np.where(pos_mask, res_pos, 0.0), np.where(rot_mask, angle, 0.0)
+    return {"key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
+            "key_residual_rotation_rad": float(angle.max(initial=0.0))}
+
+
 def _snap_partial(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict]:
     """:func:`snap_to_keys` for partial keys: residuals of unkeyed channels count as zero."""
     k = keys.frames

@@ -261,11 +261,11 @@ def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, re
             block = {"position": r["position_m"], "rotation_rad": r["angle_rad"],
                      "removed": "key_residual_removed" in info}
         else:  # a method that reports none: its frames at the keys as they are
-            from keyfill.learn.exact_keys import snap_to_keys
+            from keyfill.learn.exact_keys import key_residual
 
-            measured = snap_to_keys(result.motion, motion, keys)[1] if len(keys) >= 2 else {}
-            block = {"position": measured.get("key_residual_position", 0.0),
-                     "rotation_rad": measured.get("key_residual_rotation_rad", 0.0), "removed": False}
+            measured = key_residual(result.motion, motion, keys)
+            block = {"position": measured["key_residual_position"],
+                     "rotation_rad": measured["key_residual_rotation_rad"], "removed": False}
         info["key_residual"] = block
     if not m.learned:
         info.update(model=None, model_path=None)
@@ -273,8 +273,14 @@ def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, re
         path = info.get("model") if info.get("model") and Path(str(info.get("model"))).exists() else None
         chosen = getattr(m.implementation(), "model_path", None)  # the model these keys use (gan: partial keys)
         path = path or (chosen(options, keys) if chosen is not None else options.model or m.default_model())
-        info["model_path"] = None if path is None else str(Path(path).resolve())
-        info["model"] = None if path is None else (Path(path).stem if str(path).endswith(".onnx") else Path(path).name)
+        if path is not None:
+            from keyfill.learn.onnx import GRAPH
+
+            path = Path(path).resolve()
+            if path.name == GRAPH and (path.parent / "config.json").is_file():
+                path = path.parent  # a model folder's own graph: the model is the folder (runtime says onnx)
+        info["model_path"] = None if path is None else str(path)
+        info["model"] = None if path is None else (path.stem if path.suffix.lower() == ".onnx" else path.name)
     return {"method": m.name, "keys": keys.to_list(), "frames": motion.num_frames, **info}
 
 

@@ -61,7 +61,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
       keyfill convert walk.bvh walk.glb
       keyfill convert walk.bvh walk_curves.usda --curves --keys 0,10,20,30
       cat walk.bvh | keyfill convert - - --format usda > walk.usda
-      keyfill convert cmu.bvh cmu.usda --meters-per-unit 0.056444     (metersPerUnit as stated)
+      keyfill convert capture.bvh capture.usda --meters-per-unit 0.0254     (inches: metersPerUnit 0.0254)
       keyfill convert mocap/ -o usd/ --format usdc --workers 2
     """
     from keyfill import io

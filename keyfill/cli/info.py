@@ -82,7 +82,7 @@ def info(file, in_fmt, fmt, meters_per_unit, representative, rig, rig_map, as_js
       keyfill info walk.bvh
       keyfill info keys.usda --json | jq .keys
       cat walk.bvh | keyfill info -                      (the format from the first bytes)
-      keyfill info cmu.bvh --meters-per-unit 0.056444     (CMU's inches x 0.45 per unit)
+      keyfill info capture.bvh --meters-per-unit 0.0254     (a file in inches)
       keyfill info salsa.bvh --representative 8 --json | jq .representative_frames
       keyfill info character.bvh --rig
       keyfill info character.bvh --rig-map character.toml --json | jq .rig

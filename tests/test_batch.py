@@ -204,8 +204,8 @@ def test_a_batch_runs_torch_on_one_thread_and_restores_it(lamps, tmp_path, monke
     before = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
-        summary = batch.run(batch.plan([lamps], tmp_path / "o"), complete_chunk, CompleteSpec("arnn", CompleteOptions()),
-                            workers=1)
+        summary = batch.run(batch.plan([lamps], tmp_path / "o"), complete_chunk,
+                            CompleteSpec("arnn", CompleteOptions(runtime="torch")), workers=1)
         assert [f["status"] for f in summary.files] == ["done"] * 7
         assert seen == [1] and torch.get_num_threads() == 2
     finally:

@@ -194,11 +194,30 @@ def test_onnx_runtime_imports_no_torch(lamp_graph, transformer, tmp_path):
 
 
 def test_a_model_without_a_graph_says_how_to_export(tmp_path, capsys):
+    from keyfill.learn.arnn.model import DEFAULT_MODEL
+
+    folder = tmp_path / "lamp"  # the shipped lamp model without the graph it ships with
+    shutil.copytree(DEFAULT_MODEL, folder, ignore=shutil.ignore_patterns(kx.GRAPH))
     code, _out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "arnn",
-                         "--runtime", "onnx")
+                          "--model", folder, "--runtime", "onnx")
     assert code == 1 and len(err.strip().splitlines()) == 1
-    assert "has no exported graph" in err and "keyfill export arnn -o arnn.onnx" in err
+    assert "has no exported graph" in err and f"keyfill export {folder}" in err
     assert not (tmp_path / "x.usda").exists()
+
+
+def test_the_shipped_transformer_and_lamp_models_run_their_graphs_without_torch(tmp_path):
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    for example, method in ((LAMP_KEYS, "arnn"), (root / "examples" / "human" / "keys_15.usda", "transformer")):
+        out = tmp_path / f"{method}.usda"
+        code = ("import sys; sys.modules['torch'] = None  # the base install: no torch\n"
+                "from keyfill.cli.main import main\n"
+                f"sys.exit(main(['complete', {str(example)!r}, '-o', {str(out)!r}, '--method', {method!r}]))")
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False)
+        assert r.returncode == 0, r.stderr
+        assert io.load(out).num_frames == io.load(example).num_frames
 
 
 def test_a_graph_of_other_weights_is_refused(transformer, tmp_path, capsys):
@@ -246,3 +265,19 @@ def test_batch_completion_through_the_graph(lamp_graph, tmp_path, capsys):
     code, _, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "torch.usda", "--method", "arnn")
     a, b = io.load(tmp_path / "out" / "k0.usda"), io.load(tmp_path / "torch.usda")
     assert np.abs(a.positions - b.positions).max() < 1e-5
+
+
+def test_a_graph_beside_a_changed_config_is_refused(tmp_path, capsys):
+    import json
+
+    from keyfill.learn.arnn.model import DEFAULT_MODEL
+
+    folder = tmp_path / "lamp"
+    shutil.copytree(DEFAULT_MODEL, folder)
+    config = json.loads((folder / "config.json").read_text())
+    config["training"] = {**config.get("training", {}), "note": "edited"}
+    (folder / "config.json").write_text(json.dumps(config))
+    code, _out, err = run(capsys, "complete", LAMP_KEYS, "-o", tmp_path / "x.usda", "--method", "arnn",
+                          "--model", folder)
+    assert code == 1 and "exported with another config.json" in err and f"keyfill export {folder}" in err
+    assert not (tmp_path / "x.usda").exists()

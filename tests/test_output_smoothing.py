@@ -12,6 +12,7 @@ from keyfill import io
 from keyfill.errors import ModelError
 from keyfill.kinematics import fk
 from keyfill.learn import registry
+from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.gan.rcfk import binomial_lowpass as torch_lowpass
 from keyfill.learn.modelfile import load_cached
 from keyfill.learn.transformer import model as T
@@ -48,11 +49,12 @@ def test_the_shipped_transformer_smooths_its_correction_and_keeps_its_keys():
         p = fk(m.rotations, m.positions, m.skeleton.parents)[1]
         return np.linalg.norm(p[3:] - 3 * p[2:-1] + 3 * p[1:-2] - p[:-3], axis=-1).mean()
 
-    smooth = registry.complete(motion, keys, "transformer").motion
+    torch_path = CompleteOptions(runtime="torch")  # the model object patched below (the graph has its own copy)
+    smooth = registry.complete(motion, keys, "transformer", torch_path).motion
     original = model.config
     try:
         model.config = dataclasses.replace(original, output_smoothing=0)
-        raw = registry.complete(motion, keys, "transformer").motion
+        raw = registry.complete(motion, keys, "transformer", torch_path).motion
     finally:
         model.config = original
     k = keys.frames

@@ -127,6 +127,9 @@ def check_binding(graph: Graph, folder: Path) -> None:
     if not (folder / WEIGHTS).is_file() or weights_digest(folder) != graph.weights_sha256:
         raise ModelError(f"{graph.path}: exported from other weights than {folder / WEIGHTS}; "
                          f"export it again with 'keyfill export {folder}'")
+    if read_config(folder) != graph.config:  # the graph runs with the settings it was exported with
+        raise ModelError(f"{graph.path}: exported with another config.json than {folder}'s; "
+                         f"export it again with 'keyfill export {folder}'")
 
 
 def select(method, model: str | None, runtime: str) -> Graph | None:

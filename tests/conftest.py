@@ -33,3 +33,20 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+def run(capsys, *args):
+    """``keyfill ARGS...`` in this process: ``(exit code, stdout, stderr)``."""
+    from keyfill.cli.main import main
+
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_error_line(err: str) -> str:
+    """The one ``keyfill: error:`` line of ``err`` (asserting there is exactly one and it is no internal error)."""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("keyfill: error: "), err
+    assert "internal error" not in lines[0] and "Traceback" not in err
+    return lines[0]

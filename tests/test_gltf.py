@@ -18,10 +18,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BVH_FIXTURES, DATA, shared_path
+from conftest import BVH_FIXTURES, DATA, one_error_line, run, shared_path
 
 from keyfill import io
-from keyfill.cli.main import main
 from keyfill.errors import DataError, FormatError
 from keyfill.motion import Keys
 
@@ -32,18 +31,6 @@ SHARED = sorted(p.name for p in BVH_FIXTURES.glob("*.bvh")) or ["(absent)"]
 TOL = 1e-6
 VALIDATOR = Path(os.environ.get("KEYFILL_GLTF_VALIDATOR", Path(__file__).parents[1] / ".venv-gltf-validator"))
 
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("keyfill: error: "), err
-    assert "internal error" not in lines[0] and "Traceback" not in err
-    return lines[0]
 
 
 def height(motion) -> float:

@@ -17,10 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import DATA
+from conftest import DATA, one_error_line, run
 
 from keyfill import io
-from keyfill.cli.main import main
 from keyfill.errors import DataError, FormatError
 from keyfill.io import bvh, usd
 from keyfill.motion import Keys, Motion, Skeleton
@@ -28,18 +27,6 @@ from keyfill.motion import Keys, Motion, Skeleton
 REGRESS = DATA / "regress"
 MIXAMO = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
 
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("keyfill: error: "), err
-    assert "internal error" not in lines[0] and "Traceback" not in err
-    return lines[0]
 
 
 #: regression file -> what its one error line says (``None``: it is read without error)

@@ -397,10 +397,42 @@ def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384)
     return rot, pos
 
 
+#: the channel values of the last file :func:`read` read, by (path, size, mtime), when they take at most
+#: :data:`KEEP_BYTES`: a completion writes its output next to the input it just read, and
+#: :func:`follow_template` then need not parse the input again (a big file is parsed again rather than kept)
+_LAST_READ: dict[tuple, tuple[Skeleton, np.ndarray]] = {}
+KEEP_BYTES = 32 * 2**20
+
+
+def _stamp(path: Path) -> tuple:
+    st = path.stat()
+    return (str(path.resolve()), st.st_size, st.st_mtime_ns)
+
+
 def read(path: str | Path, label=None) -> Motion:
     """Read a BVH file; ``label`` (default: the path) names it in error messages."""
     path = Path(path)
-    return parse(path.read_bytes(), label if label is not None else path)  # parse holds the only reference
+    label = label if label is not None else path
+    skeleton, fps, values = parse_values(path.read_bytes(), label)
+    try:
+        rot, pos = channels_to_pose(values, skeleton)
+        motion = Motion(skeleton, fps, rot, pos)
+    except DataError as e:
+        raise FormatError(str(e), label) from None
+    _LAST_READ.clear()
+    if values.nbytes <= KEEP_BYTES:
+        _LAST_READ[_stamp(path)] = (skeleton, values)
+    return motion
+
+
+def _template_values(template: Path) -> tuple[Skeleton, np.ndarray]:
+    """``(skeleton, (F, C) channel values)`` of the BVH file ``template``: from the last :func:`read` when it
+    was this file, unchanged, else parsed."""
+    hit = _LAST_READ.get(_stamp(template))
+    if hit is not None:
+        return hit
+    skeleton, _, values = parse_values(template.read_bytes(), template)
+    return skeleton, values
 
 
 # --- writing -----------------------------------------------------------------
@@ -494,7 +526,8 @@ def follow_template(values: np.ndarray, motion: Motion, template: str | Path) ->
     file ``template`` (e.g. the input ``motion`` was completed from) where they can be kept.
 
     At each frame where a joint's rotation is unchanged from the template's (within :data:`SAME_ROTATION_RAD`;
-    a completion's keys), its rotation channels take the template's own values (``-177.333`` stays
+    only the keys are compared when ``motion`` records keys, as a completion does), its rotation channels take
+    the template's own values (``-177.333`` stays
     ``-177.333``, not ``182.667``), and so do position channels equal to within 1e-12 of the file's scale.
     The frames after such a frame, up to the next one, are shifted by the whole turns per channel that put
     them next to it (the frames before the first, next to the first): still continuous, and unwrapped
@@ -503,14 +536,17 @@ def follow_template(values: np.ndarray, motion: Motion, template: str | Path) ->
     """
     sk = motion.skeleton
     try:
-        tsk, _, tvalues = parse_values(Path(template).read_bytes(), template)
+        tsk, tvalues = _template_values(Path(template))
     except (OSError, FormatError):
         return values
     if tsk.names != sk.names or tsk.channels != sk.channels or not len(values) or not len(tvalues):
         return values
     n = min(len(values), len(tvalues))
-    trot, _ = channels_to_pose(tvalues[:n], tsk)
-    same = R.quat_angle(motion.rotations[:n], trot) < SAME_ROTATION_RAD  # (n, J)
+    # the frames that may hold the template's rotations: a completion's keys, else every frame
+    maybe = np.arange(n) if motion.keys is None else motion.keys.frames[motion.keys.frames < n]
+    trot, _ = channels_to_pose(tvalues[maybe], tsk)
+    same = np.zeros((n, sk.num_joints), dtype=bool)
+    same[maybe] = R.quat_angle(motion.rotations[maybe], trot) < SAME_ROTATION_RAD  # (n, J)
     scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
     values = values.copy()
     frames = np.arange(len(values))

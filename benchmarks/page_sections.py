@@ -88,6 +88,11 @@ def complete(f: dict) -> list[str]:
     split = f["split_seconds"]
     rows += [[name, num(split[name], 3), num(cpu.get(name), 3) if name in cpu else ""]
              for name in in_order(split, SPLIT)]
+    learned = f.get("learned_startup")
+    if learned:
+        sec = learned["seconds"]
+        rows.append([f"cubic / transformer / gan, {learned['frames']}-frame human file (new process)",
+                     " / ".join(num(sec[m], 3) for m in ("cubic", "transformer", "gan")), ""])
     return lines + table(["", "wall s", "CPU s"], rows)
 
 

@@ -34,6 +34,16 @@ from keyfill.learn.corpus import model_hierarchy
 from keyfill.motion import Keys, Motion, Skeleton
 
 
+@dataclass(frozen=True, eq=False)
+class Served:
+    """What a human model serves: its ``skeleton`` (as its config records it), its ``fps`` and whether its
+    corpus ``folded`` a static top joint into the hips."""
+
+    skeleton: Skeleton
+    fps: float
+    folded: bool
+
+
 def fits(served: Served, motion: Motion, frame: int) -> bool:
     """``motion`` is on the model's own skeleton (as the model checks it, :func:`keyfill.learn.corpus.model_hierarchy`:
     the same joints and parents, bones within 1 % at ``frame``): no retargeting needed."""
@@ -132,16 +142,6 @@ def mapped_joints(rig: Rig) -> np.ndarray:
     out[[j for chain in rig.chains().values() for j in chain]] = True
     out[list(rig.roles.limbs.values())] = True
     return out
-
-
-@dataclass(frozen=True, eq=False)
-class Served:
-    """What a human model serves: its ``skeleton`` (as its config records it), its ``fps`` and whether its
-    corpus ``folded`` a static top joint into the hips."""
-
-    skeleton: Skeleton
-    fps: float
-    folded: bool
 
 
 def served(model_path) -> Served:

@@ -5,19 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run
 
 from keyfill import io
-from keyfill.cli.main import main
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 HUMAN = EXAMPLES / "human" / "keys_15.usda"
 LAMP = EXAMPLES / "lamp" / "keys.usda"
-
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.mark.parametrize("method", ["cubic", "transformer", "gan"])

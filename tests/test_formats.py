@@ -7,22 +7,15 @@ from io import BytesIO, TextIOWrapper
 from pathlib import Path
 
 import pytest
-from conftest import DATA
+from conftest import DATA, run
 
 from keyfill import io
 from keyfill.cli.common import FORMAT_CHOICE
-from keyfill.cli.main import main
 from keyfill.errors import UsageError
 from keyfill.io import batch
 
 MIXAMO = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
 DOC = Path(__file__).resolve().parents[1] / "docs" / "formats.md"
-
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_every_list_of_formats_is_the_table():

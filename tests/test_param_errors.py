@@ -10,10 +10,11 @@ import json
 import pickle
 from pathlib import Path
 
+import conftest
 import numpy as np
 import pytest
 import torch
-from conftest import DATA
+from conftest import DATA, run
 from synthetic_corpus import walker_motion, walker_skeleton
 
 from keyfill import io, limits, parallel, viz
@@ -28,17 +29,9 @@ HUMAN_KEYS = Path(__file__).parent.parent / "examples" / "human" / "keys_15.usda
 LAMP_MODEL = Path(__file__).parent.parent / "keyfill" / "learn" / "models" / "lamp-arnn"
 
 
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("keyfill: error: "), err
-    assert "internal error" not in lines[0]
-    return lines[0].removeprefix("keyfill: error: ")
+    """The message of the one ``keyfill: error:`` line of ``err``."""
+    return conftest.one_error_line(err).removeprefix("keyfill: error: ")
 
 
 def unkeyed() -> Motion:

@@ -13,10 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA
+from conftest import DATA, run
 
 from keyfill import io
-from keyfill.cli.main import main
 from keyfill.io import batch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,12 +24,6 @@ LAMP_CURVES = ROOT / "examples" / "edit" / "lamp_nod_curves.usda"
 LAMP_EDIT = ROOT / "examples" / "edit" / "lamp_lift.toml"
 MIXAMO = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
 CMU = DATA / "cmu_02_03_cgspeed_first4frames.bvh"
-
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def summary_of(capsys, *args) -> dict:

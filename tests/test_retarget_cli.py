@@ -8,23 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, shared_path
+from conftest import DATA, run, shared_path
 
 from keyfill import io
 from keyfill.characters.retarget import make_rig
-from keyfill.cli.main import main
 from keyfill.learn.rig_bridge import mapped_joints
 
 MIXAMO = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
 CMU = DATA / "cmu_02_03_cgspeed_first4frames.bvh"
 LAMP = Path(__file__).parent.parent / "examples" / "lamp" / "keys.usda"
 GRIP = "mixamorig:L_Grip"  # a name the mapper reads as no hand
-
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def one_error(err: str) -> str:

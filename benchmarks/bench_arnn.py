@@ -194,8 +194,7 @@ def main() -> None:
         return
     for record in report.values():
         print(results.summary(record))
-        for g in record["goals"]:
-            print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+        results.print_goals(record)
     if "inference" in report:
         r = report["inference"]["figures"]
         print(f"3-hop sequence, {r['frames']} frames, {r['keys']} keys:          median      best")

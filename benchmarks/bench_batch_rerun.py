@@ -114,8 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     bench = results.Run()
     figures = measure(args.files, args.repeat)
     record = bench.record("batch_rerun", figures, goals(figures), write=not args.no_record)
-    for g in record["goals"]:
-        print(f"{'met' if g['met'] else 'MISSED'}: {g['goal']}: {g['measured']}")
+    results.print_goals(record)
     print(results.summary(record))
     return 0
 

@@ -240,8 +240,7 @@ def main(argv: list[str]) -> int:
     print(f"{'':24s} {'seconds':>8s} {'cpu s':>7s} {'MB/s':>7s} {'x keyfill read':>15s}")
     for name, r in figures["rows"].items():
         print(f"{name:24s} {r['seconds']:8.3f} {r['cpu_seconds']:7.3f} {r['mb_per_s']:7.1f} {r['x_keyfill_read']:15.2f}")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
     print(results.summary(record))
     return 0
 

@@ -184,8 +184,7 @@ def main(argv: list[str]) -> int:
     for name, seconds in result["split_seconds"].items():
         cpu = result["split_cpu_seconds"].get(name)
         print(f"  {name:36s} {seconds:7.3f} {'' if cpu is None else f'{cpu:7.3f}'}")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
     print(results.summary(record))
     return 0
 

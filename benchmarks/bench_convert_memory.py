@@ -130,8 +130,7 @@ def main() -> None:
     for fmt, r in figures["outputs"].items():
         print(f"  -> .{fmt}: peak {r['peak_mb']} MiB = {r['peak_over_file']}x the file "
               f"({r['peak_minus_overhead_over_file']}x beyond the overhead), {r['seconds']} s, output {r['output_mb']} MiB")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
 
 
 if __name__ == "__main__":

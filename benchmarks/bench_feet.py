@@ -193,8 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                "speed": speed(next(iter(sets.values()))[0])}
     record = bench.record("feet", figures, goals(figures), write=not args.no_record)
     print(f"speed: {figures['speed']}")
-    for g in record["goals"]:
-        print(f"{'met' if g['met'] else 'MISSED'}: {g['goal']}: {g['measured']}")
+    results.print_goals(record)
     print(results.summary(record))
     return 0
 

@@ -83,8 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     m = motion()
     figures = {"frames": FRAMES, "joints": m.num_joints, "repeat": args.repeat, "formats": measure(m, args.repeat)}
     record = bench.record("formats", figures, goals(figures), write=not args.no_record)
-    for g in record["goals"]:
-        print(f"{'met' if g['met'] else 'MISSED'}: {g['goal']}: {g['measured']}")
+    results.print_goals(record)
     print(results.summary(record))
     return 0
 

@@ -83,8 +83,7 @@ def main(argv=None) -> int:
         print(f"  {kind:<15} {cm(e['joints_cm']):>6} {cm(e['root_cm']):>6}")
     v = report["variety_cm"]
     print(f"variety (cm): 4 DNAs {cm(v.get('dnas'))}, 4 noise seeds {cm(v['seeds'])}")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
     return 0
 
 

@@ -207,8 +207,7 @@ def main(argv=None) -> int:
         for name, r in table.items():
             print(f"  {name:<12} {r['clips']:>5} {r['foot_skating_cm_s']:>13.2f} {r['jitter_m_s3']:>13.2f} "
                   f"{r['range_violations_pct']:>15.3f} {r['bone_error_cm']:>14.2e}")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
     return 0
 
 

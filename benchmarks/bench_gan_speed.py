@@ -95,8 +95,7 @@ def main(argv=None) -> int:
         c = r["complete_ms"]
         print(f"{r['threads']:>7} {r['frames']:>7} {r['keys']:>5} {c['median']:>11.1f} ({c['best']:.1f}) "
               f"{r['load_ms']['median']:>8.1f}")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
     return 0
 
 

@@ -201,8 +201,7 @@ def main(argv: list[str] | None = None) -> int:
     record = bench.record("retarget", figures, goals(figures), write=not args.no_record)
     print(f"round trip: {figures['round_trip']}")
     print(f"speed: {figures['speed']}")
-    for g in record["goals"]:
-        print(f"{'met' if g['met'] else 'MISSED'}: {g['goal']}: {g['measured']}")
+    results.print_goals(record)
     print(results.summary(record))
     return 0
 

@@ -151,8 +151,7 @@ def main(argv=None) -> int:
               f"{row['goal_ms']:>8.0f} {row['paper_ms']:>9.0f} {row['complete_vs_paper']:>9.2f}")
         if "onnx_complete_ms" in row:
             print(f"{'onnx':>7} {row['batch']:>5} {'':>11} {row['onnx_complete_ms']:>12.2f} {row['goal_ms']:>8.0f}")
-    for g in record["goals"]:
-        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+    results.print_goals(record)
     return 0
 
 

@@ -132,6 +132,12 @@ class Run:
         return record
 
 
+def print_goals(record: dict) -> None:
+    """One line per goal of ``record`` for a script's text output: ``goal: <goal>: <measured> met|MISSED``."""
+    for g in record["goals"]:
+        print(f"goal: {g['goal']}: {g['measured']} {'met' if g['met'] else 'MISSED'}")
+
+
 def summary(record: dict) -> str:
     """One line for a script's text output: the machine and the 1-minute load before and after the run."""
     m = record["machine"]

@@ -112,9 +112,6 @@ class Rig:
         joints) and ``neck`` (the neck joints, then the head)."""
         return {"spine": [self.roles.hips, *self.roles.spine], "neck": [*self.roles.neck, self.roles.head]}
 
-    def single_roles(self) -> dict[str, int]:
-        """Every limb role present in this rig -> its joint."""
-        return dict(self.roles.limbs)
 
 
 def make_rig(skeleton: Skeleton, roles: RoleMap | None = None, rig_map: dict | None = None,
@@ -247,7 +244,7 @@ def retarget(motion: Motion, source: Rig, target: Rig) -> Motion:
                        R.quat_conjugate(convert))
     F, J = motion.num_frames, target.skeleton.num_joints
     tgt_delta: dict[int, np.ndarray] = {}
-    for role, j in target.single_roles().items():
+    for role, j in target.roles.limbs.items():
         if role in source.roles.limbs:
             tgt_delta[j] = delta[:, source.roles.limbs[role]]
     for name, chain in target.chains().items():

@@ -113,7 +113,6 @@ class Rig:
         return {"spine": [self.roles.hips, *self.roles.spine], "neck": [*self.roles.neck, self.roles.head]}
 
 
-
 def make_rig(skeleton: Skeleton, roles: RoleMap | None = None, rig_map: dict | None = None,
              label: str = "the skeleton") -> Rig:
     """The :class:`Rig` of ``skeleton``: its roles (found with :func:`map_roles` unless given; ``label`` names

@@ -79,10 +79,11 @@ class LazyGroup(click.Group):
 def cli(ctx, quiet, verbose, debug):
     """keyfill fills in the frames between keyframes of character animation.
 
-    It reads and writes BVH and USD files and offers spline baselines, learned
-    in-betweening (ARNN, transformer, generative-tweening GAN; many files at
-    once, ONNX export), a physics-based hopping-lamp dataset and tangent-space
-    editing of Bezier curves, all on one Motion data type.
+    It reads and writes BVH, USD and glTF files and offers spline baselines,
+    learned in-betweening (ARNN, transformer, generative-tweening GAN; many
+    files at once, ONNX export; the human models on any humanoid rig through
+    retargeting, feet locked on request), a physics-based hopping-lamp dataset
+    and tangent-space editing of Bezier curves, all on one Motion data type.
 
     \b
     Examples:

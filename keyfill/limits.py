@@ -50,6 +50,8 @@ MAX_SEED = 2**63 - 1
 #: local worker processes, jobs in flight on a cluster, and torch threads
 MAX_WORKERS = 1024
 MAX_CONNECT_SECONDS = 86_400.0
+#: how long ``--scheduler`` is tried before one error line (``--connect-timeout``'s default, CLI and library)
+CONNECT_SECONDS = 3.0
 
 #: one number in keyfill's text formats (bytes or str via :func:`is_number`)
 NUMBER = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"

@@ -24,7 +24,7 @@ import threading
 import time
 
 from keyfill.errors import UsageError
-from keyfill.limits import MAX_CONNECT_SECONDS, MAX_WORKERS, check_count
+from keyfill.limits import CONNECT_SECONDS, MAX_CONNECT_SECONDS, MAX_WORKERS, check_count
 
 
 def available_cpus() -> int:
@@ -176,7 +176,7 @@ class DaskCluster:
         self.client.close()
 
 
-def check_options(workers: int | None, connect_timeout: float = 5.0) -> None:
+def check_options(workers: int | None, connect_timeout: float = CONNECT_SECONDS) -> None:
     """:class:`UsageError` (naming the parameter) for ``workers`` or ``connect_timeout`` no executor can use."""
     if workers is not None:
         check_count("workers", workers, MAX_WORKERS)
@@ -185,7 +185,7 @@ def check_options(workers: int | None, connect_timeout: float = 5.0) -> None:
                          f"got {connect_timeout}", params="connect_timeout")
 
 
-def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = 5.0):
+def executor(workers: int | None = None, scheduler: str | None = None, connect_timeout: float = CONNECT_SECONDS):
     """The executor for ``--workers`` / ``--scheduler``: ``(executor, jobs to keep in flight)``.
 
     ``workers`` defaults to one process per available core (1 runs everything

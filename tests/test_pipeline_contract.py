@@ -17,6 +17,7 @@ from conftest import DATA, run
 
 from keyfill import io
 from keyfill.io import batch
+from keyfill.limits import CONNECT_SECONDS
 
 ROOT = Path(__file__).resolve().parents[1]
 LAMP_KEYS = ROOT / "examples" / "lamp" / "keys.usda"
@@ -295,12 +296,18 @@ def test_a_batch_never_writes_over_one_of_its_inputs(tmp_path, capsys):
 # --- a bad --scheduler fails fast -------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("command", ["complete", "simulate"])
 @pytest.mark.parametrize("address,timeout,bound", [("tcp://127.0.0.1:9", "2", 2.0), ("localhost", "2", 2.0),
-                                                   ("tcp://127.0.0.1:9", None, 5.0)])
-def test_a_bad_scheduler_is_one_line_within_the_timeout(tmp_path, address, timeout, bound):
+                                                   ("tcp://127.0.0.1:9", None, CONNECT_SECONDS)])
+def test_a_bad_scheduler_is_one_line_within_the_timeout(tmp_path, command, address, timeout, bound):
     pytest.importorskip("distributed")
-    cmd = [sys.executable, "-m", "keyfill", "complete", str(LAMP_KEYS), str(MIXAMO), "-o", str(tmp_path / "out"),
-           "--key-every", "5", "--scheduler", address]
+    if command == "simulate":
+        pytest.importorskip("pybullet")
+        cmd = [sys.executable, "-m", "keyfill", "simulate", "-o", str(tmp_path / "out"), "--count", "1"]
+    else:
+        cmd = [sys.executable, "-m", "keyfill", "complete", str(LAMP_KEYS), str(MIXAMO), "-o", str(tmp_path / "out"),
+               "--key-every", "5"]
+    cmd += ["--scheduler", address]
     if timeout is not None:
         cmd += ["--connect-timeout", timeout]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -314,3 +321,18 @@ def test_a_bad_scheduler_is_one_line_within_the_timeout(tmp_path, address, timeo
     # the timeout, plus the start of a Python process (a few seconds on a loaded machine)
     assert seconds < bound + 4.0, seconds
     assert not (tmp_path / "out").exists()
+
+
+def test_the_connect_timeout_default_is_a_few_seconds_and_one_value(capsys):
+    """--connect-timeout defaults to limits.CONNECT_SECONDS in every command and library entry point."""
+    import inspect
+
+    from keyfill import parallel
+    from keyfill.sim import runner
+
+    assert 1.0 <= CONNECT_SECONDS <= 5.0
+    for fn in (parallel.executor, parallel.check_options, batch.run, runner.simulate, runner.check_arguments):
+        assert inspect.signature(fn).parameters["connect_timeout"].default == CONNECT_SECONDS, fn
+    for command in ("complete", "convert", "retarget", "simulate"):
+        code, out, _ = run(capsys, command, "--help")
+        assert code == 0 and f"[default: {CONNECT_SECONDS}]" in " ".join(out.split()), command

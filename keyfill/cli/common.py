@@ -11,6 +11,7 @@ import click
 
 from keyfill import io
 from keyfill.errors import UsageError
+from keyfill.limits import CONNECT_SECONDS
 from keyfill.motion import Keys, Motion
 
 #: ``--format`` / ``--in-format`` choices: the names of the one table of formats
@@ -220,7 +221,7 @@ def batch_options(f):
     f = click.option("--force", is_flag=True,
                      help="Redo every output, also those the output folder's record says were made the same way "
                           "(docs/batch.md), and allow an output that is one of the inputs.")(f)
-    f = click.option("--connect-timeout", default=5.0, show_default=True, type=float, metavar="SECONDS",
+    f = click.option("--connect-timeout", default=CONNECT_SECONDS, show_default=True, type=float, metavar="SECONDS",
                      help="Give up reaching the --scheduler after this long.")(f)
     f = click.option("--scheduler", metavar="ADDRESS",
                      help="Run the batch on a Dask distributed cluster, e.g. tcp://host:8786.")(f)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from keyfill.cli.common import emit_json, progress, say
+from keyfill.limits import CONNECT_SECONDS
 
 DEFAULT_ITERATIONS = 200
 
@@ -23,7 +24,7 @@ DEFAULT_ITERATIONS = 200
 @click.option("--format", "fmt", type=click.Choice(["usd", "bvh"]), default="usd", show_default=True,
               help="Motion file format of the sequences (.usda or .bvh).")
 @click.option("--scheduler", metavar="ADDRESS", help="Run on a Dask distributed cluster, e.g. tcp://host:8786.")
-@click.option("--connect-timeout", default=10.0, show_default=True, type=float, metavar="SECONDS",
+@click.option("--connect-timeout", default=CONNECT_SECONDS, show_default=True, type=float, metavar="SECONDS",
               help="Give up reaching the --scheduler after this long.")
 @click.option("--max-runs", type=int, help="Stop after this many annealing runs [default: 20 x count + 20].")
 @click.option("--force", is_flag=True, help="Replace a folder made with another configuration.")

@@ -48,6 +48,7 @@ from pathlib import Path
 
 from keyfill.errors import FormatError, KeyfillError, UsageError
 from keyfill.io import FORMATS, SUFFIXES
+from keyfill.limits import CONNECT_SECONDS
 
 #: suffixes of motion files a folder input contributes (those of :data:`keyfill.io.FORMATS`)
 MOTION_SUFFIXES = tuple(SUFFIXES)
@@ -416,7 +417,7 @@ def failure(item: Item, error: BaseException) -> dict:
 
 
 def run(items: list[Item], fn: Callable, spec, workers: int | None = None, scheduler: str | None = None,
-        force: bool = False, chunk: int = CHUNK, connect_timeout: float = 5.0,
+        force: bool = False, chunk: int = CHUNK, connect_timeout: float = CONNECT_SECONDS,
         on_chunk: Callable[[list[dict]], None] | None = None, recipe: dict | None = None) -> Summary:
     """Do ``items`` with the job function ``fn(chunk, spec) -> outcomes``; see the module docstring.
 

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from keyfill.errors import DataError, UsageError
 from keyfill.io import hops as ds
-from keyfill.limits import check_seed
+from keyfill.limits import CONNECT_SECONDS, check_seed
 from keyfill.motion import Motion
 from keyfill.parallel import check_options
 from keyfill.parallel import executor as make_executor
@@ -101,7 +101,7 @@ def config_of(job: Job, fmt: str) -> dict:
 
 def check_arguments(
     count: int, seed: int, iterations: int, workers: int | None, fmt: str,
-    max_runs: int | None = None, connect_timeout: float = 10.0,
+    max_runs: int | None = None, connect_timeout: float = CONNECT_SECONDS,
 ) -> None:
     """Raise :class:`UsageError` for values ``simulate`` cannot work with, naming the parameter."""
     if count < 1:
@@ -256,7 +256,7 @@ def simulate(
     force: bool = False,
     settings: Settings = DEFAULT_SETTINGS,
     max_runs: int | None = None,
-    connect_timeout: float = 10.0,
+    connect_timeout: float = CONNECT_SECONDS,
     on_run: Callable[[Outcome, int, int], None] | None = None,
 ) -> Summary:
     """Build (or resume) a hop dataset of ``count`` sequences in ``folder``.

@@ -325,6 +325,36 @@ def test_preview_filmstrip(tmp_path):
     assert pixels(tmp_path / "t.png").shape == (2 * 124 + 4, 8 * 104 + 4, 3)  # two rows of 8
 
 
+@pytest.mark.parametrize("name", ["strip.png", "anim.gif", "still.png"])
+@pytest.mark.parametrize("motion", ["walker", "lamp"])
+def test_preview_reports_the_size_of_the_file_written_and_default_pictures_are_readable(tmp_path, capsys, name,
+                                                                                        motion):
+    """--json's size is the written file's (a filmstrip: the whole sheet); frame_size one frame; default frames are
+    at least 300 px on each side (a filmstrip frame 300 px tall), also for a wide lamp hop."""
+    src = tmp_path / "m.usda"
+    io.save(walker() if motion == "walker" else lamp_hop(), src)
+    out = tmp_path / name
+    trail = ["--trail", "LeftLeg" if motion == "walker" else "head"] if name == "still.png" else []
+    code = main(["preview", str(src), "-o", str(out), "--json", *trail])
+    d = __import__("json").loads(capsys.readouterr().out)
+    assert code == 0
+    with Image.open(out) as im:
+        written = im.size
+        frames = getattr(im, "n_frames", 1)
+    assert tuple(d["size"]) == written
+    w, h = d["frame_size"]
+    if name == "strip.png":
+        assert h == S.STRIP_HEIGHT >= 300 and d["kind"] == "filmstrip"
+        cols = min(S.STRIP_COLUMNS, d["frames"])
+        rows = -(-d["frames"] // cols)
+        assert written == (cols * (w + 4) + 4, rows * (h + 4) + 4)  # the cells and their 4 px gaps
+    else:
+        assert (w, h) == written and min(written) >= S.MIN_SIDE >= 300
+        assert frames == (d["frames"] if name == "anim.gif" else 1)
+    code = main(["preview", str(src), "-o", str(tmp_path / ("again_" + name)), *trail])
+    assert code == 0 and f"{written[0]}x{written[1]} px" in capsys.readouterr().err
+
+
 def test_preview_trail_still_shows_the_path(tmp_path):
     before = walker()
     after = walker(swing=0.9)

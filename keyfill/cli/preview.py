@@ -32,7 +32,8 @@ def _size(ctx, param, value):
                    "With a .png output: one still of the whole trail and the ghosted key poses.")
 @click.option("--fps", type=float, help="GIF playback rate in frames per second (default: the file's).")
 @click.option("--size", callback=_size, metavar="WxH",
-              help="Picture size in pixels (for a filmstrip: one frame). Default: fitted to the motion.")
+              help="Picture size in pixels (for a filmstrip: one frame). Default: fitted to the motion, no side under "
+                   "300 px.")
 @click.option("--labels", metavar="NAMES", help="Names for the files, comma-separated (default: file names).")
 @keys_options
 @in_format_option
@@ -69,4 +70,7 @@ def preview(files, output, view, frames, step, trail, fps, size, labels, keys_te
         what = {"gif": f"{len(info.frames)}-frame GIF at {info.fps:g} fps" if info.fps else "",
                 "filmstrip": f"filmstrip of {len(info.frames)} frames",
                 "still": f"still of the {', '.join(trail)} trail"}[info.kind]
-        say(f"wrote {output}: {what}, {info.size[0]}x{info.size[1]} px, {view} view")
+        size = f"{info.size[0]}x{info.size[1]} px"
+        if info.kind == "filmstrip":
+            size += f" (each frame {info.frame_size[0]}x{info.frame_size[1]} px)"
+        say(f"wrote {output}: {what}, {size}, {view} view")

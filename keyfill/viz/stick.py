@@ -30,6 +30,8 @@ from keyfill.viz.scene import VIEWS, figure_points, ground_segments, is_planar, 
 
 #: default picture sizes in pixels: the long side of a GIF and a still, the height of a filmstrip frame
 GIF_SIDE, STILL_SIDE, STRIP_HEIGHT = 480, 720, 300
+#: the shortest side of a default-sized picture (a wide motion gets a wider picture, not a lower one)
+MIN_SIDE = 300
 #: frames in a filmstrip without --step, and per filmstrip row
 STRIP_FRAMES, STRIP_COLUMNS = 8, 8
 #: most frames a GIF may have (Pillow holds them all in memory)
@@ -44,13 +46,15 @@ class PreviewInfo:
     kind: str  # "gif", "filmstrip" or "still"
     view: str
     frames: tuple[int, ...]  # frame numbers shown (file numbering)
-    size: tuple[int, int]  # pixels (of one frame for a filmstrip)
+    size: tuple[int, int]  # (width, height) pixels of the file written (a filmstrip: the whole sheet)
     fps: float | None  # GIF playback rate
+    frame_size: tuple[int, int] | None = None  # (width, height) pixels of one frame (of a filmstrip: one cell)
 
     def as_dict(self) -> dict:
         # docs/json.md: frames a count, frames_drawn the frame numbers shown
         return {"output": self.output, "kind": self.kind, "view": self.view, "frames": len(self.frames),
-                "frames_drawn": list(self.frames), "size": list(self.size), "fps": self.fps}
+                "frames_drawn": list(self.frames), "size": list(self.size),
+                "frame_size": list(self.frame_size or self.size), "fps": self.fps}
 
 
 class StickRenderer:
@@ -234,14 +238,18 @@ class StickRenderer:
 
 
 def _default_size(aspect: float, side: int) -> tuple[int, int]:
-    """A size whose long side is ``side`` (or, for side < 0, whose height is -side) for ``aspect`` = w/h."""
+    """A size whose long side is ``side``, grown to no side under ``MIN_SIDE`` (or, for side < 0, whose height is
+    -side) for ``aspect`` = w/h."""
     if side < 0:
         h = -side
         w = min(max(h * aspect, h * 0.5), h * 2.0)
-    elif aspect >= 1:
-        w, h = side, side / min(aspect, 3.0)
     else:
-        w, h = side * max(aspect, 1 / 3.0), side
+        if aspect >= 1:
+            w, h = side, side / min(aspect, 3.0)
+        else:
+            w, h = side * max(aspect, 1 / 3.0), side
+        grow = max(1.0, MIN_SIDE / min(w, h))  # readable: a wide motion gets a wider picture, no side under MIN_SIDE
+        w, h = w * grow, h * grow
     return round(w / 2) * 2, round(h / 2) * 2
 
 
@@ -347,14 +355,17 @@ def preview(
             cells = [Image.fromarray(r.render(t, r.bracketing_keys(t), r.frame_label(t))[..., :3])
                      for t in wrap(shown, desc="frames")]
             _montage(cells, STRIP_COLUMNS, r.palette_colors()).save(tmp, format="PNG", optimize=True)
-            out_fps = None
+            out_fps, frame_size = None, tuple(cells[0].size)
         else:
             ghosts = r.keys.tolist() if len(r.keys) else sorted({0, cut[0].num_frames - 1})
             last = shown_first + max(m.num_frames for m in cut) - 1
             image = r.render(None, ghosts, f"{', '.join(trail)} path, frames {shown_first}-{last}")
             Palette([image], 256, r.palette_colors()).apply(image).save(tmp, format="PNG", optimize=True)
             shown, out_fps = ghosts, None
-    return PreviewInfo(str(output), kind, view, tuple(shown_first + int(t) for t in shown), r.size, out_fps)
+        with Image.open(tmp) as written:  # the size reported is that of the file, read back from its header
+            written_size = tuple(written.size)
+    return PreviewInfo(str(output), kind, view, tuple(shown_first + int(t) for t in shown), written_size, out_fps,
+                       frame_size=frame_size if kind == "filmstrip" else written_size)
 
 
 def _montage(cells, columns: int, colors):

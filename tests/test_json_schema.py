@@ -58,6 +58,14 @@ def check_schema(d: dict) -> None:
         assert old not in d, old
     for f in ("file", "folder"):
         assert f not in d
+    if "inputs" in d:  # a batch: how many inputs, and ``files`` one outcome per input
+        assert type(d["inputs"]) is int and d["inputs"] == len(d["files"]) == len(d["input"])
+    if "files" in d:  # only ever a batch's outcomes (plot's legend names are ``labels``)
+        assert isinstance(d["files"], list) and "inputs" in d
+        for outcome in d["files"]:
+            assert isinstance(outcome["input"], str) and isinstance(outcome["output"], str)
+            assert outcome["status"] in ("done", "redone", "skipped", "failed")
+            check_schema(outcome)
 
 
 def check_key_residual(d: dict) -> None:
@@ -101,6 +109,9 @@ def test_convert_single_and_batch(capsys, tmp_path):
     code, d = run_json(capsys, "convert", CMU, MIXAMO, "-o", tmp_path / "batch/", "--format", "usda", "--json")
     assert code == 0 and isinstance(d["output"], str)
     assert not isinstance(d.get("frames"), list)
+    check_schema(d)
+    assert sorted(d["input"]) == sorted([str(CMU), str(MIXAMO)]) and d["inputs"] == 2
+    assert {(f["input"], f["frames"], f["joints"]) for f in d["files"]} == {(str(CMU), 4, 31), (str(MIXAMO), 69, 55)}
 
 
 def test_complete_baseline_learned_and_batch(capsys, tmp_path):
@@ -123,6 +134,8 @@ def test_complete_baseline_learned_and_batch(capsys, tmp_path):
 
     code, d = run_json(capsys, "complete", CMU, MIXAMO, "--key-every", "3", "-o", tmp_path / "batch/", "--json")
     assert code == 0 and isinstance(d["output"], str)
+    check_schema(d)
+    assert sorted(d["input"]) == sorted([str(CMU), str(MIXAMO)])
     for outcome in d["files"]:
         if outcome.get("status") in ("done", "redone"):
             check_key_residual(outcome)
@@ -134,6 +147,10 @@ def test_retarget(capsys, tmp_path):
     assert code == 0
     check_schema(d)
     assert d["frames"] == 4 and d["joints"] == 31
+    code, d = run_json(capsys, "retarget", CMU, MIXAMO, "--to", CMU, "-o", tmp_path / "rb/", "--json")
+    assert code == 0
+    check_schema(d)
+    assert sorted(d["input"]) == sorted([str(CMU), str(MIXAMO)]) and d["done"] == 2
 
 
 def test_plot_has_a_frame_range(capsys, tmp_path):
@@ -141,6 +158,7 @@ def test_plot_has_a_frame_range(capsys, tmp_path):
     assert code == 0
     check_schema(d)
     assert d["input"] == [str(MIXAMO)] and d["frame_range"] == [10, 19] and d["frames"] == 10
+    assert d["labels"] == [MIXAMO.stem] and "files" not in d
 
 
 def test_preview_lists_the_frames_drawn(capsys, tmp_path):
@@ -148,6 +166,10 @@ def test_preview_lists_the_frames_drawn(capsys, tmp_path):
     assert code == 0
     check_schema(d)
     assert d["input"] == [str(CMU)] and d["frames_drawn"] and d["frames"] == len(d["frames_drawn"])
+    from PIL import Image
+
+    with Image.open(tmp_path / "p.png") as im:  # size: the file written; frame_size: one filmstrip frame
+        assert d["size"] == list(im.size) and d["frame_size"] == [64, 64] and d["kind"] == "filmstrip"
 
 
 def test_edit_tangents_and_pose(capsys, tmp_path):

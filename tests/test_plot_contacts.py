@@ -128,7 +128,7 @@ def test_cli_plot_contacts(walk, tmp_path, capsys):
     rig = make_rig(walk.skeleton)
     labels = feet.contacts(walk, rig, keys=walk.keys)
     toe = next(k for k, (role, _) in enumerate(feet.contact_joints(rig)) if role == "toe_l")
-    assert summary["contacts"][0]["file"] == "walk"
+    assert summary["contacts"][0]["label"] == "walk"
     assert summary["contacts"][0]["joints"]["Toes_L"] == [list(s) for s in runs(labels[:, toe])]
     # the picture: the curve's panel, and under it the band, taller than without it and shaded in blue
     assert main(["plot", str(tmp_path / "walk.usda"), "--positions", "--joints", "Toes_L", "--channels", "y",

@@ -361,7 +361,9 @@ class Summary:
         return [f for f in self.files if f["status"] == "failed"]
 
     def to_dict(self) -> dict:
-        return {"output": self.output, "inputs": len(self.files), "done": self.count("done"),
+        # docs/json.md: ``input`` the files read (one per outcome in ``files``), ``inputs`` their count
+        return {"input": [f["input"] for f in self.files], "output": self.output, "inputs": len(self.files),
+                "done": self.count("done"),
                 "redone": self.count("redone"), "skipped": self.count("skipped"), "failed": self.count("failed"),
                 "seconds": self.seconds, "files": self.files}
 

@@ -214,10 +214,11 @@ class PlotInfo:
 
     def as_dict(self) -> dict:
         first, last = self.frames  # docs/json.md: frames a count, frame_range the first and last (inclusive)
-        d = {"output": self.output, "panels": list(self.panels), "files": list(self.labels),
+        # the legend names are ``labels`` (as --labels): ``files`` is a batch's per-file outcomes everywhere else
+        d = {"output": self.output, "panels": list(self.panels), "labels": list(self.labels),
              "frames": last - first + 1, "frame_range": [first, last]}
         if self.contacts:
-            d["contacts"] = [{"file": label, "joints": joints} for label, joints in zip(self.labels, self.contacts)]
+            d["contacts"] = [{"label": label, "joints": joints} for label, joints in zip(self.labels, self.contacts)]
         return d
 
 

@@ -1,6 +1,8 @@
 # keyfill: `make demo` and `make test` each create .venv, install keyfill with every extra
 # (train: torch, pinned to 2.13.0, the local CPU build; sim: pybullet; dask; onnx: export) and
-# pinned dependencies, and run. `pip install .` alone installs none of the extras.
+# pinned dependencies, and the human models' own distribution (models/bandai, CC BY-NC 4.0, editable:
+# weights retrained into its folders are used at once), and run. `pip install .` alone installs none of
+# the extras and no human model.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
@@ -12,9 +14,10 @@ OUT := out/demo
 
 .PHONY: demo test test-slow test-interop fuzz gan-models transformer-model gltf-validator clean
 
-$(STAMP): pyproject.toml constraints.txt
+$(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx,train,sim,dask]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps -e ./models/bandai
 	@touch $(STAMP)
 
 demo: $(STAMP)
@@ -33,7 +36,7 @@ demo: $(STAMP)
 	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_transformer.usda --method transformer
 	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_cubic.usda --method cubic
 	$(BIN)/keyfill preview $(OUT)/human15_cubic.usda $(OUT)/human15_transformer.usda --labels cubic,transformer --view side -o $(OUT)/human15.png
-	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model, CC BY-NC 4.0, with its feet locked and raw, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_gan_raw.usda, human_cubic.usda, human.png, human_feet.png (frames 0-99, raw against locked feet), human_feet_contacts.png (toe curves and foot contacts, frames 0-99), human15_transformer.usda, human15_cubic.usda, human15.png)"
+	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model of models/bandai, CC BY-NC 4.0, with its feet locked and raw, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_gan_raw.usda, human_cubic.usda, human.png, human_feet.png (frames 0-99, raw against locked feet), human_feet_contacts.png (toe curves and foot contacts, frames 0-99), human15_transformer.usda, human15_cubic.usda, human15.png)"
 
 test: $(STAMP)
 	@command -v npm >/dev/null && $(MAKE) --no-print-directory gltf-validator \
@@ -60,7 +63,8 @@ FUZZ_TIMEOUT ?= 20
 fuzz: $(STAMP)
 	$(BIN)/python tests/fuzzing.py --cases $(FUZZ_CASES) --jobs 2 --mem-mb $(FUZZ_MEM_MB) --timeout $(FUZZ_TIMEOUT)
 
-# The human models shipped in keyfill/learn/models (MODELS: where to train them).
+# The human models of the distribution models/bandai (CC BY-NC 4.0; MODELS: where to train them; a
+# retrained model replaces a shipped one by copying its folder into models/bandai/keyfill_models_bandai/).
 # The gan models of docs/gan.md and docs/benchmarks.md, trained on Bandai-Namco dataset-2 (unpacked from
 # ../shared/data into data/bandai2 on first use) with the `normal` style held out: the global path
 # predictor, then two generators on it, one with Motion DNA (gaps up to 600 frames) and one that also

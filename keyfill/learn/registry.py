@@ -15,7 +15,8 @@ A learned method's module provides:
   method calls the model's own hook: ``benchmark_method()`` for ``lafan1``
   (:mod:`keyfill.learn.protocols.lafan1`), ``predict(sequences)`` for ``keys``
   (:mod:`keyfill.learn.protocols.keys`);
-* ``DEFAULT_MODEL``: the folder of the model shipped with keyfill, or None.
+* ``DEFAULT_MODEL``: the folder of its shipped model (inside keyfill, or in an installed model
+  distribution: :mod:`keyfill.learn.installed_models`), or None.
 
 Its training module provides ``TRAINING``, a
 :class:`keyfill.learn.training.TrainingSpec` (options, help text and the task
@@ -105,7 +106,8 @@ class Method:
         return importlib.import_module(self.training).TRAINING
 
     def default_model(self) -> Path | None:
-        """The model folder shipped with keyfill for this method, or None."""
+        """The folder of this method's shipped model (:mod:`keyfill.learn.installed_models`), or None when none
+        ships or its distribution is not installed."""
         path = getattr(self.implementation(), "DEFAULT_MODEL", None)
         return Path(path) if path is not None and Path(path).is_dir() else None
 
@@ -181,13 +183,23 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
         method = METHODS[name_or_path]
         path = method.default_model()
         if path is None:
-            raise UsageError(f"no {name_or_path} model ships with keyfill; give a model folder "
-                             f"(train one with 'keyfill train {name_or_path}')")
+            raise _no_model(method)
         return name_or_path, method, method.implementation().load(path, device)
     if not Path(name_or_path).exists():
         raise UsageError(f"{name_or_path!r} is neither a method ({', '.join(METHODS)}) nor a model folder")
     method = method_for_model(name_or_path)
     return str(name_or_path), method, method.implementation().load(name_or_path, device)
+
+
+def _no_model(m: Method) -> KeyfillError:
+    """The error of using ``m``'s shipped model when it has none here: the human models' distribution is not
+    installed (they are CC BY-NC 4.0, apart from keyfill), or no model ships for ``m``."""
+    if m.humanoid:
+        from keyfill.learn.installed_models import missing
+
+        return missing(m.name)
+    return UsageError(f"no {m.name} model ships with keyfill; give a model folder "
+                      f"(train one with 'keyfill train {m.name}')")
 
 
 def checked_keys(m: Method, motion: Motion, keys: Keys) -> Keys:
@@ -231,6 +243,8 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     m = get(method)
     keys = checked_keys(m, motion, keys)
     options = checked_options(m, options)
+    if m.learned and options.model is None and m.default_model() is None:
+        raise _no_model(m)
     graph = _graph(m, options)
     bridged = _on_model_rig(m, motion, keys, options)
     if bridged is not None:
@@ -316,9 +330,9 @@ def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOption
 
     if not m.humanoid or is_graph(options.model):
         return None
-    from keyfill.learn import rig_bridge
+    from keyfill.learn import installed_models, rig_bridge
 
-    model = rig_bridge.served(m.implementation().model_path(options, keys))
+    model = rig_bridge.served(installed_models.require(m.implementation().model_path(options, keys), m.name))
     if not rig_bridge.needed(model, motion, keys):
         return None
     inner = replace(options, feet="free")  # the feet are locked once, on the motion's own rig
@@ -360,7 +374,9 @@ def humanoid_fit(motion: Motion, rig_map: dict | None = None, label: str = "the 
             continue
         path = m.default_model()
         if path is None:
-            models[m.name] = {"model": None, "fits": "no", "reason": "no model ships with this keyfill"}
+            from keyfill.learn.installed_models import HOW_TO_GET
+
+            models[m.name] = {"model": None, "fits": "no", "reason": f"its shipped models are not installed: {HOW_TO_GET}"}
             continue
         try:
             served = rig_bridge.served(path)
@@ -396,6 +412,8 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
     options = options or CompleteOptions()
     m = get(method)
     options = checked_options(m, options)
+    if m.learned and options.model is None and m.default_model() is None:
+        raise _no_model(m)
     results: list = [None] * len(jobs)
     ready = []
     for i, (motion, keys) in enumerate(jobs):

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from keyfill.errors import DataError, ModelError, UsageError
+from keyfill.learn import installed_models
 from keyfill.learn.lamp_data import NUM_VARIABLES, LampSequence, Normalizer, origin, wrap_angles
 
 if TYPE_CHECKING:
@@ -20,8 +21,9 @@ if TYPE_CHECKING:
 
 #: the ``kind`` of a lamp model folder (:mod:`keyfill.learn.modelfile`)
 KIND = "arnn"
-#: the model that ``keyfill complete --method arnn`` uses for lamp files without --model
-DEFAULT_MODEL = Path(__file__).parent.parent / "models" / "lamp-arnn"
+#: the model that ``keyfill complete --method arnn`` uses for lamp files without --model (trained on keyfill's
+#: own simulated hops, so MIT and inside keyfill: keyfill/learn/models/lamp-arnn)
+DEFAULT_MODEL = installed_models.shipped("lamp-arnn")
 
 
 class LampModel:

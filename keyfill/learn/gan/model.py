@@ -52,6 +52,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError, UsageError
+from keyfill.learn import installed_models
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
@@ -61,12 +62,12 @@ from keyfill.limits import check_count, check_fps
 from keyfill.motion import Skeleton
 
 STAGES = ("path", "full")
-_SHIPPED = Path(__file__).resolve().parents[1] / "models"
-#: the gan model shipped with keyfill: Bandai-Namco dataset-2's skeleton, Motion DNA, whole keys
-#: (its MODEL_CARD.md and LICENSE: CC BY-NC 4.0, as the data it learned from)
-DEFAULT_MODEL = _SHIPPED / "bandai2-gan"
-#: the shipped model ``complete`` uses for partial keys (also trained with ``--partial-keys``)
-PARTIAL_MODEL = _SHIPPED / "bandai2-gan-partial"
+#: the shipped gan model: Bandai-Namco dataset-2's skeleton, Motion DNA, whole keys (its MODEL_CARD.md and
+#: LICENSE: CC BY-NC 4.0, as the data it learned from, so it comes in the model distribution models/bandai,
+#: :mod:`keyfill.learn.installed_models`); None when that is not installed
+DEFAULT_MODEL = installed_models.shipped("bandai2-gan")
+#: the shipped model ``complete`` uses for partial keys (also trained with ``--partial-keys``), or None
+PARTIAL_MODEL = installed_models.shipped("bandai2-gan-partial")
 #: ends the error for a motion of another skeleton
 TRAIN_HINT = ("; train a gan model on your own clips with 'keyfill train gan CLIPS -o MODEL-path --stage path' "
               "then 'keyfill train gan CLIPS -o MODEL --stage generator --path-model MODEL-path'")

@@ -58,6 +58,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import KeyfillError, ModelError
+from keyfill.learn import installed_models
 from keyfill.learn.modelfile import torch_device
 from keyfill.learn.transformer.config import ModelConfig
 from keyfill.learn.transformer.features import IGNORED, Features, apply_transform, canonical_transform, frame_kinds
@@ -67,8 +68,9 @@ from keyfill.motion import Skeleton
 #: the ``kind`` of a transformer model folder (:mod:`keyfill.learn.modelfile`)
 KIND = "transformer"
 #: the model ``keyfill complete --method transformer`` uses without --model: Bandai-Namco's skeleton
-#: (``normal`` style held out; its MODEL_CARD.md has the command, the data, the figures and the licence)
-DEFAULT_MODEL = Path(__file__).parent.parent / "models" / "bandai2-transformer"
+#: (``normal`` style held out; its MODEL_CARD.md has the command, the data, the figures and the licence,
+#: CC BY-NC 4.0, so it comes in the model distribution models/bandai); None when that is not installed
+DEFAULT_MODEL = installed_models.shipped("bandai2-transformer")
 #: ends the error for a motion of another skeleton
 TRAIN_HINT = "; train a transformer on your own clips with 'keyfill train transformer CLIPS -o MODEL'"
 
@@ -329,7 +331,7 @@ def complete(motion, keys, options):
     """``keyfill complete --method transformer``: see :func:`complete_motion`."""
     from keyfill.learn.modelfile import load_cached
 
-    model = load_cached(load, options.model or DEFAULT_MODEL, options.device)
+    model = load_cached(load, model_path(options), options.device)
     return _complete_with(model, motion, keys, options)
 
 
@@ -343,7 +345,7 @@ def _finish(completed, motion, keys, options):
     from keyfill.learn.exact_keys import snap_to_keys
 
     filled, info = completed
-    info = {"model": str(options.model or DEFAULT_MODEL.name), **info, "exact_keys": bool(options.exact_keys)}
+    info = {"model": str(options.model or model_path(options).name), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
         filled, report = snap_to_keys(filled, motion, keys)
         info.update(report)
@@ -367,9 +369,10 @@ def complete_many(jobs, options):
     key layout batched (:func:`complete_motions`); a Completion or the error, per job."""
     from keyfill.learn.modelfile import load_cached
 
-    return complete_many_with(load_cached(load, options.model or DEFAULT_MODEL, options.device), jobs, options)
+    return complete_many_with(load_cached(load, model_path(options), options.device), jobs, options)
 
 
-def model_path(options, keys) -> Path:
-    """The model folder (or graph) a completion with ``options`` uses: ``options.model`` or the shipped one."""
-    return Path(options.model) if options.model is not None else DEFAULT_MODEL
+def model_path(options, keys=None) -> Path:
+    """The model folder (or graph) a completion with ``options`` uses: ``options.model`` or the shipped one
+    (:func:`keyfill.learn.installed_models.missing`'s error when it is not installed)."""
+    return Path(options.model) if options.model is not None else installed_models.require(DEFAULT_MODEL, KIND)

@@ -33,7 +33,7 @@ for the random paper-size model; ``results.py``; not with ``--no-record``): ``mo
     .venv/bin/python benchmarks/bench_transformer.py
     .venv/bin/python benchmarks/bench_transformer.py --model data/models/bandai2-transformer --repeat 200 --json
     .venv/bin/keyfill export transformer -o /tmp/transformer.onnx
-    .venv/bin/python benchmarks/bench_transformer.py --model keyfill/learn/models/bandai2-transformer \
+    .venv/bin/python benchmarks/bench_transformer.py --model models/bandai/keyfill_models_bandai/bandai2-transformer \
         --onnx /tmp/transformer.onnx --repeat 200
 """
 

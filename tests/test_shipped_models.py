@@ -1,6 +1,6 @@
-"""The human models that ship inside the package: they work with no training, and they carry their licence.
+"""The shipped human models (the distribution models/bandai): they work with no training, and carry their licence.
 
-``keyfill complete --method gan`` without ``--model`` uses ``keyfill/learn/models/bandai2-gan``
+``keyfill complete --method gan`` without ``--model`` uses ``bandai2-gan``
 (``bandai2-gan-partial`` for partial keys), ``--method transformer`` uses
 ``bandai2-transformer``, on the Bandai-Namco skeleton of ``examples/human``; on
 another skeleton they say which skeleton the model serves, the first joint that

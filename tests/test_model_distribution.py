@@ -124,3 +124,12 @@ def test_make_installs_the_model_distribution_editable():
     makefile = (ROOT / "Makefile").read_text()
     rule = makefile[makefile.index("$(STAMP):"):makefile.index("@touch $(STAMP)")]
     assert "-e ./models/bandai" in rule and "models/bandai/pyproject.toml" in rule.splitlines()[0]
+
+
+def test_without_the_model_distribution_export_of_the_method_name_says_how_to_get_it(capsys, tmp_path,
+                                                                                     no_model_distribution):
+    code, _, err = run(capsys, "export", "transformer", "-o", tmp_path / "t.onnx")
+    line = one_error_line(err)
+    assert code == 1 and not (tmp_path / "t.onnx").exists()
+    assert "pip install ./models/bandai" in line and line.endswith(
+        "or give a model folder of your own instead (train one with 'keyfill train transformer')")

@@ -72,10 +72,12 @@ def shipped(name: str) -> Path | None:
     return installed().get(name)
 
 
-def missing(method: str) -> ModelError:
-    """The error of completing with ``method`` without a model folder when its shipped model is not installed."""
-    return ModelError(f"the shipped {method} models are not installed: {HOW_TO_GET}; or give model FOLDER, "
-                      f"one of your own (train one with 'keyfill train {method}')", params="model")
+def missing(method: str, option: bool = True) -> ModelError:
+    """The error of using ``method``'s shipped model when it is not installed: the alternative is the ``model``
+    option (``option``) or a model folder in its place (``keyfill evaluate``/``export`` take one for the name)."""
+    other = "model FOLDER, one of your own" if option else "a model folder of your own instead"
+    return ModelError(f"the shipped {method} models are not installed: {HOW_TO_GET}; or give {other} "
+                      f"(train one with 'keyfill train {method}')", params="model" if option else ())
 
 
 def require(folder: str | os.PathLike | None, method: str) -> Path:

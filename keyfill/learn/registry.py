@@ -183,7 +183,7 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
         method = METHODS[name_or_path]
         path = method.default_model()
         if path is None:
-            raise _no_model(method)
+            raise _no_model(method, option=False)
         return name_or_path, method, method.implementation().load(path, device)
     if not Path(name_or_path).exists():
         raise UsageError(f"{name_or_path!r} is neither a method ({', '.join(METHODS)}) nor a model folder")
@@ -191,13 +191,13 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
     return str(name_or_path), method, method.implementation().load(name_or_path, device)
 
 
-def _no_model(m: Method) -> KeyfillError:
+def _no_model(m: Method, option: bool = True) -> KeyfillError:
     """The error of using ``m``'s shipped model when it has none here: the human models' distribution is not
     installed (they are CC BY-NC 4.0, apart from keyfill), or no model ships for ``m``."""
     if m.humanoid:
         from keyfill.learn.installed_models import missing
 
-        return missing(m.name)
+        return missing(m.name, option)
     return UsageError(f"no {m.name} model ships with keyfill; give a model folder "
                       f"(train one with 'keyfill train {m.name}')")
 

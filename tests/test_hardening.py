@@ -256,7 +256,6 @@ def test_weights_that_overflow_are_one_clean_error(capsys, tmp_path):
     assert not (tmp_path / "o.usda").exists()
 
 
-MODELS = Path(__file__).parent.parent / "keyfill" / "learn" / "models"
 HUMAN_KEYS = Path(__file__).parent.parent / "examples" / "human" / "keys_15.usda"
 
 
@@ -286,7 +285,9 @@ def test_tampered_human_model_configs_are_one_clean_error(capsys, tmp_path, mode
     """Probes of session 8: absurd numbers in a shipped human model's config.json were numpy warnings, an
     error about frame 0, an internal TypeError or ZeroDivisionError, or an allocation of hundreds of GB."""
     folder = tmp_path / "model"
-    shutil.copytree(MODELS / model, folder, ignore=shutil.ignore_patterns("model.onnx"))  # the torch path
+    from keyfill.learn.installed_models import shipped
+
+    shutil.copytree(shipped(model), folder, ignore=shutil.ignore_patterns("model.onnx"))  # the torch path
     config = json.loads((folder / "config.json").read_text())
     change(config)
     (folder / "config.json").write_text(json.dumps(config))

@@ -96,8 +96,9 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     With an exported graph (keyfill export), --runtime onnx or auto runs
     the model through onnxruntime and imports no torch (docs/onnx.md).
 
-    The shipped human models (transformer, gan) complete any humanoid rig at
-    any frame rate: the keys are retargeted onto the model's skeleton and
+    The shipped human models (transformer, gan; CC BY-NC 4.0, their own
+    distribution: pip install ./models/bandai from a keyfill checkout)
+    complete any humanoid rig at any frame rate: the keys are retargeted onto the model's skeleton and
     frame rate, completed, and retargeted back; the output keeps IN's
     skeleton, channels and fps (docs/retarget.md). --rig-map names the roles
     the mapper cannot find ('keyfill info IN --rig' shows the mapping).

@@ -65,21 +65,27 @@ fuzz: $(STAMP)
 
 # The human models of the distribution models/bandai (CC BY-NC 4.0; MODELS: where to train them; a
 # retrained model replaces a shipped one by copying its folder into models/bandai/keyfill_models_bandai/).
-# The gan models of docs/gan.md and docs/benchmarks.md, trained on Bandai-Namco dataset-2 (unpacked from
-# ../shared/data into data/bandai2 on first use) with the `normal` style held out: the global path
-# predictor, then two generators on it, one with Motion DNA (gaps up to 600 frames) and one that also
-# takes partial keys (gaps up to 318). An interrupted run continues from its checkpoints; a finished
-# stage is not retrained. Torch thread counts are part of the recipe (results are bitwise
-# reproducible for a given count).
+# The gan models of docs/gan.md and docs/benchmarks.md, by the second recipe (benchmarks/gan_recipe2.json,
+# docs/gan.md "The second recipe"), trained on Bandai-Namco dataset-2 and dataset-1 (unpacked from
+# ../shared/data into data/bandai2 and data/bandai1 on first use) with three styles held out for the
+# figures: `normal` (both datasets), and dataset-1's `sad` and `feminine`. The global path predictor,
+# then two generators on it, one with Motion DNA (gaps up to 600 frames) and one that also takes partial
+# keys (gaps up to 318). An interrupted run continues from its checkpoints; a finished stage is not
+# retrained. Torch thread counts are part of the recipe (results are bitwise reproducible for a given count).
 BANDAI2 := data/bandai2/bandai_namco_motiondataset2/data
+BANDAI1 := data/bandai1/Bandai-Namco-Research-Motiondataset-1/data
 MODELS := data/models
-GAN_TRAIN = $(BIN)/keyfill train gan $(BANDAI2) --exclude '*_normal_*' --seed 0
+GAN_TRAIN = $(BIN)/keyfill train gan $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
+    --exclude 'dataset-1_*_feminine_*' --config benchmarks/gan_recipe2.json --seed 0
 resume_if = $(if $(wildcard $(1).checkpoint.pt),--resume)
 
 $(BANDAI2): | $(STAMP)
 	$(BIN)/python -c "from keyfill.learn.corpus import locate; print(locate('bandai2'))"
 
-$(MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2)
+$(BANDAI1): | $(STAMP)
+	$(BIN)/python -c "from keyfill.learn.corpus import locate; print(locate('bandai1'))"
+
+$(MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2) $(BANDAI1)
 	@mkdir -p $(dir $(@D))
 	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan-path --stage path --threads 2 $(call resume_if,$(MODELS)/bandai2-gan-path)
 

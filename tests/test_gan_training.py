@@ -14,7 +14,8 @@ from gan_helpers import built, fit, synthetic_corpus, tiny_config
 
 from keyfill.errors import ModelError, UsageError
 from keyfill.learn import registry
-from keyfill.learn.gan.task import GanTask, read_config
+from keyfill.learn.gan.task import GanTask
+from keyfill.learn.gan.train_command import read_config
 from keyfill.learn.modelfile import read_config as read_model_config
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -113,7 +114,8 @@ def test_batches_are_seeded_sharded_and_stateful(corpus, path_model):
     other = GanTask(corpus, tiny_config(), "generator", path_model=path_model)
     other.load_state_dict(json.loads(json.dumps(task.state_dict())))
     assert other.step_count == 2345
-    assert task.cfg.root_weight(0) == 10 and task.cfg.root_weight(2345) == 12 and task.cfg.root_weight(10**6) == 80
+    assert task.cfg.root_weight(0, 8000) == 10 and task.cfg.root_weight(2345, 8000) == 12
+    assert task.cfg.root_weight(10**6, 8000) == 80
     assert task.steps(0) == 4 and task.epochs == 40 and GanTask(corpus, tiny_config(), "path").epochs == 40
 
 

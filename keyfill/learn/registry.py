@@ -127,7 +127,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            onnx="keyfill.learn.transformer.onnx", humanoid=True),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
-           training="keyfill.learn.gan.task", partial_keys=True, dna=True, humanoid=True),
+           training="keyfill.learn.gan.train_command", partial_keys=True, dna=True, humanoid=True),
 )}
 
 

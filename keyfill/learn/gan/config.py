@@ -60,6 +60,20 @@ _RANGES = {
     "joint_weight": (0, 1e6, True), "root_weight_start": (0, 1e6, True), "root_weight_end": (0, 1e6, True),
     "root_weight_every": (1, 10_000_000, True), "grad_clip": (0, 1e6, True), "path_epochs": (1, 1_000_000, True),
     "generator_epochs": (1, 1_000_000, True), "val_fraction": (0, 0.9, True), "val_sequences": (0, 100_000, True),
+    "in_clip_fraction": (0, 1, True), "window_frames": (64, 65_536, True), "min_key_every": (1, 10_000, True),
+    "max_key_every": (1, 10_000, True), "warmup_fraction": (0, 1, True), "ema_decay": (0, 1, True),
+    "recon_weight": (0, 1e6, True), "foot_weight": (0, 1e6, True),
+}
+#: the choices of the recipe's named settings; the first of each is the first recipe's (and the default, so
+#: that model folders written before the setting existed load and give their old bytes)
+CHOICES = {
+    "residual_form": ("printed", "variance"),
+    "output_init": ("default", "small"),
+    "upsampling": ("transposed", "linear"),
+    "root_input": ("centred", "key-relative"),
+    "optimizer": ("rmsprop", "adam"),
+    "lr_schedule": ("constant", "cosine"),
+    "root_weight_schedule": ("steps", "run"),
 }
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
@@ -122,6 +136,38 @@ class GanConfig:
             machine, about 8 minutes on two threads and 1-1.5 hours on one; see docs/gan.md).
         val_fraction: share of the clips held out for validation (by a seeded draw).
         val_sequences: held-out sequences scored after each generator epoch.
+        residual_form: how a residual layer joins its skip path (Eq. 6; :mod:`keyfill.learn.gan.layers`):
+            ``"printed"`` as the paper prints it, ``"variance"`` ``sqrt(s) h + sqrt(1 - s) skip``, whose skip
+            gain is 1 at every ratio (the printed form's is above 1, so activations grow through a stack).
+        output_init: the generator's output convolution: ``"default"`` PyTorch's initialisation,
+            ``"small"`` a tenth of it and a zero bias, so a fresh generator's pre-``tanh`` angles sit
+            near 0, the middle of every joint's range, instead of at its limits.
+        upsampling: the decoder's up-sampling layers: ``"transposed"`` convolutions (Table 5), or
+            ``"linear"`` interpolation by 2 then a convolution of kernel 3 (no checkerboard ripple).
+        root_input: the root channels of the dense input: ``"centred"`` the nearest key's root position
+            (the keys' mean ground position at 0; spans metres over a long sequence), ``"key-relative"``
+            its ground offset from the straight line between the frame's two keys (0 at keys; bounded by
+            the gap), the height kept.
+        in_clip_fraction: the share of generator steps whose batch is in-clip windows
+            (:func:`keyfill.learn.gan.sampling.clip_window`: keys every ``min_key_every`` to
+            ``max_key_every`` frames, the LaFAN1 context layout, whole short clips; the ground truth of
+            every frame known) instead of the paper's long sequences (Appendix C). 0: the paper's only.
+        window_frames: frames of an in-clip window (a multiple of 64); a batch of them holds
+            ``batch_size * sequence_frames // window_frames`` windows (as many frames as a long batch).
+        min_key_every, max_key_every: key spacing of in-clip windows, frames.
+        optimizer: ``"rmsprop"`` (section 3.7, PyTorch's defaults) or ``"adam"`` (betas 0.5, 0.999).
+        lr_schedule: ``"constant"`` or ``"cosine"``: linear warm-up over ``warmup_fraction`` of the
+            run's generator steps, then a cosine decay to a tenth of the rate.
+        warmup_fraction: see ``lr_schedule``.
+        ema_decay: with a value above 0, the model keeps the exponential moving average of the
+            generator's weights with this decay per step, and saves that average (0: the last weights).
+        root_weight_schedule: ``"steps"``: the root weight grows by 1 every ``root_weight_every`` steps
+            (Appendix A, absolute); ``"run"``: it grows linearly from start to end over the run's steps.
+        recon_weight: weight of the supervised reconstruction term on in-clip windows (a deviation from
+            the paper: the mean squared root-relative joint position error, m^2, on frames between keys).
+        foot_weight: weight of the foot-sliding term on in-clip windows: the mean squared horizontal
+            speed (m/s)^2 of the foot joints on frames the ground truth has them in contact
+            (:func:`keyfill.characters.feet.label_contacts`).
         seed: the seed of the clip split and of every batch (epoch ``e`` draws from
             ``numpy.random.default_rng([seed, stage, e])``).
     """
@@ -162,6 +208,21 @@ class GanConfig:
     generator_epochs: int = 40
     val_fraction: float = 0.05
     val_sequences: int = 8
+    residual_form: str = "printed"
+    output_init: str = "default"
+    upsampling: str = "transposed"
+    root_input: str = "centred"
+    in_clip_fraction: float = 0.0
+    window_frames: int = 256
+    min_key_every: int = 15
+    max_key_every: int = 90
+    optimizer: str = "rmsprop"
+    lr_schedule: str = "constant"
+    warmup_fraction: float = 0.05
+    ema_decay: float = 0.0
+    root_weight_schedule: str = "steps"
+    recon_weight: float = 0.0
+    foot_weight: float = 0.0
     seed: int = 0
 
     def __post_init__(self):
@@ -192,6 +253,14 @@ class GanConfig:
                              f"max_gap {self.max_gap} must be at most {SPARSE_RECEPTIVE_FIELD} frames")
         if self.real_frames > self.sequence_frames:
             raise UsageError("real_frames cannot exceed sequence_frames")
+        for name, choices in CHOICES.items():
+            if getattr(self, name) not in choices:
+                raise UsageError(f"GAN setting {name!r} must be one of {', '.join(choices)}; got {getattr(self, name)!r}")
+        if self.window_frames % 64 or self.real_frames > self.window_frames and self.in_clip_fraction > 0:
+            raise UsageError("window_frames must be a multiple of 64 and at least real_frames")
+        if self.min_key_every > self.max_key_every or self.max_key_every > self.max_gap:
+            raise UsageError(f"in-clip key spacing needs min_key_every <= max_key_every <= max_gap, got "
+                             f"{self.min_key_every}, {self.max_key_every}, {self.max_gap}")
 
     @classmethod
     def from_preset(cls, name: str, **changes) -> GanConfig:
@@ -226,7 +295,10 @@ class GanConfig:
                 raise UsageError(f"GAN setting {name!r} is {value:g}, more than {max_abs():g} in size")
         return cls(**data)
 
-    def root_weight(self, step: int) -> float:
-        """The root path loss weight at generator step ``step`` (Appendix A's schedule)."""
+    def root_weight(self, step: int, steps: int) -> float:
+        """The root path loss weight at generator step ``step`` of a run of ``steps`` (``root_weight_schedule``)."""
+        if self.root_weight_schedule == "run":
+            share = min(step / max(steps - 1, 1), 1.0)
+            return float(self.root_weight_start + share * (self.root_weight_end - self.root_weight_start))
         grown = self.root_weight_start + step // max(self.root_weight_every, 1)
         return float(min(grown, self.root_weight_end))

@@ -11,7 +11,11 @@ re-centred so that the keys' mean ground position is the origin), rows 1.. the
 joints' positions relative to the root (world axes), all in metres. The
 generator's input is ``(6 J, T)``: the ``3 J`` pose values, then the mask
 repeated for every coordinate (the paper's ``3 M`` mask channels, which leave
-room for partial keys).
+room for partial keys). With ``root="key-relative"`` (``GanConfig.root_input``)
+the root's two ground coordinates are instead the nearest key's offset from the
+straight line between the frame's two keys (0 at the keys, bounded by the
+distance the gap covers), so the channels stay near unit size however far a
+long sequence travels; the height stays as it is.
 
 Partial-key models (``GanConfig.partial_keys``, section 5) take the *sparse*
 format instead (:func:`sparse_input`, Fig. 4's top rows): the given coordinates
@@ -36,11 +40,27 @@ def nearest_key(num_frames: int, key_frames) -> tuple[np.ndarray, np.ndarray]:
     return idx, np.minimum(dl, dr)
 
 
-def dense_input(num_frames: int, key_frames, key_poses, mask_scale: float = 64.0) -> np.ndarray:
-    """The generator input ``(6 J, T)`` float32 for keys at ``key_frames (K,)`` with ``key_poses (K, J, 3)``."""
+def dense_input(num_frames: int, key_frames, key_poses, mask_scale: float = 64.0, root: str = "centred",
+                up_axis: str = "Y") -> np.ndarray:
+    """The generator input ``(6 J, T)`` float32 for keys at ``key_frames (K,)`` with ``key_poses (K, J, 3)``;
+    ``root``: ``"centred"`` or ``"key-relative"`` (the module docstring), ``up_axis`` the height's axis."""
+    from keyfill.interpolate import segment_coordinates
+    from keyfill.learn.windows import horizontal_axes
+
     idx, dist = nearest_key(num_frames, key_frames)
     poses = np.asarray(key_poses, dtype=np.float32)[idx]  # (T, J, 3)
     T, J = poses.shape[:2]
+    if root == "key-relative":
+        k = np.asarray(key_frames, dtype=np.int64)
+        kr = np.asarray(key_poses, dtype=np.float64)[:, 0]
+        if len(k) > 1:
+            seg, u = segment_coordinates(T, k)  # frames past the last key: on it
+            line = kr[seg] + u[:, None] * (kr[seg + 1] - kr[seg])  # (T, 3)
+        else:
+            line = np.broadcast_to(kr[0], (T, 3))
+        h = list(horizontal_axes(up_axis))
+        poses = poses.copy()
+        poses[:, 0, h] = (kr[idx][:, h] - line[:, h]).astype(np.float32)
     pos = poses.reshape(T, 3 * J).T
     mask = np.broadcast_to((dist / mask_scale).astype(np.float32), (3 * J, T))
     return np.concatenate([pos, mask], axis=0)

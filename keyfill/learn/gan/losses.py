@@ -173,3 +173,39 @@ def key_root_loss(root, key_root, key_mask):
     ck = (key_root * m).sum(1, keepdim=True) / n
     d = (((root - c) - (key_root - ck)) ** 2 * m).sum((1, 2)) / n[:, 0, 0]
     return d.mean()
+
+
+def reconstruction_loss(positions, truth, key_mask, valid):
+    """The second recipe's supervised term (not in the paper): per row, the mean over its valid frames between
+    keys and its non-root joints of the squared distance to the ground truth; the mean over rows with such
+    frames (zero when none has).
+
+    ``positions``, ``truth``: ``(B, T, J, 3)`` root-relative (joint 0 skipped); ``key_mask``, ``valid``: ``(B, T)``
+    bool (valid: frames that have a ground truth).
+    """
+    d = ((positions[:, :, 1:] - truth[:, :, 1:]) ** 2).sum(-1).mean(-1)  # (B, T)
+    m = (valid & ~key_mask).to(d.dtype)
+    n = m.sum(1)
+    rows = n > 0
+    if not bool(rows.any()):
+        return positions.sum() * 0
+    return ((d * m).sum(1)[rows] / n[rows]).mean()
+
+
+def foot_sliding_loss(root, relative, joints, contact, fps: float, up: int):
+    """The foot-sliding term: the mean squared horizontal speed, (m/s)^2, of the foot joints over the frame pairs
+    ``(t, t + 1)`` that the labels have in contact at both frames (zero when there is none).
+
+    Args:
+        root: ``(B, T, 3)`` root path; ``relative``: ``(B, T, J, 3)`` root-relative positions (world axes), metres.
+        joints: ``(n,)`` the foot joints; ``contact``: ``(B, T, n)`` bool labels (ground truth).
+        fps: frames per second; up: the up axis (1 for Y, 2 for Z).
+    """
+    world = root[:, :, None] + relative[:, :, joints]  # (B, T, n, 3)
+    ground = [a for a in range(3) if a != up]
+    v = (world[:, 1:, :, ground] - world[:, :-1, :, ground]) * fps  # (B, T - 1, n, 2)
+    both = (contact[:, 1:] & contact[:, :-1]).to(v.dtype)
+    count = both.sum()
+    if float(count) == 0:
+        return root.sum() * 0
+    return ((v**2).sum(-1) * both).sum() / count

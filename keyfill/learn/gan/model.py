@@ -76,7 +76,9 @@ TRAIN_HINT = ("; train a gan model on your own clips with 'keyfill train gan CLI
 def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> dict:
     """Fresh ``{"generator", "discriminator", "path"}`` torch modules (weights from torch's global generator).
 
-    The skeleton's offsets are converted to metres for the RC-FK layer.
+    The skeleton's offsets are converted to metres for the RC-FK layer. ``residual_form`` and
+    ``upsampling`` shape the generator and the discriminator; the path predictor keeps Table 5's layers
+    (a path stage model serves generators of either recipe).
     """
     from keyfill.learn.gan.network import Discriminator, Generator, PathPredictor
     from keyfill.learn.gan.rcfk import RCFK
@@ -85,8 +87,9 @@ def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> d
     rcfk = RCFK(skeleton.parents, skeleton.offsets * skeleton.meters_per_unit, ranges)
     w = cfg.widths
     return {
-        "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim, cfg.dna_width),
-        "discriminator": Discriminator(3 * (J - 1), w["discriminator"]),
+        "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim, cfg.dna_width,
+                               cfg.residual_form, cfg.upsampling, cfg.output_init),
+        "discriminator": Discriminator(3 * (J - 1), w["discriminator"], cfg.residual_form),
         "path": PathPredictor(3 * (J - 1), w["path"]),
     }
 
@@ -254,7 +257,8 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         given = np.ones(poses.shape[1:], dtype=bool) if coords is None else np.asarray(coords, dtype=bool)
         x = np.stack([sparse_input(Tp, key_frames, p, given) for p in poses])
     else:
-        x = np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale) for p in poses])
+        x = np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale, cfg.root_input, model.skeleton.up_axis)
+                      for p in poses])
     x = torch.as_tensor(x, device=dev)
     g = torch.Generator().manual_seed(int(seed))
     noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None

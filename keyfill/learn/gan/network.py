@@ -56,10 +56,10 @@ GENERATOR_MULTIPLE, PATH_MULTIPLE = 64, 16
 IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
 
 
-def _stack(c_in: int, widths, specs, ratios) -> nn.Sequential:
+def _stack(c_in: int, widths, specs, ratios, form: str = "printed", upsampling: str = "transposed") -> nn.Sequential:
     layers = []
     for w, (k, s, p, t), r in zip(widths, specs, ratios):
-        layers.append(ResidualConv(c_in, w, k, s, p, r, transpose=t))
+        layers.append(ResidualConv(c_in, w, k, s, p, r, transpose=t, form=form, upsampling=upsampling))
         c_in = w
     return nn.Sequential(*layers)
 
@@ -127,19 +127,26 @@ class Generator(nn.Module):
         noise_dim, style_dim: channels joined to every latent step.
         dna_width: hidden width of a :class:`DnaEncoder` (``self.dna``) making the style
             vector from representative poses; 0: none (the style is given directly).
+        form, upsampling: of the residual layers (:class:`~keyfill.learn.gan.layers.ResidualConv`).
+        output_init: ``"default"`` or ``"small"`` (``GanConfig.output_init``).
     """
 
     def __init__(self, num_joints: int, rcfk: RCFK, encoder, decoder, noise_dim: int = 0, style_dim: int = 0,
-                 dna_width: int = 0):
+                 dna_width: int = 0, form: str = "printed", upsampling: str = "transposed",
+                 output_init: str = "default"):
         super().__init__()
         self.num_joints = num_joints
         self.noise_dim, self.style_dim = noise_dim, style_dim
         if dna_width:
             self.dna = DnaEncoder(3 * (num_joints - 1), dna_width, style_dim)
-        self.encoder = _stack(6 * num_joints, encoder, ENCODER, ENCODER_RATIOS)
-        self.decoder = _stack(encoder[-1] + noise_dim + style_dim, decoder, DECODER, DECODER_RATIOS)
+        self.encoder = _stack(6 * num_joints, encoder, ENCODER, ENCODER_RATIOS, form)
+        self.decoder = _stack(encoder[-1] + noise_dim + style_dim, decoder, DECODER, DECODER_RATIOS, form, upsampling)
         k, s, p = DECODER_OUT
         self.output = nn.Conv1d(decoder[-1], rcfk.channels, k, s, p)
+        if output_init == "small":  # pre-tanh angles near 0: mid-range, where tanh has its full slope
+            with torch.no_grad():
+                self.output.weight.mul_(0.1)
+                self.output.bias.zero_()
         self.rcfk = rcfk
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D), persistent=False)
 
@@ -169,9 +176,9 @@ class Generator(nn.Module):
 class Discriminator(nn.Module):
     """Six strided residual layers and a 1x1 convolution to one score per 64 frames."""
 
-    def __init__(self, channels: int, widths):
+    def __init__(self, channels: int, widths, form: str = "printed"):
         super().__init__()
-        self.body = _stack(channels, widths, DISCRIMINATOR, DISCRIMINATOR_RATIOS)
+        self.body = _stack(channels, widths, DISCRIMINATOR, DISCRIMINATOR_RATIOS, form)
         self.score = nn.Conv1d(widths[-1], 1, 1)
 
     def forward(self, x):

@@ -12,7 +12,7 @@ the up axis (:func:`turn`) turns both, which is how training draws headings.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,12 +52,19 @@ class ClipPool:
         root: per clip ``(T_c, 3)`` float64 root positions.
         fps: frames per second.
         up_axis: ``"Y"`` or ``"Z"``.
+        contacts: per clip ``(T_c, n)`` bool foot contact labels (:mod:`keyfill.learn.gan.labels`), or
+            empty when not needed.
+        foot_joints: ``(n,)`` the joints of the contact columns.
+        groups: ``(C,)`` content group per clip (draws balanced by content), or None (every clip alike).
     """
 
     relative: tuple[np.ndarray, ...]
     root: tuple[np.ndarray, ...]
     fps: float
     up_axis: str
+    contacts: tuple[np.ndarray, ...] = ()
+    foot_joints: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    groups: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.root)
@@ -66,9 +73,20 @@ class ClipPool:
     def lengths(self) -> np.ndarray:
         return np.array([len(r) for r in self.root], dtype=np.int64)
 
+    def draw(self, rng: np.random.Generator, usable: np.ndarray | None = None) -> int:
+        """A random clip (of ``usable`` indices, default all): with ``groups``, a random content first, then
+        a random clip of it, so every content is drawn as often; else uniformly."""
+        usable = np.arange(len(self)) if usable is None else np.asarray(usable)
+        if self.groups is None:
+            return int(rng.choice(usable))
+        g = self.groups[usable]
+        content = rng.choice(np.unique(g))
+        return int(rng.choice(usable[g == content]))
 
-def clip_pool(corpus, clips=None) -> ClipPool:
-    """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`."""
+
+def clip_pool(corpus, clips=None, labels: bool = False) -> ClipPool:
+    """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`;
+    ``labels``: with foot contacts and content groups (:mod:`keyfill.learn.gan.labels`)."""
     s = corpus.skeleton
     m = s.meters_per_unit
     clips = list(range(len(corpus))) if clips is None else [int(i) for i in clips]
@@ -80,4 +98,9 @@ def clip_pool(corpus, clips=None) -> ClipPool:
     bounds = np.concatenate([[0], np.cumsum([corpus.starts[i + 1] - corpus.starts[i] for i in clips])])
     rel = tuple(rel_all[a:b] for a, b in itertools.pairwise(bounds))
     root = tuple(np.asarray(corpus.root[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float64) * m for i in clips)
-    return ClipPool(rel, root, float(corpus.fps), s.up_axis)
+    if not labels:
+        return ClipPool(rel, root, float(corpus.fps), s.up_axis)
+    from keyfill.learn.gan.labels import clip_contacts, content_groups
+
+    contacts, joints = clip_contacts(corpus, clips)
+    return ClipPool(rel, root, float(corpus.fps), s.up_axis, contacts, joints, content_groups(corpus, clips))

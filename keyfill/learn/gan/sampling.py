@@ -22,9 +22,19 @@ frame 0 and ``N - 1`` and gaps drawn uniformly from ``[min_gap, max_gap]``
 Bandai-Namco clips last about 5 s, so a 1,024-frame sequence gets its keys from
 several clips.
 
+**In-clip windows** (:func:`clip_window`, the second recipe's
+``GanConfig.in_clip_fraction`` of the steps) are ``window_frames`` long and lie
+in one clip, so every frame's ground truth is known: either keys every
+``min_key_every`` to ``max_key_every`` frames (each gap drawn anew) over a
+crop of the clip, or the whole clip when it is shorter than the window (keys
+every 30-60 frames, as users key), or, a quarter of the time, the LaFAN1
+layout: 10 context frames, a gap of 5-45 and the target key. The frames after
+the layout hold its last key, as the padding at inference does.
+
 **Real sequences for the discriminator** (:func:`real_crops`) are random crops
 of ``real_frames`` frames of single clips (clips shorter than that are not
-used), each turned to a random heading. The fake sequences the discriminator
+used), each turned to a random heading; with content groups in the pool
+(:meth:`~keyfill.learn.gan.poses.ClipPool.draw`) every content is drawn as often. The fake sequences the discriminator
 sees are crops of the same length from the generated sequences, at starts
 drawn by :func:`crop_starts`, so both kinds have the same length and borders.
 
@@ -201,7 +211,7 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
         poses, _ = centre_keys(lay.poses, pool.up_axis, coords)
         out["dense"] = sparse_input(N, lay.frames, poses, coords)
     else:
-        out["dense"] = dense_input(N, lay.frames, lay.poses, cfg.mask_scale)
+        out["dense"] = dense_input(N, lay.frames, lay.poses, cfg.mask_scale, cfg.root_input, pool.up_axis)
     if bank is not None:
         out["dna"] = draw_dna(bank, rng, dna_count(lay.frames, pool.fps, cfg.dna_seconds))
     return out
@@ -215,15 +225,81 @@ def real_crops(pool: ClipPool, rng: np.random.Generator, count: int, frames: int
                         f"(the longest has {int(pool.lengths.max(initial=0))}); lower real_frames")
     out = []
     for _ in range(count):
-        c = int(rng.choice(usable))
+        c = pool.draw(rng, usable) if pool.groups is not None else int(rng.choice(usable))
         s = int(rng.integers(pool.lengths[c] - frames + 1))
         out.append(turn(pool.relative[c][s : s + frames], rng.uniform(-np.pi, np.pi), pool.up_axis))
     return np.array(out, dtype=np.float32)
 
 
-def crop_starts(rng: np.random.Generator, rows: int, crops: int, frames: int, length: int) -> np.ndarray:
-    """``(rows, crops)`` start frames of crops of ``length`` frames from sequences of ``frames`` frames."""
-    return rng.integers(0, frames - length + 1, size=(rows, crops))
+#: LaFAN1's layout (Harvey et al. 2020): context frames before the gap, and the gap's range
+LAFAN_CONTEXT, LAFAN_GAPS = 10, (5, 45)
+#: the share of in-clip windows with the LaFAN1 layout
+LAFAN_SHARE = 0.25
+
+
+def _window_keys(rng: np.random.Generator, length: int, min_every: int, max_every: int) -> np.ndarray:
+    """Keys at 0 and ``length - 1`` with gaps drawn from ``[min_every, max_every]`` between (the last cut short)."""
+    frames = [0]
+    while frames[-1] < length - 1:
+        frames.append(min(frames[-1] + int(rng.integers(min_every, max_every + 1)), length - 1))
+    return np.array(frames, dtype=np.int64)
+
+
+def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None) -> dict:
+    """One in-clip training window of ``cfg.window_frames`` (``W``) frames as arrays (the module docstring).
+
+    Returns ``dense (6 J, W)``, ``key_mask (W,)`` bool, ``valid (W,)`` bool (frames of the clip; the rest
+    hold the last key), ``truth (W, J, 3)`` float32 metres (row 0 the root, re-centred as the keys are;
+    rows 1.. root-relative joints, the last valid frame repeated), ``contact (W, n)`` bool (False past the
+    clip), and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)`` poses. A ``cfg.partial_keys`` config
+    keys part of the poses as :func:`training_sequence` does (the sparse format).
+    """
+    W = cfg.window_frames
+    c = pool.draw(rng, np.flatnonzero(pool.lengths >= 2))
+    n = int(pool.lengths[c])
+    lafan = n >= LAFAN_CONTEXT + LAFAN_GAPS[0] + 1 and rng.random() < LAFAN_SHARE
+    if lafan:
+        gap = int(rng.integers(LAFAN_GAPS[0], min(LAFAN_GAPS[1], n - LAFAN_CONTEXT - 1) + 1))
+        L = LAFAN_CONTEXT + gap + 1
+        frames = np.append(np.arange(LAFAN_CONTEXT), L - 1)
+    elif n <= W:
+        L = n
+        frames = _window_keys(rng, L, max(cfg.min_key_every, 30), max(min(cfg.max_key_every, 60), 30))
+    else:
+        L = W
+        frames = _window_keys(rng, L, cfg.min_key_every, cfg.max_key_every)
+    s = int(rng.integers(n - L + 1))
+    heading = float(rng.uniform(-np.pi, np.pi))
+    rel = turn(pool.relative[c][s : s + L].astype(np.float64), heading, pool.up_axis)
+    truth = rel.copy()
+    truth[:, 0] = turn(pool.root[c][s : s + L], heading, pool.up_axis)
+    coords = partial_coords(rng, len(frames), truth.shape[1], halves, cfg.partial_fraction) \
+        if cfg.partial_keys else None
+    _, shift = centre_keys(truth[frames], pool.up_axis, coords)
+    truth[:, 0] -= shift
+    pad = W - L
+    truth = np.concatenate([truth, np.repeat(truth[-1:], pad, 0)]).astype(np.float32)
+    key_mask = np.zeros(W, dtype=bool)
+    key_mask[frames] = True
+    n_feet = len(pool.foot_joints)
+    contact = np.zeros((W, n_feet), dtype=bool)
+    if n_feet:
+        contact[:L] = pool.contacts[c][s : s + L]
+    dense = sparse_input(W, frames, truth[frames], coords) if coords is not None else \
+        dense_input(W, frames, truth[frames], cfg.mask_scale, cfg.root_input, pool.up_axis)
+    out = {"dense": dense, "key_mask": key_mask, "valid": np.arange(W) < L, "truth": truth, "contact": contact}
+    if bank is not None:
+        out["dna"] = draw_dna(bank, rng, dna_count(frames, pool.fps, cfg.dna_seconds))
+    return out
+
+
+def crop_starts(rng: np.random.Generator, rows: int, crops: int, frames, length: int) -> np.ndarray:
+    """``(rows, crops)`` start frames of crops of ``length`` frames from sequences of ``frames`` frames (a number,
+    or ``(rows,)`` valid frames per row: a crop then starts where it fits, at 0 when none does)."""
+    if np.ndim(frames) == 0:
+        return rng.integers(0, frames - length + 1, size=(rows, crops))
+    high = np.maximum(np.asarray(frames) - length + 1, 1)
+    return rng.integers(0, high[:, None], size=(rows, crops))
 
 
 def clip_batch(pool: ClipPool, rng: np.random.Generator, count: int, max_frames: int, min_frames: int = 2):

@@ -38,9 +38,9 @@ state_dict / load_state_dict, save).
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
+import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -49,14 +49,13 @@ from pathlib import Path
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
-from keyfill.files import read_json_object
 from keyfill.learn.gan import KIND
-from keyfill.learn.gan.config import DNA_WIDTHS, SPARSE_RECEPTIVE_FIELD, GanConfig
+from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dna import build_bank, pad_dna
 from keyfill.learn.gan.poses import clip_pool
 from keyfill.learn.gan.ranges import estimate_ranges
-from keyfill.learn.gan.sampling import body_halves, clip_batch, crop_starts, real_crops, training_sequence
-from keyfill.learn.training import Option, TrainingSpec, TrainingTask
+from keyfill.learn.gan.sampling import body_halves, clip_batch, clip_window, crop_starts, real_crops, training_sequence
+from keyfill.learn.training import TrainingTask
 
 STAGES = ("path", "generator")
 
@@ -115,14 +114,16 @@ class GanTask(TrainingTask):
         order = np.random.default_rng([self.cfg.seed, 7]).permutation(C)
         self.val_clips = np.sort(order[:n_val])
         self.train_clips = np.sort(order[n_val:])
-        self.train_pool = clip_pool(corpus, self.train_clips)
-        self.val_pool = clip_pool(corpus, self.val_clips) if n_val else None
+        labels = self.cfg.in_clip_fraction > 0 and stage == "generator"  # contacts and content groups
+        self.train_pool = clip_pool(corpus, self.train_clips, labels)
+        self.val_pool = clip_pool(corpus, self.val_clips, labels) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
         self.halves = body_halves(self.skeleton) if self.cfg.partial_keys else []
         self.train_bank = build_bank(corpus, self.train_clips) if self.cfg.dna else None
         self.val_bank = build_bank(corpus, self.val_clips) if self.cfg.dna and n_val else None
         self.step_count = 0
+        self.ema: dict = {}  # name -> tensor: the moving average of the generator's weights (ema_decay > 0)
         self.nets: dict = {}
         self.path_net = None
         self.path_hash = ""
@@ -165,19 +166,37 @@ class GanTask(TrainingTask):
             self.nets = {"path": nets["path"]}
         else:
             self.nets = {"generator": nets["generator"], "discriminator": nets["discriminator"]}
+            if self.cfg.ema_decay > 0:
+                self.ema = {k: v.detach().clone() for k, v in nets["generator"].state_dict().items()}
         return self.nets
 
+    def _rates(self) -> dict:
+        return {"path": self.cfg.lr_path, "generator": self.cfg.lr_generator,
+                "discriminator": self.cfg.lr_discriminator}
+
     def optimizers(self, nets) -> dict:
-        """RMSprop (PyTorch defaults) per network."""
+        """RMSprop (PyTorch defaults) or Adam (betas 0.5, 0.999: GAN practice) per network (``optimizer``)."""
         import torch
 
-        lr = {"path": self.cfg.lr_path, "generator": self.cfg.lr_generator,
-              "discriminator": self.cfg.lr_discriminator}
+        lr = self._rates()
+        if self.cfg.optimizer == "adam":
+            return {name: torch.optim.Adam(net.parameters(), lr=lr[name], betas=(0.5, 0.999))
+                    for name, net in nets.items()}
         return {name: torch.optim.RMSprop(net.parameters(), lr=lr[name]) for name, net in nets.items()}
 
     def learning_rates(self, epoch: int, step: int, steps: int):
-        """Constant rates (the optimisers' own): None."""
-        return
+        """None for constant rates; with ``lr_schedule="cosine"`` each rate times the warm-up and cosine factor
+        of the run's step ``epoch * steps + step`` (of ``epochs * steps``), which falls to a tenth."""
+        if self.cfg.lr_schedule == "constant":
+            return None
+        total = max(self.epochs * steps, 1)
+        t = epoch * steps + step
+        warm = max(round(self.cfg.warmup_fraction * total), 1)
+        if t < warm:
+            f = (t + 1) / warm
+        else:
+            f = 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min((t - warm) / max(total - warm, 1), 1.0)))
+        return {name: rate * f for name, rate in self._rates().items() if name in self.nets}
 
     def begin(self, rank: int, world: int, device: str) -> None:
         self.device = device
@@ -219,10 +238,32 @@ class GanTask(TrainingTask):
         return row
 
     def state_dict(self) -> dict:
-        return {"step_count": int(self.step_count)}
+        return {"step_count": int(self.step_count), **({"ema": dict(self.ema)} if self.ema else {})}
 
     def load_state_dict(self, state: dict) -> None:
         self.step_count = int(state["step_count"])
+        if self.cfg.ema_decay > 0:
+            if "ema" not in state:
+                raise DataError("the checkpoint has no moving average of the generator's weights")
+            self.ema = {k: v.clone() for k, v in state["ema"].items()}
+
+    def _update_ema(self, G) -> None:
+        """One step of the moving average (``ema_decay``; tensors that are not floats are copied)."""
+        import torch
+
+        d = self.cfg.ema_decay
+        with torch.no_grad():
+            for k, v in _unwrap(G).state_dict().items():
+                e = self.ema[k]
+                if e.device != v.device:
+                    e = self.ema[k] = e.to(v.device)
+                if v.dtype.is_floating_point:
+                    e.mul_(d).add_(v.detach(), alpha=1 - d)
+                else:
+                    e.copy_(v)
+
+    def _run_steps(self) -> int:
+        return self.epochs * self.cfg.steps_per_epoch
 
     def save(self, output, nets, history) -> Path:
         """Write the model folder ``output`` (kind ``"gan"``; stage ``"path"`` or ``"full"``)."""
@@ -233,6 +274,9 @@ class GanTask(TrainingTask):
             gen, path, stage = None, nets["path"], "path"
         else:
             gen, path, stage = nets["generator"], self.path_net, "full"
+            if self.ema:  # the model keeps the moving average (the checkpoint keeps both)
+                gen = build_networks(self.skeleton, self.ranges, self.cfg)["generator"]
+                gen.load_state_dict({k: v.cpu() for k, v in self.ema.items()})
         if path is None:
             path = build_networks(self.skeleton, self.ranges, self.cfg)["path"]
         history = list(history or [])
@@ -251,15 +295,34 @@ class GanTask(TrainingTask):
         return Batch("path", {"relative": rel, "root": root, "lengths": lengths})
 
     def generator_batch(self, rng: np.random.Generator, pool) -> Batch:
+        """A batch of the paper's long sequences or, ``in_clip_fraction`` of the time, of in-clip windows
+        (as many frames in all), with the discriminator's real crops and the fake crops' starts."""
         cfg = self.cfg
-        B = cfg.batch_size
-        arrays = self._sequences(rng, pool, B)
+        if cfg.in_clip_fraction > 0 and rng.random() < cfg.in_clip_fraction:
+            B = max(cfg.batch_size * cfg.sequence_frames // cfg.window_frames, 1)
+            arrays = self._windows(rng, pool, B)
+            frames = arrays["valid"].sum(1)
+        else:
+            B = cfg.batch_size
+            arrays = self._sequences(rng, pool, B)
+            frames = cfg.sequence_frames
         if self.stage == "generator":
             crops = cfg.crops_per_sequence
             real = real_crops(self.train_pool, rng, B * crops, cfg.real_frames)
             arrays["real"] = real.reshape(B, crops, *real.shape[1:])
-            arrays["starts"] = crop_starts(rng, B, crops, cfg.sequence_frames, cfg.real_frames)
+            arrays["starts"] = crop_starts(rng, B, crops, frames, cfg.real_frames)
         return Batch("generator", arrays)
+
+    def _windows(self, rng, pool, count: int) -> dict:
+        """The arrays of ``count`` in-clip windows of ``pool`` (:func:`~keyfill.learn.gan.sampling.clip_window`)."""
+        cfg = self.cfg
+        bank = self.train_bank if pool is self.train_pool else self.val_bank
+        wins = [clip_window(pool, rng, cfg, self.halves, bank) for _ in range(count)]
+        arrays = {k: np.stack([w[k] for w in wins]) for k in ("dense", "key_mask", "valid", "truth", "contact")}
+        arrays["noise"] = rng.standard_normal((count, cfg.noise_dim, cfg.window_frames // 64)).astype(np.float32)
+        if bank is not None:
+            arrays["dna"], arrays["dna_valid"] = pad_dna([w["dna"] for w in wins])
+        return arrays
 
     def _sequences(self, rng, pool, count: int) -> dict:
         """``dense``, ``key_mask``, ``noise`` (and ``dna``, ``dna_valid``) of ``count`` sequences of ``pool``."""
@@ -372,9 +435,21 @@ class GanTask(TrainingTask):
             else:
                 joint = L.key_joint_loss(rel, key_rel, key_mask)
                 root_l = L.key_root_loss(root, keypose[:, :, 0], key_mask)
-            w_root = cfg.root_weight(self.step_count)
+            w_root = cfg.root_weight(self.step_count, self._run_steps())
             total = cfg.adv_weight * g_adv + cfg.br_weight * g_br + cfg.joint_weight * joint + w_root * root_l
             out = {}
+            if "truth" in a:  # in-clip windows: the ground truth of every frame
+                truth = torch.as_tensor(a["truth"], device=dev)
+                valid = torch.as_tensor(a["valid"], device=dev)
+                if cfg.recon_weight:
+                    out["recon"] = L.reconstruction_loss(rel, truth, key_mask, valid)
+                    total = total + cfg.recon_weight * out["recon"]
+                if cfg.foot_weight and len(self.train_pool.foot_joints):
+                    up = 1 if self.skeleton.up_axis == "Y" else 2
+                    out["foot"] = L.foot_sliding_loss(root, rel, self.train_pool.foot_joints,
+                                                      torch.as_tensor(a["contact"], device=dev),
+                                                      float(self.corpus.fps), up)
+                    total = total + cfg.foot_weight * out["foot"]
             if cfg.dna:
                 out["dna_1"], out["dna_2"] = L.dna_losses(L.root_free(quats, rel), dna, dna_valid, key_mask,
                                                           round(cfg.dna_seconds * self.corpus.fps))
@@ -383,6 +458,8 @@ class GanTask(TrainingTask):
         finally:
             for p in D.parameters():
                 p.requires_grad_(True)
+        if self.ema:
+            self._update_ema(G)
         self.step_count += 1
         out.update({"d_adv": d_adv, "d_br": d_br, "g_adv": g_adv, "g_br": g_br, "key_joint": joint,
                     "key_root": root_l, "generator": total})
@@ -454,9 +531,44 @@ class GanTask(TrainingTask):
                                         round(cfg.dna_seconds * self.corpus.fps), squared=False)
                     errors["dna_error_1"].append(float(e1))
                     errors["dna_error_2"].append(float(e2))
+        if cfg.in_clip_fraction > 0:
+            errors.update(self._window_errors(G, dev))
         G.train(was)
         m = self.skeleton.meters_per_unit
         return {name: float(np.mean(v) / m) for name, v in errors.items() if v}
+
+    def _window_errors(self, G, dev) -> dict:
+        """On held-out in-clip windows: ``window_error`` (the mean world joint position error on the frames
+        between keys, the root path moved onto the key roots as ``complete`` does; metres) and
+        ``window_foot_speed`` (the mean horizontal foot speed where the ground truth is in contact, m/s;
+        file units per second once the caller divides)."""
+        import torch
+
+        rng = np.random.default_rng([self.cfg.seed, 97])
+        a = self._windows(rng, self.val_pool, max(4 * self.cfg.val_sequences, 1))
+        dense, _, noise, dna, dna_valid = self._inputs(a, dev)
+        with torch.no_grad():
+            _, _, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
+        truth = a["truth"]
+        km, valid = a["key_mask"], a["valid"]
+        root = root.cpu().numpy()
+        n = km.sum(1, keepdims=True)[..., None]
+        root = root + ((truth[:, :, 0] - root) * km[..., None]).sum(1, keepdims=True) / n
+        world = rel.cpu().numpy() + root[:, :, None]
+        true_world = truth[:, :, 1:] + truth[:, :, :1]
+        between = valid & ~km
+        err = np.linalg.norm(world[:, :, 1:] - true_world, axis=-1).mean(-1)[between]
+        out = {"window_error": [float(err.mean())] if err.size else []}
+        feet = self.val_pool.foot_joints
+        if len(feet):
+            up = 1 if self.skeleton.up_axis == "Y" else 2
+            ground = [x for x in range(3) if x != up]
+            w = world[:, :, feet][..., ground]
+            speed = np.linalg.norm(np.diff(w, axis=1), axis=-1) * self.corpus.fps
+            both = a["contact"][:, 1:] & a["contact"][:, :-1]
+            if both.any():
+                out["window_foot_speed"] = [float(speed[both].mean())]
+        return out
 
     # --- the path predictor of the generator stage ---
 
@@ -474,103 +586,3 @@ class GanTask(TrainingTask):
         digest = hashlib.sha1((model_folder(path_model) / WEIGHTS).read_bytes()).hexdigest()
         return net, digest
 
-
-# --- keyfill train gan ---------------------------------------------------------------------------
-
-
-def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int = 0) -> GanConfig:
-    """The :class:`GanConfig` of preset ``preset`` with the settings of the JSON file ``path`` (if any) and ``seed``.
-
-    The file is one object of :class:`GanConfig` fields; its ``"preset"`` (without
-    ``"widths"``) picks the widths of that preset instead.
-    """
-    data = {} if path is None else read_json_object(path)
-    preset = data.pop("preset", preset) if "widths" not in data else data.get("preset", "custom")
-    try:
-        return GanConfig.from_preset(preset, **data, seed=seed) if "widths" not in data else \
-            GanConfig.from_json({**data, "seed": seed})
-    except (TypeError, UsageError) as e:  # name the file a bad setting came from
-        raise UsageError(f"{path}: {e}" if path is not None else str(e), params=getattr(e, "params", ())) from None
-
-
-def _make_task(common, options: dict, progress) -> GanTask:
-    """The task of ``keyfill train gan``: the BVH clips in DATA, chosen by --include / --exclude."""
-    from keyfill.learn.corpus import load_corpus
-
-    cfg = read_config(options["config"], options["preset"], common.seed)
-    if options["dna"] and not cfg.dna:
-        width = DNA_WIDTHS.get(cfg.preset, DNA_WIDTHS["cpu"])
-        cfg = dataclasses.replace(cfg, style_dim=cfg.style_dim or width, dna_width=width)
-    if options["partial_keys"] and not cfg.partial_keys:
-        cfg = dataclasses.replace(cfg, partial_keys=True, max_gap=min(cfg.max_gap, SPARSE_RECEPTIVE_FIELD))
-    corpus = load_corpus(common.data, fold=options["fold_root"],
-                         progress=lambda f: progress(f, desc="reading clips", unit="file"))
-    corpus = corpus.select(options["include"], options["exclude"])
-    return GanTask(corpus, cfg, options["stage"], options["path_model"], common.epochs, common.checkpoint_every or 1)
-
-
-def _started(task: GanTask) -> str:
-    what = "the global path predictor" if task.stage == "path" else "the local motion generator, path predictor frozen,"
-    return (f"training {what} with {task.cfg.preset} widths on {len(task.train_clips)} clips, validating on "
-            f"{len(task.val_clips)}; {task.epochs} epochs of {task.cfg.steps_per_epoch} steps")
-
-
-def _epoch_line(row: dict) -> str:
-    if "loss_path" in row:
-        val = f", held-out {row['path_loss']:.4f}" if "path_loss" in row else ""
-        return f"epoch {row['epoch']}: Eq. 5 loss {row['loss_path']:.4f} m^2{val}"
-    val = (f", held-out key errors: joints {row['key_joint_error']:.2f}, root {row['key_root_error']:.2f} "
-           "(file units)") if "key_joint_error" in row else ""
-    return (f"epoch {row['epoch']}: generator {row['loss_generator']:.4f}, discriminator {row['loss_d_adv']:.4f}"
-            f"{val}")
-
-
-def _finished(task: GanTask, outcome) -> tuple[dict, str]:
-    summary = {"output": str(outcome.output), "checkpoint": str(outcome.checkpoint), "log": str(outcome.log),
-               "stage": task.stage, "steps": task.step_count}
-    nxt = "" if task.stage == "generator" else \
-        f"; next: keyfill train gan DATA --stage generator --path-model {outcome.output} -o MODEL"
-    return summary, f"wrote {outcome.output} (checkpoint {outcome.checkpoint}, log {outcome.log}){nxt}"
-
-
-TRAINING = TrainingSpec(
-    help="""Train a generative tweening GAN (Zhou et al. 2020) on the BVH clips in DATA, in two stages.
-
-    Stage "path" trains the global path predictor on whole clips (Eq. 5) and
-    writes a gan model folder holding only it. Stage "generator" loads that
-    folder (--path-model), freezes the predictor and trains the local motion
-    generator against a discriminator on long sequences whose keys come from
-    several clips. The result completes motions: keyfill complete --method gan.
-
-    \b
-    Examples:
-      keyfill train gan bandai2/data -o models/gan-path --stage path
-      keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path
-      keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path --resume
-      keyfill train gan bandai2/data -o models/gan-dna --stage generator --path-model models/gan-path --dna \\
-          --partial-keys
-    """,
-    options=(
-        Option("stage", "path", "Which stage to train: the path predictor, or the generator.",
-               choices=STAGES),
-        Option("path_model", None, "The gan model folder of the path stage (the generator stage needs it).",
-               metavar="FOLDER"),
-        Option("preset", "cpu", "Layer widths: 'cpu' (small, trains on a CPU) or 'paper' (Table 5).",
-               choices=("cpu", "paper")),
-        Option("config", None, "JSON file of gan settings overriding the preset's (see docs/gan.md).", type="file"),
-        Option("include", (), "Train only on files matching one of these patterns.", multiple=True, metavar="GLOB"),
-        Option("exclude", (), "Leave out files matching these patterns (e.g. a test style).", multiple=True,
-               metavar="GLOB"),
-        Option("dna", False, "Give the generator a Motion DNA encoder (style_dim and its width from the preset: "
-               "cpu 128, paper 1024) trained with Eqs. 11-12; complete then takes --dna.", flag=True),
-        Option("partial_keys", False, "Train on partial keys too (root paths, half bodies, 2-D keys) with the "
-               "sparse input format; max_gap becomes at most 318 frames.", flag=True),
-        Option("fold_root", None, "Fold a static top joint (like Bandai's joint_Root) into the hips. "
-               "Default: when it is static.", flag=True),
-    ),
-    make_task=_make_task,
-    started=_started,
-    finished=_finished,
-    threads=1,
-    epoch_line=_epoch_line,
-)

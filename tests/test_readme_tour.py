@@ -76,6 +76,8 @@ def reads_and_writes(line: str) -> tuple[list[str], list[str]]:
         if tokens[0] == "mkdir":
             writes += [t for t in tokens[1:] if not t.startswith("-")]
             continue
+        if tokens[0] in ("printf", "echo"):
+            continue
         if tokens[0] in ("cat", "cp"):
             reads += tokens[1:]
             continue

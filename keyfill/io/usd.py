@@ -401,9 +401,9 @@ def _read_stage(stage, label) -> Motion:
         raise FormatError("a rotation is zero (not a quaternion)", label)
     rot /= norms
 
-    custom = skel.GetPrim().GetCustomDataByKey(CUSTOM_KEY) or {}
-    if not isinstance(custom, dict):
-        raise FormatError(f"the Skeleton's customData {CUSTOM_KEY!r} is not a dictionary", label)
+    from keyfill.io.usd_custom import SKELETON, checked
+
+    custom = checked(skel.GetPrim().GetCustomDataByKey(CUSTOM_KEY), SKELETON, label)
     skeleton = _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, label)
     try:
         keys = None

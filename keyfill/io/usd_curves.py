@@ -45,6 +45,7 @@ from keyfill.curves import Control, Curves
 from keyfill.errors import DataError, FormatError
 from keyfill.files import quiet_stderr
 from keyfill.io import usd
+from keyfill.io.usd_custom import CURVE, CURVES, KNOT, checked
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 
 LAYOUT = "keyfill.curves"
@@ -118,7 +119,7 @@ def curves_prim(stage):
     root = stage.GetDefaultPrim() or stage.GetPseudoRoot()
     for prim in root.GetChildren():
         data = prim.GetCustomDataByKey(_CUSTOM)
-        if isinstance(data, dict) and data.get("layout") == LAYOUT:
+        if isinstance(data, dict) and data.get("layout") == LAYOUT:  # the prim's other fields: from_stage
             return prim
     return None
 
@@ -133,16 +134,16 @@ def from_stage(stage, motion: Motion, label) -> Curves:
             "not a keyfill curves file (no Curves prim); make one with keyfill convert IN OUT.usda --curves --keys ...",
             label,
         )
-    version = prim.GetCustomDataByKey(_CUSTOM).get("version", 0)
+    version = checked(prim.GetCustomDataByKey(_CUSTOM), CURVES, label)["version"]
     if version > VERSION:
         raise FormatError(f"curves layout version {version} is newer than this keyfill reads ({VERSION})", label)
     sk = motion.skeleton
     controls, splines, names = [], [], []
     for attr in prim.GetAttributes():
-        data = attr.GetCustomDataByKey(_CUSTOM) or {}
         if not attr.HasSpline():
             continue
         where = f"{attr.GetName()}"
+        data = checked(attr.GetCustomDataByKey(_CUSTOM), CURVE, label, where)
         joint, channel = data.get("joint"), data.get("channel")
         if joint not in sk.names:
             raise FormatError(f"curve {where} names joint {joint!r}, which is not in the Skeleton", label)
@@ -213,7 +214,7 @@ def from_stage(stage, motion: Motion, label) -> Curves:
                 in_tan[k, i] = pre[0], pre[0] * pre[1]
                 out_tan[k, i] = post[0], post[0] * post[1]
                 # GetCustomDataByKey segfaults on a missing key (usd-core 26.11)
-                flag = knot.GetCustomData().get("broken")
+                flag = checked(knot.GetCustomData(), KNOT, label, names[i]).get("broken")
                 broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9,
                                                                                   atol=1e-12)
             for k, knot in enumerate(knots[:-1]):

@@ -4,6 +4,7 @@ generator that is not saturated, in-clip windows, the schedule and moving averag
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 
@@ -12,16 +13,16 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from gan_helpers import built, fit, synthetic_corpus, tiny_config  # noqa: E402
+from gan_helpers import built, fit, synthetic_corpus, tiny_config
 
-from keyfill.learn.gan import losses as L  # noqa: E402
-from keyfill.learn.gan.config import GanConfig  # noqa: E402
-from keyfill.learn.gan.features import dense_input  # noqa: E402
-from keyfill.learn.gan.layers import ResidualConv  # noqa: E402
-from keyfill.learn.gan.model import build_networks, generate, load_model  # noqa: E402
-from keyfill.learn.gan.poses import clip_pool  # noqa: E402
-from keyfill.learn.gan.sampling import LAFAN_CONTEXT, clip_window, training_sequence  # noqa: E402
-from keyfill.learn.gan.task import GanTask  # noqa: E402
+from keyfill.learn.gan import losses as L
+from keyfill.learn.gan.config import GanConfig
+from keyfill.learn.gan.features import dense_input
+from keyfill.learn.gan.layers import ResidualConv
+from keyfill.learn.gan.model import build_networks, generate, load_model
+from keyfill.learn.gan.poses import clip_pool
+from keyfill.learn.gan.sampling import LAFAN_CONTEXT, clip_window, training_sequence
+from keyfill.learn.gan.task import GanTask
 
 #: the settings of benchmarks/gan_recipe2.json that shape the networks and the data
 RECIPE2 = {"noise_dim": 0, "residual_form": "variance", "output_init": "small", "upsampling": "linear",
@@ -187,7 +188,7 @@ def test_cosine_schedule_root_weight_and_moving_average(corpus, tmp_path):
     built(task)
     rates = [task.learning_rates(e, s, 10)["path"] for e in range(2) for s in range(10)]
     assert math.isclose(rates[0], cfg.lr_path / 2) and math.isclose(rates[1], cfg.lr_path)  # two warm-up steps
-    assert all(a >= b for a, b in zip(rates[1:], rates[2:]))
+    assert all(a >= b for a, b in itertools.pairwise(rates[1:]))
     assert math.isclose(rates[-1], cfg.lr_path * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * 17 / 18))))
     assert cfg.root_weight(0, 100) == cfg.root_weight_start and cfg.root_weight(99, 100) == cfg.root_weight_end
     path = fit(task, tmp_path / "path").output
@@ -233,10 +234,10 @@ def test_second_recipe_trains_and_a_first_recipe_folder_loads_as_before(corpus, 
 
 
 def test_clip_contacts_label_a_real_walk():
+    from conftest import SHARED
+
     from keyfill.learn.corpus import load_corpus
     from keyfill.learn.gan.labels import clip_contacts
-
-    from conftest import SHARED
 
     walk = SHARED / "bvh_fixtures" / "dataset-1_walk_normal_002.bvh"
     if not walk.is_file():

@@ -92,6 +92,7 @@ class Graph:
             self.config = json.loads(meta["keyfill.config"])
             self.weights_sha256 = meta["keyfill.weights_sha256"]
             self.contract = json.loads(meta["keyfill.contract"])
+            self.metadata = dict(meta)  # a method's own keys too (the gan's keyfill.dna_bank)
         except (KeyError, ValueError) as e:
             raise ModelError(f"{path}: damaged keyfill metadata ({e})") from None
 

@@ -127,7 +127,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            onnx="keyfill.learn.transformer.onnx", humanoid=True),
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
-           training="keyfill.learn.gan.train_command", partial_keys=True, dna=True, humanoid=True),
+           training="keyfill.learn.gan.train_command", export="keyfill.learn.gan.onnx:export_onnx",
+           onnx="keyfill.learn.gan.onnx", partial_keys=True, dna=True, humanoid=True),
 )}
 
 

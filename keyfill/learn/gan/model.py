@@ -69,6 +69,8 @@ DEFAULT_MODEL = installed_models.shipped("bandai2-gan")
 #: the shipped model ``complete`` uses for partial keys (also trained with ``--partial-keys``), or None
 PARTIAL_MODEL = installed_models.shipped("bandai2-gan-partial")
 #: ends the error for a motion of another skeleton
+#: the generator takes a multiple of this many frames (keyfill.learn.gan.network.GENERATOR_MULTIPLE; no torch here)
+FRAME_MULTIPLE = 64
 TRAIN_HINT = ("; train a gan model on your own clips with 'keyfill train gan CLIPS -o MODEL-path --stage path' "
               "then 'keyfill train gan CLIPS -o MODEL --stage generator --path-model MODEL-path'")
 
@@ -160,6 +162,21 @@ class GanModel:
         return save_model(path, KIND, self.tensors(), self.model_config())
 
 
+def config_parts(config: dict) -> tuple[GanConfig, Skeleton, JointRanges, float, str]:
+    """``(settings, skeleton, ranges, fps, stage)`` of a model's ``config.json`` (no torch; a graph's
+    :mod:`keyfill.learn.gan.onnx` reads the same); KeyError, TypeError, ValueError or a KeyfillError when damaged."""
+    cfg = GanConfig.from_json(config["gan"])
+    skel = Skeleton.from_json(config["skeleton"])
+    ranges = JointRanges.from_json(config["ranges"])
+    fps = float(config["fps"])
+    if problem := check_fps(fps):
+        raise ValueError(problem)
+    stage = config["stage"]
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r}")
+    return cfg, skel, ranges, fps, stage
+
+
 def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None = "full") -> GanModel:
     """Read a ``"gan"`` model folder (no code is executed); ``stage`` (if given) must match."""
     from keyfill.learn import modelfile
@@ -169,15 +186,7 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
     tensors, config = modelfile.load_model(path, kind=KIND)
     folder = modelfile.model_folder(path)
     try:
-        cfg = GanConfig.from_json(config["gan"])
-        skel = Skeleton.from_json(config["skeleton"])
-        ranges = JointRanges.from_json(config["ranges"])
-        fps = float(config["fps"])
-        if problem := check_fps(fps):
-            raise ValueError(problem)
-        model_stage = config["stage"]
-        if model_stage not in STAGES:
-            raise ValueError(f"unknown stage {model_stage!r}")
+        cfg, skel, ranges, fps, model_stage = config_parts(config)
         nets = modelfile.build_for_loading(lambda: build_networks(skel, ranges, cfg))
     except (KeyError, TypeError, ValueError, KeyfillError) as e:
         raise ModelError(f"{folder}: damaged gan model config ({e})") from None
@@ -241,24 +250,49 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
         root path moved onto its key roots (the least-squares translation); float64 numpy.
     """
+    key_poses = np.asarray(key_poses)
+    single = key_poses.ndim == 3
+    poses = key_poses[None] if single else key_poses
+    T = int(key_frames[-1]) + 1
+    x = network_input(model, key_frames, poses, coords)
+    run = getattr(model.generator, "run_numpy", None)  # an exported graph (keyfill.learn.gan.onnx)
+    quats, root = (run if run is not None else _run_torch)(model, x, seed, style, dna)
+    q, root = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
+    kr = poses[:, :, 0]
+    if coords is None:
+        root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
+    else:
+        cr = np.asarray(coords)[:, 0]  # (K, 3)
+        n = np.maximum(cr.sum(0), 1)
+        root = root + (((kr - root[:, key_frames]) * cr).sum(1) / n)[:, None]
+    q = R.quat_normalize(q)
+    return (q[0], root[0]) if single else (q, root)
+
+
+def network_input(model: GanModel, key_frames, poses: np.ndarray, coords=None) -> np.ndarray:
+    """The generator's input ``(B, 6 J, T')`` float32 for ``poses (B, K, J, 3)`` (:func:`generate`'s), ``T'`` the
+    key range padded to a multiple of :data:`FRAME_MULTIPLE`: the dense format, or the sparse one for a
+    ``partial_keys`` model (``coords``: the coordinates the keys give)."""
+    cfg = model.config
+    T = int(key_frames[-1]) + 1
+    Tp = T + (-T) % FRAME_MULTIPLE
+    if cfg.partial_keys:
+        given = np.ones(poses.shape[1:], dtype=bool) if coords is None else np.asarray(coords, dtype=bool)
+        return np.stack([sparse_input(Tp, key_frames, p, given) for p in poses])
+    return np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale, cfg.root_input, model.skeleton.up_axis)
+                     for p in poses])
+
+
+def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna) -> tuple[np.ndarray, np.ndarray]:
+    """The torch networks on ``x`` (:func:`network_input`): ``(quats (B, T', J, 4), root (B, T', 3))`` float32,
+    the root path from 0 (noise from ``torch.Generator().manual_seed(seed)``, one draw for the batch)."""
     import torch
 
     from keyfill.learn.gan.network import GENERATOR_MULTIPLE, joint_channels, root_path
 
     cfg = model.config
-    key_poses = np.asarray(key_poses)
-    single = key_poses.ndim == 3
-    poses = key_poses[None] if single else key_poses
-    B = len(poses)
-    T = int(key_frames[-1]) + 1
-    Tp = T + (-T) % GENERATOR_MULTIPLE
+    B, Tp = len(x), x.shape[-1]
     dev = next(model.generator.parameters()).device
-    if cfg.partial_keys:
-        given = np.ones(poses.shape[1:], dtype=bool) if coords is None else np.asarray(coords, dtype=bool)
-        x = np.stack([sparse_input(Tp, key_frames, p, given) for p in poses])
-    else:
-        x = np.stack([dense_input(Tp, key_frames, p, cfg.mask_scale, cfg.root_input, model.skeleton.up_axis)
-                      for p in poses])
     x = torch.as_tensor(x, device=dev)
     g = torch.Generator().manual_seed(int(seed))
     noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
@@ -271,17 +305,8 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     with torch.inference_mode():
         v = model.generator(x, noise, w, dna=d)
         quats, rel = model.generator.rcfk(v, cfg.output_smoothing)
-        root = root_path(model.path(joint_channels(rel)))[:, :T].double().cpu().numpy()
-    q = quats[:, :T].double().cpu().numpy()
-    kr = poses[:, :, 0]
-    if coords is None:
-        root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
-    else:
-        cr = np.asarray(coords)[:, 0]  # (K, 3)
-        n = np.maximum(cr.sum(0), 1)
-        root = root + (((kr - root[:, key_frames]) * cr).sum(1) / n)[:, None]
-    q = R.quat_normalize(q)
-    return (q[0], root[0]) if single else (q, root)
+        root = root_path(model.path(joint_channels(rel)))
+    return quats.cpu().numpy(), root.cpu().numpy()
 
 
 def dna_poses(model: GanModel, source=None, frames=None, count: int | None = None, key_frames=None,
@@ -438,14 +463,19 @@ def complete(motion, keys, options):
 
     ``options.dna`` (``FILE[:FRAMES]``) and ``options.dna_count`` choose the Motion DNA.
     """
+    from keyfill.learn.modelfile import load_cached
+
+    path = model_path(options, keys)
+    return complete_with(load_cached(load, path, options.device), motion, keys, options, path)
+
+
+def complete_with(model: GanModel, motion, keys, options, path):
+    """:func:`complete` with a loaded ``model`` (torch, or an exported graph's) from ``path``."""
     from keyfill import io
     from keyfill.learn import rig_bridge
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
-    from keyfill.learn.modelfile import load_cached
 
-    path = model_path(options, keys)
-    model = load_cached(load, path, options.device)
     dna = None
     if options.dna is not None or options.dna_count is not None:
         source, frames = (None, None)

@@ -12,7 +12,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop fuzz gan-models transformer-model gltf-validator clean
+.PHONY: demo test test-slow test-interop fuzz gan-models gan-graphs transformer-model gltf-validator clean
 
 $(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -103,6 +103,16 @@ $(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/we
 
 # `make -j2 gan-models` trains the two generators side by side, one core each
 gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-partial/weights.safetensors
+
+# Once the gan models are copied into the distribution, `make gan-graphs` exports each one's ONNX graph
+# (model.onnx beside its weights; docs/onnx.md): `keyfill complete --method gan` then runs through
+# onnxruntime without torch. Only noise-free models (the second recipe) export. A graph is remade when its
+# model's weights or config change.
+SHIPPED := models/bandai/keyfill_models_bandai
+$(SHIPPED)/%/model.onnx: $(SHIPPED)/%/weights.safetensors $(SHIPPED)/%/config.json | $(STAMP)
+	$(BIN)/keyfill export $(SHIPPED)/$*
+
+gan-graphs: $(SHIPPED)/bandai2-gan/model.onnx $(SHIPPED)/bandai2-gan-partial/model.onnx
 
 # The shipped transformer (docs/transformer.md), in two steps, one thread each: the base model, the
 # benchmark's config with the SLERP pre-fill (about 3 hours of one core of the project's VM, 2.9 h

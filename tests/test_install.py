@@ -32,11 +32,11 @@ def test_a_command_that_needs_a_missing_extra_names_the_pip_line(tmp_path):
     import subprocess
     import sys
 
-    example = PYPROJECT.parent / "examples" / "human" / "keys.usda"  # the gan ships no graph: it needs torch
+    example = PYPROJECT.parent / "examples" / "human" / "keys.usda"  # runtime torch: shipped graph or not
     out = tmp_path / "o.bvh"
     code = ("import sys; sys.modules['torch'] = None  # as if the train extra were not installed\n"
             "from keyfill.cli.main import main\n"
-            f"sys.exit(main(['complete', {str(example)!r}, '-o', {str(out)!r}, '--method', 'gan']))")
+            f"sys.exit(main(['complete', {str(example)!r}, '-o', {str(out)!r}, '--method', 'gan', '--runtime', 'torch']))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False)
     assert r.returncode == 1 and not out.exists()
     assert r.stderr.strip() == ("keyfill: error: this needs torch, which the base install leaves out: "

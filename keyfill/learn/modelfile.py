@@ -11,7 +11,8 @@ A keyfill model is a folder holding two files:
   loading a model never executes code from the file.
 
 :func:`save_model` writes the folder atomically (a finished model or none);
-:func:`load_model` checks both files and raises :class:`ModelError` with one
+:func:`load_model` checks both files (the config against the one schema of
+:mod:`keyfill.learn.config_schema`) and raises :class:`ModelError` with one
 clear line for anything that is not an intact keyfill model.
 """
 
@@ -76,26 +77,6 @@ def bounded_array(values, what: str, shape: tuple | None = None, above: float | 
         raise ValueError(f"{what} must be numbers of at most {max_abs():g} in size"
                          + (f" and over {above:g}" if above is not None else ""))
     return a
-
-
-def _check_skeleton_json(want, folder) -> None:
-    """Raise :class:`ModelError` unless ``want`` is a skeleton as :meth:`Skeleton.to_json` writes it."""
-    from keyfill.limits import max_abs, max_joints
-
-    if not isinstance(want, dict):
-        raise ModelError(f"{folder}: the model config's skeleton is not a JSON object")
-    names, parents, offsets = want.get("names"), want.get("parents"), want.get("offsets")
-    if not (isinstance(names, list) and names and len(names) <= max_joints() and all(isinstance(n, str) for n in names)):
-        raise ModelError(f"{folder}: the model config's skeleton names are not a list of joint names")
-    J = len(names)
-    if not (isinstance(parents, list) and len(parents) == J
-            and all(type(p) is int and -1 <= p < j for j, p in enumerate(parents))):
-        raise ModelError(f"{folder}: the model config's skeleton parents are not {J} indices of earlier joints")
-    if not (isinstance(offsets, list) and len(offsets) == J and all(
-            isinstance(o, list) and len(o) == 3
-            and all(type(v) in (int, float) and math.isfinite(v) and abs(v) <= max_abs() for v in o)
-            for o in offsets)):
-        raise ModelError(f"{folder}: the model config's skeleton offsets are not {J} finite 3-vectors")
 
 
 def check_skeleton(config: dict, skeleton: Skeleton, path: str | os.PathLike = "the model") -> None:
@@ -182,9 +163,9 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
         raise ModelError(f"{folder}: the model config names no kind (the method that made it)")
     if kind is not None and config.get("kind") != kind:
         raise ModelError(f"{folder}: a {config.get('kind')!r} model, not a {kind!r} model")
-    if "skeleton" not in config:
-        raise ModelError(f"{folder}: the model config names no skeleton")
-    _check_skeleton_json(config["skeleton"], folder)
+    from keyfill.learn.config_schema import check_config
+
+    check_config(config, folder / CONFIG)  # every field the loaders use, by the one schema of every kind
     return config
 
 

@@ -248,6 +248,14 @@ def _output_stamp(path: str) -> list[int] | None:
     return [st.st_size, st.st_mtime_ns]
 
 
+def _entry_ok(entry) -> bool:
+    """Whether ``entry`` has the shape :meth:`Record.put` writes (one of another shape: a damaged record)."""
+    stamp = entry.get("output") if isinstance(entry, dict) else None
+    return (isinstance(entry, dict) and isinstance(entry.get("input"), str)
+            and isinstance(entry.get("input_sha256"), str) and isinstance(entry.get("recipe"), str)
+            and isinstance(stamp, list) and len(stamp) == 2 and all(type(v) is int for v in stamp))
+
+
 class Record:
     """How the outputs of one output folder were made: ``OUTDIR/.keyfill-outputs.json``.
 
@@ -288,17 +296,19 @@ class Record:
             recipes, outputs = data.get("recipes"), data.get("outputs")
             if not isinstance(recipes, dict) or not all(isinstance(r, dict) for r in recipes.values()):
                 raise ValueError("its recipes are not a JSON object of objects")
-            if not isinstance(outputs, dict) or not all(
-                    isinstance(e, dict) and isinstance(e.get("input_sha256"), str) and isinstance(e.get("recipe"), str)
-                    for e in outputs.values()):
-                raise ValueError("its outputs are not entries with input_sha256 and recipe")
-        except (ValueError, UnicodeDecodeError) as e:  # json.JSONDecodeError is a ValueError
+            if not isinstance(outputs, dict) or not all(_entry_ok(e) for e in outputs.values()):
+                raise ValueError("its outputs are not entries with input, input_sha256, recipe and output")
+        except (ValueError, UnicodeDecodeError, RecursionError) as e:  # json.JSONDecodeError is a ValueError
             if force:
                 return cls(folder)
-            reason = f"not valid JSON at line {e.lineno}" if isinstance(e, json.JSONDecodeError) else str(e)
-            raise UsageError(f"{path}: damaged or foreign record of this output folder ({reason}); "
-                             "remove it, or give force to redo every output and write a new record",
-                             params="force") from None
+            line = e.lineno if isinstance(e, json.JSONDecodeError) else None
+            reason = (f"not valid JSON at line {line}" if line is not None else
+                      "nested too deeply" if isinstance(e, RecursionError) else str(e))
+            error = UsageError(f"{path}: damaged or foreign record of this output folder ({reason}); "
+                               "remove it, or give force to redo every output and write a new record",
+                               params="force")
+            error.path, error.line = str(path), line  # --json names the record (docs/json.md)
+            raise error from None
         return cls(folder, recipes, outputs)
 
     def name(self, item: Item) -> str:

@@ -235,14 +235,13 @@ def _gan(config: dict, J: int) -> None:
 
 
 def _arnn(config: dict, J: int) -> None:
-    from keyfill.learn.lamp_data import NUM_VARIABLES
-
     _string("arch", _get(config, "", "arch"))
     for name, size in _object("sizes", config.get("sizes", {})).items():
         _number(f"sizes.{name}", size, 1, 2**31, whole=True)
     norm = _object("normalizer", _get(config, "", "normalizer"))
-    _numbers("normalizer.mean", _get(norm, "normalizer.", "mean"), NUM_VARIABLES)
-    _numbers("normalizer.std", _get(norm, "normalizer.", "std"), NUM_VARIABLES, above=0)
+    mean = _get(norm, "normalizer.", "mean")
+    _numbers("normalizer.mean", mean)  # one per animation variable: the Normalizer checks how many
+    _numbers("normalizer.std", _get(norm, "normalizer.", "std"), len(mean), above=0)
     if "variables" in config:
         for i, v in enumerate(_list("variables", config["variables"])):
             _string(f"variables[{i}]", v)

@@ -17,6 +17,9 @@ Three parts, all on the ``normal`` clips the model never saw:
    joint and root error at the keys, in cm, of the networks' output
    (:func:`keyfill.learn.gan.quality.quality_report`, which also gives the
    Motion DNA errors and the variety).
+   The same at keys every 30 frames on the held-out clips themselves
+   (``key_errors_every``: the networks' output before the exact-key correction,
+   the root after the least-squares move onto the key roots).
 3. **Realism** of what ``keyfill complete`` writes, per method, on every held-out
    clip long enough for two gaps: keys every ``G`` frames (``--gaps``) and on
    the last frame, filled by linear, cubic, the gan (seed 0) and, with
@@ -24,9 +27,14 @@ Three parts, all on the ``normal`` clips the model never saw:
    real clip: foot skating (cm/s, :mod:`keyfill.learn.protocols.metrics`, the real
    clip's lowest foot heights as the floor), jitter (m/s^3), the share of driven
    joint rotations outside the model's RC-FK ranges by more than 0.01 degree on
-   the frames between keys (%; keys are the input), and the largest
+   the frames between keys (%; keys are the input), the largest
    bone-length error (cm: every method writes rotations over constant offsets,
-   so this checks that nothing else moved).
+   so this checks that nothing else moved) and the gap error (cm: the mean world
+   joint position error against the real clip over the frames between keys).
+
+``--test-pattern`` takes several file-name patterns separated by commas (e.g. dataset-1's
+held-out ``'*_sad_*,*_feminine_*'`` with ``--data`` its folder); a run on other patterns
+than the default records under ``gan_quality-<model folder>-<patterns>``.
 
 Without the corpus the script says ``skipped`` and exits 0. The run is recorded in
 ``benchmarks/results/gan_quality-<model folder>.json`` (``results.py``; not with ``--no-record``):
@@ -95,6 +103,7 @@ def realism_table(model, model_path: str, files: list[Path], gaps, transformer: 
     out = {}
     for gap in gaps:
         rows: dict = {m: {"world": [], "rot": [], "bone": []} for m in ["real", *methods]}
+        rows["real"]["between"] = []
         for motion in clips:
             T = motion.num_frames
             if T < 2 * gap + 1:
@@ -103,6 +112,7 @@ def realism_table(model, model_path: str, files: list[Path], gaps, transformer: 
             keys = Keys(frames)
             between = np.setdiff1d(np.arange(T), frames)  # ranges are scored between keys: keys are the input
             rows["real"]["world"].append(motion.world_positions())
+            rows["real"]["between"].append(between)
             rows["real"]["rot"].append(motion.rotations[between])
             rows["real"]["bone"].append(bone_error_cm(motion, motion))
             for name, options in methods.items():
@@ -127,8 +137,11 @@ def realism_table(model, model_path: str, files: list[Path], gaps, transformer: 
                 from keyfill.learn.corpus import fold_root
 
                 rot, _ = fold_root(rot, np.zeros(rot.shape[:-1] + (3,)), sk.parents)
+            gap_error = [np.linalg.norm(w[b] - g[b], axis=-1).mean() * sk.meters_per_unit * 100
+                         for w, g, b in zip(r["world"], real, rows["real"]["between"])]
             table[name] = {
                 "clips": len(r["world"]),
+                "gap_error_cm": float(np.mean(gap_error)),
                 "foot_skating_cm_s": float(np.nanmean(skating)),
                 "jitter_m_s3": float(np.mean([jitter(w[None], fps, sk.meters_per_unit) for w in r["world"]])),
                 "range_violations_pct": float(100.0 * (~inside(model.ranges, rot, RANGE_TOLERANCE)).mean()),
@@ -136,6 +149,32 @@ def realism_table(model, model_path: str, files: list[Path], gaps, transformer: 
             }
         out[gap] = table
     return out
+
+
+def key_errors_every(model, corpus, gap: int, seed: int = 0) -> dict:
+    """``{"gap", "clips", "joints_cm", "root_cm"}``: the networks' key errors before the exact-key correction with
+    keys every ``gap`` frames (and on the last frame) of each clip of ``corpus`` long enough for two gaps."""
+    from keyfill.learn.gan.features import centre_keys
+    from keyfill.learn.gan.model import generate
+    from keyfill.learn.gan.poses import relative_positions
+
+    sk = model.skeleton
+    m = sk.meters_per_unit
+    joints, roots = [], []
+    for i in range(len(corpus)):
+        q, root = corpus.clip(i)
+        if len(q) < 2 * gap + 1:
+            continue
+        k = np.unique(np.r_[np.arange(0, len(q), gap), len(q) - 1])
+        poses = relative_positions(q[k], sk.offsets * m, sk.parents)
+        poses[:, 0] = root[k] * m
+        poses, _ = centre_keys(poses, sk.up_axis)
+        gq, groot = generate(model, k - k[0], poses, seed)
+        rel = relative_positions(gq[k - k[0]], sk.offsets * m, sk.parents)
+        joints.append(np.linalg.norm(rel[:, 1:] - poses[:, 1:], axis=-1).mean())
+        roots.append(np.linalg.norm(groot[k - k[0]] - poses[:, 0], axis=-1).mean())
+    return {"gap": gap, "clips": len(joints), "joints_cm": float(np.mean(joints) * 100),
+            "root_cm": float(np.mean(roots) * 100)}
 
 
 def goals(report: dict) -> list[dict]:
@@ -148,6 +187,22 @@ def goals(report: dict) -> list[dict]:
         out.append(results.goal(12, "gan: zero joint-range violations and bone-length error between keys",
                                 f"{worst_range:.2f} % and {worst_bone:.1g} cm at keys every "
                                 f"{' and '.join(str(g) for g in gan)} frames", worst_range == 0 and worst_bone < 1e-6))
+    for gap, table in report["realism"].items():
+        if "gan" not in table:
+            continue
+        g, c, real = table["gan"], table["cubic"], table["real"]
+        out.append(results.goal(31, f"gan raw output, keys every {gap}: foot skating below cubic's, jitter at most "
+                                    "1.5x the real clips', gap error at most cubic's",
+                                f"skating {g['foot_skating_cm_s']:.1f} (cubic {c['foot_skating_cm_s']:.1f}) cm/s, "
+                                f"jitter {g['jitter_m_s3']:.0f} (real {real['jitter_m_s3']:.0f}) m/s^3, gap error "
+                                f"{g['gap_error_cm']:.2f} (cubic {c['gap_error_cm']:.2f}) cm",
+                                g["foot_skating_cm_s"] < c["foot_skating_cm_s"]
+                                and g["jitter_m_s3"] <= 1.5 * real["jitter_m_s3"]
+                                and g["gap_error_cm"] <= c["gap_error_cm"]))
+    e = report["key_errors_every"]
+    out.append(results.goal(31, f"gan keys before correction, keys every {e['gap']}: at most 5 cm (joints), 30 cm "
+                                "(root)", f"{e['joints_cm']:.1f} cm joints, {e['root_cm']:.1f} cm root",
+                            e["joints_cm"] <= 5 and e["root_cm"] <= 30))
     full = report["sampled"]["key_errors"]["full"]
     joints, root = full["joints_cm"], full["root_cm"]
     near = joints <= NEAR * PAPER["key_joints_cm"] and root <= NEAR * PAPER["key_root_cm"]
@@ -179,15 +234,21 @@ def main(argv=None) -> int:
     bench = results.Run()
     started = time.perf_counter()
     model = load_model(args.model)
-    corpus = load_corpus([data], fold=model.folded).select(include=(args.test_pattern,))
+    patterns = tuple(p.strip() for p in args.test_pattern.split(",") if p.strip())
+    corpus = load_corpus([data], fold=model.folded).select(include=patterns)
     report = {"path_cm": path_errors(model, clip_pool(corpus))}
     report["sampled"] = quality_report(model, corpus, range(len(corpus)), args.sequences, args.frames, args.seed)
-    files = bvh_files([data], args.test_pattern)[: args.clips]
+    report["key_errors_every"] = key_errors_every(model, corpus, 30, args.seed)
+    files = sorted({f for p in patterns for f in bvh_files([data], p)})[: args.clips]
     report["realism"] = realism_table(model, args.model, files, [int(g) for g in args.gaps.split(",")], args.transformer)
     report["seconds"] = round(time.perf_counter() - started, 1)
     print(f"load average after: {os.getloadavg()[0]:.2f}", file=sys.stderr)
     figures = {"model": args.model, "transformer": args.transformer, "paper": PAPER, **report}
-    record = bench.record(f"gan_quality-{Path(args.model).name}", figures, goals(report), write=not args.no_record)
+    name = f"gan_quality-{Path(args.model).name}"
+    if args.test_pattern != "*_normal_*":
+        name += "-" + "-".join(p.strip("*_") for p in patterns)
+    figures["test_pattern"] = args.test_pattern
+    record = bench.record(name, figures, goals(report), write=not args.no_record)
     if args.json:
         print(results.dumps(record), end="")
         return 0
@@ -202,11 +263,15 @@ def main(argv=None) -> int:
     full = s["key_errors"]["full"]
     print(f"{s['sequences']} sequences of {s['frames']} frames: key errors before post-processing "
           f"joints {cm(full['joints_cm'])} cm (paper 3.5), root {cm(full['root_cm'])} cm (paper 10.0)")
+    e = report["key_errors_every"]
+    print(f"keys every {e['gap']} frames on {e['clips']} held-out clips: key errors before post-processing joints "
+          f"{cm(e['joints_cm'])} cm, root {cm(e['root_cm'])} cm")
     for gap, table in report["realism"].items():
-        print(f"keys every {gap} frames:  clips  skating cm/s  jitter m/s^3  out of range %  bone error cm")
-        for name, r in table.items():
-            print(f"  {name:<12} {r['clips']:>5} {r['foot_skating_cm_s']:>13.2f} {r['jitter_m_s3']:>13.2f} "
-                  f"{r['range_violations_pct']:>15.3f} {r['bone_error_cm']:>14.2e}")
+        print(f"keys every {gap} frames:  clips  skating cm/s  jitter m/s^3  gap error cm  out of range %  "
+              "bone error cm")
+        for label, r in table.items():
+            print(f"  {label:<12} {r['clips']:>5} {r['foot_skating_cm_s']:>13.2f} {r['jitter_m_s3']:>13.2f} "
+                  f"{r['gap_error_cm']:>13.2f} {r['range_violations_pct']:>15.3f} {r['bone_error_cm']:>14.2e}")
     results.print_goals(record)
     return 0
 

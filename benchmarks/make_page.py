@@ -82,9 +82,9 @@ SECTIONS = {
         "Generative tweening speed: `{variant}`", "`complete_motion` and both exact-key steps with the model loaded, "
         "512 to 4,096 frames, on 1 and 2 threads.", S.gan_speed),
     "gan_quality": Section(
-        "Generative tweening quality: `{variant}`", "On the held-out `normal` clips of Bandai-Namco dataset-2: the "
-        "path predictor (the paper's Table 2), key errors before post-processing (Table 4), and the realism of what "
-        "`keyfill complete` writes.", S.gan_quality),
+        "Generative tweening quality: `{variant}`", "On held-out Bandai-Namco clips (styles the model never saw): "
+        "the path predictor (the paper's Table 2), key errors before post-processing (Table 4), and the realism of "
+        "what `keyfill complete` writes.", S.gan_quality),
     "gan_dna": Section(
         "Motion DNA and partial keys: `{variant}`", "Eqs. 11-12's DNA errors, key errors for whole, root-only, "
         "half-body and 2-D keys, and the variety of 4 DNAs against 4 noise seeds, on the held-out clips.",

@@ -336,21 +336,26 @@ def _sampled_rows(s: dict, paper: dict) -> list[list[str]]:
 
 
 def gan_quality(f: dict) -> list[str]:
-    """Table 2 (path predictor), Table 4 (key errors) and realism of one gan model."""
+    """Table 2 (path predictor), Table 4 (key errors) and realism of one gan model on one held-out set."""
     p, s, paper = f["path_cm"], f["sampled"], f["paper"]
     rows = [["path predictor error per frame / after 64 / after 128 frames (cm)",
              f"{num(p['1'])} / {num(p['64'], 1)} / {num(p['128'], 1)}",
              f"{paper['path_cm_per_frame']} per frame, {paper['path_cm_2s']} after 2.1 s (60 fps)"]]
-    lines = [f"{s['sequences']} key layouts of {num(s['frames'], 0)} frames over the held-out `normal` clips.", ""]
+    if "key_errors_every" in f:
+        e = f["key_errors_every"]
+        rows.append([f"key errors before post-processing, keys every {e['gap']} frames of {e['clips']} clips: "
+                     "joints / root (cm)", f"{num(e['joints_cm'], 1)} / {num(e['root_cm'], 1)}", "goal: 5 / 30"])
+    held = f.get("test_pattern", "*_normal_*")
+    lines = [f"Held-out clips `{held}`; {s['sequences']} key layouts of {num(s['frames'], 0)} frames over them.", ""]
     lines += table(["figure", "measured", "paper"], rows + _sampled_rows(s, paper))
     realism = []
     for gap in in_order(f["realism"]):
         by_method = f["realism"][gap]
         realism += [[gap, m, r["clips"], num(r["foot_skating_cm_s"], 1), num(r["jitter_m_s3"], 1),
-                     num(r["range_violations_pct"], 2), num(r["bone_error_cm"], 2)]
+                     num(r.get("gap_error_cm"), 2), num(r["range_violations_pct"], 2), num(r["bone_error_cm"], 2)]
                     for m, r in ((m, by_method[m]) for m in in_order(by_method, METHODS))]
-    return lines + [""] + table(["realism of whole clips, keys every", "method", "clips", "foot skating cm/s",
-                                 "jitter m/s^3", "range violations %", "bone error cm"], realism)
+    return lines + [""] + table(["realism, keys every", "method", "clips", "foot skating cm/s", "jitter m/s^3",
+                                 "gap error cm", "range violations %", "bone error cm"], realism)
 
 
 def gan_dna(f: dict) -> list[str]:

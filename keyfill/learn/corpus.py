@@ -36,7 +36,6 @@ import fnmatch
 import hashlib
 import json
 import os
-import re
 import shutil
 import tarfile
 import tempfile
@@ -49,6 +48,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError, ModelError
+from keyfill.learn.mirror import Mirror, find_mirror, mirror_pairs  # noqa: F401 (their old home: still importable here)
 from keyfill.motion import Motion, Skeleton
 
 CACHE_VERSION = 1
@@ -453,136 +453,3 @@ def _read_cache(path: Path) -> Corpus:
         )
         return Corpus(skel, tuple(meta["files"]), z["quats"], z["root"], z["starts"], meta["fps"], meta["folded"])
 
-
-# --- mirroring ---------------------------------------------------------------------
-
-_SIDE_RULES = (
-    (re.compile(r"([_.])([LlRr])$"), lambda m: m.group(1) + {"L": "R", "R": "L", "l": "r", "r": "l"}[m.group(2)]),
-    (re.compile(r"^([LlRr])([_.])"), lambda m: {"L": "R", "R": "L", "l": "r", "r": "l"}[m.group(1)] + m.group(2)),
-    (re.compile(r"Left|Right|left|right"), lambda m: {"Left": "Right", "Right": "Left", "left": "right", "right": "left"}[m.group(0)]),
-)
-
-
-def mirror_pairs(names: Sequence[str]) -> np.ndarray | None:
-    """``(J,)`` index of each joint's mirror image by its name (itself for the centre line).
-
-    Sides are recognised as a ``_L``/``_R`` (or ``.L``, ``_l``) suffix, an
-    ``L_``/``R_`` prefix, or the words ``Left``/``Right``. None when no joint
-    has a side, or a side has no partner.
-    """
-    index = {n: i for i, n in enumerate(names)}
-    perm = np.arange(len(names))
-    paired = False
-    for i, n in enumerate(names):
-        for pattern, swap in _SIDE_RULES:
-            other = pattern.sub(swap, n, count=1)
-            if other != n:
-                if other not in index:
-                    return None
-                perm[i] = index[other]
-                paired = True
-                break
-    return perm if paired else None
-
-
-def _reflections() -> np.ndarray:
-    """The 24 signed permutation matrices with determinant -1, ``(24, 3, 3)``."""
-    out = []
-    for p in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
-        for s in np.ndindex(2, 2, 2):
-            m = np.zeros((3, 3))
-            m[range(3), p] = 1 - 2 * np.asarray(s)
-            if np.linalg.det(m) < 0:
-                out.append(m)
-    return np.array(out)
-
-
-def _mean_rotation(q: np.ndarray) -> np.ndarray:
-    """Chordal mean of unit quaternions ``(N, 4)`` (signs aligned to the first)."""
-    q = np.where(np.sum(q * q[:1], axis=-1, keepdims=True) < 0, -q, q)
-    return R.quat_normalize(q.mean(axis=0))
-
-
-@dataclass(frozen=True, eq=False)
-class Mirror:
-    """Left-right mirroring of motions of one skeleton.
-
-    The mirrored pose gives joint ``perm[m]`` the global rotation ``W G_m A_m``
-    and the root the position ``W p``, where ``W`` reflects the world's first
-    ground axis (X) and ``A_m`` is a constant reflection that maps the joint's
-    mirrored bone directions onto its own. In quaternions: local rotations
-    ``conj(a_parent) * q_m * a_m`` with ``a = quat(-A)``, the root
-    ``quat(-W) * q_root * a_root``.
-
-    Attributes:
-        perm: ``(J,)`` mirror joint of every joint.
-        a: ``(J, 4)`` the quaternions of ``-A_m``.
-        parents: ``(J,)`` the skeleton's parents.
-    """
-
-    perm: np.ndarray
-    a: np.ndarray
-    parents: np.ndarray
-
-    def __call__(self, quats: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mirror ``quats (..., J, 4)`` and ``root (..., 3)``."""
-        par = self.parents
-        left = np.array([self.a[p] if p >= 0 else [0.0, -1.0, 0.0, 0.0] for p in par])  # conj(quat(-W)) for the root
-        src = R.quat_mul(R.quat_mul(R.quat_conjugate(left), quats), self.a)  # (..., J, 4), joint m's new rotation
-        out = np.empty_like(src)
-        out[..., self.perm, :] = src
-        r = np.array(root, dtype=np.float64)
-        r[..., 0] = -r[..., 0]
-        return out, r
-
-
-def find_mirror(skeleton: Skeleton, quats: np.ndarray, tolerance: float = 0.05) -> Mirror | None:
-    """The :class:`Mirror` of ``skeleton``, or None when the skeleton does not allow one.
-
-    Needs left/right joint names (:func:`mirror_pairs`) that keep the
-    hierarchy, and for every joint a reflection ``A`` among the signed axis
-    permutations that maps its mirrored children's offsets onto its own
-    (within ``tolerance`` of the bone length). Where several fit (a single
-    straight child, a leaf), the one whose mirrored mean rotation in ``quats``
-    (``(N, J, 4)``, a sample of the corpus) best matches the mirror joint's
-    mean rotation is taken.
-    """
-    perm = mirror_pairs(skeleton.names)
-    par = skeleton.parents
-    if perm is None or skeleton.up_axis != "Y":
-        return None
-    if any((par[m] < 0) != (par[perm[m]] < 0) or (par[m] >= 0 and perm[par[m]] != par[perm[m]]) for m in range(len(par))):
-        return None
-    off = skeleton.offsets
-    cands = _reflections()
-    mean = np.array([_mean_rotation(quats[:, j]) for j in range(len(par))])
-    chosen: dict[int, np.ndarray] = {}
-
-    def constraint_children(m):
-        out = []
-        for c in skeleton.children(m):
-            if np.linalg.norm(off[c]) > 1e-9:
-                out.append(c)
-            elif np.allclose(np.abs(quats[:, c, 0]), 1.0, atol=1e-6):  # a zero-length static joint: look through it
-                out.extend(constraint_children(c))
-        return out
-
-    for m in range(len(par)):
-        ok = []
-        for A in cands:
-            err = [np.linalg.norm(A @ off[perm[c]] - off[c]) / max(np.linalg.norm(off[c]), 1e-9)
-                   for c in constraint_children(m)]
-            if all(e < tolerance for e in err):
-                ok.append(A)
-        if not ok:
-            return None
-        if len(ok) > 1:
-            if par[m] < 0:
-                return None  # the root's reflection must follow from its bones
-            a_p = R.quat_from_matrix(-chosen[par[m]])
-            dist = [R.quat_angle(R.quat_mul(R.quat_mul(R.quat_conjugate(a_p), mean[m]), R.quat_from_matrix(-A)),
-                                 mean[perm[m]]) for A in ok]
-            ok = [ok[int(np.argmin(dist))]]
-        chosen[m] = ok[0]
-    a = np.array([R.quat_from_matrix(-chosen[m]) for m in range(len(par))])
-    return Mirror(perm, a, np.asarray(par))

@@ -273,6 +273,15 @@ class Corpus:
             ``(quats (W, length, J, 4), root (W, length, 3), clip index (W,), skipped)``
             where ``skipped`` counts clips too short for a single window.
         """
+        frames, clip_of, skipped = self.window_frames(length, offset)
+        J = self.skeleton.num_joints
+        if len(frames) == 0:
+            return np.zeros((0, length, J, 4)), np.zeros((0, length, 3)), clip_of, skipped
+        return self.quats[frames], self.root[frames], clip_of, skipped
+
+    def window_frames(self, length: int, offset: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """The frames of :meth:`windows`: ``(frames (W, length) int64 indices into quats / root, clip index
+        (W,), skipped)``, to cut per-frame arrays of the corpus (contact labels) as the windows are cut."""
         idx, clip_of, skipped = [], [], 0
         for c in range(len(self)):
             a, n = int(self.starts[c]), int(self.starts[c + 1] - self.starts[c])
@@ -281,11 +290,8 @@ class Corpus:
                 skipped += 1
             idx.extend(a + s)
             clip_of.extend([c] * len(s))
-        frames = np.asarray(idx, dtype=np.int64)[:, None] + np.arange(length)
-        J = self.skeleton.num_joints
-        if len(idx) == 0:
-            return np.zeros((0, length, J, 4)), np.zeros((0, length, 3)), np.zeros(0, np.int64), skipped
-        return self.quats[frames], self.root[frames], np.asarray(clip_of, dtype=np.int64), skipped
+        frames = np.asarray(idx, dtype=np.int64).reshape(-1, 1) + np.arange(length)
+        return frames, np.asarray(clip_of, dtype=np.int64), skipped
 
 
 def load_corpus(

@@ -23,13 +23,14 @@ PREFILLS = tuple(PREFILL_FUNCTIONS)
 #: that value they are left out of a model's ``config.json`` and of what ``--resume`` compares, so older runs
 #: resume and retrain to the same bytes (:meth:`ModelConfig.recorded`)
 LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False,
-                      "output_smoothing": 0}
+                      "output_smoothing": 0, "foot_weight": 0.0, "smooth_weight": 0.0}
 #: the highest order of :attr:`ModelConfig.output_smoothing` (a 65-tap kernel: more than a window)
 MAX_SMOOTHING = 64
 #: each number of a :class:`ModelConfig`: (whole number?, lowest, highest); larger sizes would exhaust memory
 NUMBER_LIMITS = {"layers": (True, 1, 256), "d_model": (True, 1, 16384), "heads": (True, 1, 256),
                  "ffn": (True, 1, 65536), "max_frames": (True, 1, 100_000), "dropout": (False, 0, 0.99),
-                 "kinematics_weight": (False, 0, 1e6), "fk_weight": (False, 0, 1e6), "rotation_weight": (False, 0, 1e6)}
+                 "kinematics_weight": (False, 0, 1e6), "fk_weight": (False, 0, 1e6), "rotation_weight": (False, 0, 1e6),
+                 "foot_weight": (False, 0, 1e6), "smooth_weight": (False, 0, 1e6)}
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,13 @@ class ModelConfig:
             the next key (the "time to arrival" of Harvey et al. 2020), so the network reads a gap's length
             and its place in it directly. They start at zero: a model fine-tuned with them from one
             without starts as that model.
+        foot_weight: weight of a foot-sliding term (issue 30): the mean squared horizontal speed, (m/s)^2,
+            of the foot and toe joints of the decoded output (the positions a user gets) over the frame
+            pairs the real window has in contact (:func:`keyfill.characters.feet.contacts` labels;
+            :func:`keyfill.learn.realism_terms.foot_sliding_loss`). 0: off, as every shipped model.
+        smooth_weight: weight of a smoothness term (issue 30): the mean excess of the decoded output's jerk
+            (third difference of world joint positions, m/s^3) over the real window's at the same joint and
+            frame, clipped at 0 (:func:`keyfill.learn.realism_terms.excess_jerk_loss`). 0: off.
     """
 
     coordinates: str = "global"
@@ -71,6 +79,8 @@ class ModelConfig:
     rotation_weight: float = 1.0
     key_distances: bool = False
     output_smoothing: int = 0
+    foot_weight: float = 0.0
+    smooth_weight: float = 0.0
 
     def __post_init__(self):
         for name, (whole, low, high) in NUMBER_LIMITS.items():  # before any arithmetic (heads 0, layers 1e9)

@@ -16,7 +16,8 @@ Windows (65 frames at offset 20 by default) come from the training clips of a
 :class:`~keyfill.learn.corpus.Corpus`; half of them are mirrored left-right
 where the skeleton allows; each is put in the model's canonical
 frame for its layout, the unknown frames are pre-filled, and the losses of
-:func:`keyfill.learn.transformer.network.losses` are minimised with Adam. The learning
+:func:`keyfill.learn.transformer.network.losses` (plus, with ``foot_weight`` or ``smooth_weight``, the
+realism terms of :mod:`keyfill.learn.transformer.realism`) are minimised with Adam. The learning
 rate warms up linearly over the first epochs, then decays by a constant factor
 every few epochs (the paper: 50 warm-up epochs, x0.75 every 200 of 1,000).
 
@@ -53,6 +54,7 @@ from keyfill.learn.transformer.config import ModelConfig
 from keyfill.learn.transformer.features import apply_transform, canonical_transform, frame_kinds
 from keyfill.learn.transformer.model import KIND, CompletionModel, load, new_model
 from keyfill.learn.transformer.network import losses
+from keyfill.learn.transformer.realism import column_swap, contact_windows, realism_losses
 from keyfill.learn.windows import align_windows, global_pose
 from keyfill.limits import check_number
 
@@ -259,10 +261,13 @@ class Split:
     root: np.ndarray
     validation: lafan1.Protocol | None
     info: dict
+    contacts: np.ndarray | None = None  #: (W, window, n) bool contact labels of the windows, when asked for
+    contact_joints: np.ndarray | None = None  #: (n,) their joints
 
 
-def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str) -> Split:
-    """Hold out ``val_fraction`` of the clips (seeded) and cut the training windows."""
+def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str, contacts: bool = False) -> Split:
+    """Hold out ``val_fraction`` of the clips (seeded) and cut the training windows (with ``contacts``, also
+    their foot contact labels, :func:`keyfill.learn.transformer.realism.contact_windows`)."""
     rng = np.random.default_rng([seed, 7919])
     C = len(corpus)
     n_val = round(cfg.val_fraction * C) if C > 1 else 0
@@ -287,7 +292,11 @@ def split_corpus(corpus: Corpus, cfg: TrainConfig, seed: int, facing_axis: str) 
         "train_windows": len(q),
         "clips_too_short": int(skipped),
     }
-    return Split(q.astype(np.float32), r.astype(np.float32), validation, info)
+    split = Split(q.astype(np.float32), r.astype(np.float32), validation, info)
+    if contacts:
+        split.contacts, split.contact_joints = contact_windows(train, cfg.window, cfg.window_offset)
+        info["contact_columns"] = int(split.contact_joints.size)
+    return split
 
 
 class TransformerTask(TrainingTask):
@@ -311,12 +320,15 @@ class TransformerTask(TrainingTask):
         self.corpus, self.model_cfg, self.cfg, self.seed = corpus, model_cfg, cfg, seed
         self.epochs = cfg.epochs
         self.clip = cfg.grad_clip
-        self.data = split_corpus(corpus, cfg, seed, model_cfg.facing_axis)
+        self.data = split_corpus(corpus, cfg, seed, model_cfg.facing_axis, contacts=model_cfg.foot_weight > 0)
         self.mirror = None
         if cfg.mirror:
             sample = np.random.default_rng([seed, 104729]).choice(len(corpus.quats), min(len(corpus.quats), 20000),
                                                                   replace=False)
             self.mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
+        self.contact_swap = None  # the columns of a mirrored window's contact labels
+        if self.mirror is not None and self.data.contacts is not None:
+            self.contact_swap = column_swap(self.mirror, self.data.contact_joints)
         self.info = {"seed": seed, "corpus_clips": len(corpus), **self.data.info, "mirrored": self.mirror is not None}
         self.init = None if init is None else initial_model(init, corpus)
         if self.init is not None:
@@ -372,7 +384,8 @@ class TransformerTask(TrainingTask):
         return {"network": learning_rate(self.cfg, epoch + step / steps)}
 
     def batches(self, epoch):
-        """``(inputs, targets, gt_quats, gt_root, kinds)`` of each step: one key layout per batch."""
+        """``(inputs, targets, gt_quats, gt_root, kinds[, contacts])`` of each step: one key layout per batch
+        (``contacts (B, T, n)`` bool: the true windows' foot contacts, with ``foot_weight``)."""
         import torch
 
         cfg = self.cfg
@@ -383,23 +396,42 @@ class TransformerTask(TrainingTask):
             _, T, keys = sample_layout(rng, cfg.layouts, cfg.window, cfg.gap_sampling)
             idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
             wq, wr = self.data.quats[idx, :T], self.data.root[idx, :T]
+            wc = None if self.data.contacts is None else self.data.contacts[idx, :T]
             if self.mirror is not None:
                 flip = rng.random(len(idx)) < 0.5
                 wq, wr = wq.astype(np.float64), wr.astype(np.float64)
                 wq[flip], wr[flip] = self.mirror(wq[flip], wr[flip])
-            yield make_batch(self.model, wq, wr, keys, T)
+                if wc is not None:
+                    wc[flip] = wc[flip][..., self.contact_swap]
+            batch = make_batch(self.model, wq, wr, keys, T)
+            yield batch if wc is None else batch + (torch.as_tensor(wc, device=self.model.device),)
 
     def shard(self, batch, rank, world):
         return tuple(t[rank::world] for t in batch)
 
+    def losses(self, pred, batch) -> dict:
+        """The named losses of output ``pred`` on ``batch``: the network's, plus the realism terms whose weight
+        is not 0, each added to ``"total"`` with its weight."""
+        y, gq, gr, kinds = batch[1:5]
+        cfg, sk = self.model_cfg, self.corpus.skeleton
+        out = losses(self.model.features, pred, y, gq, gr, kinds, cfg)
+        extra = realism_losses(self.model.features, pred, gq, gr, kinds, cfg,
+                               contact=batch[5] if len(batch) > 5 else None, joints=self.data.contact_joints,
+                               fps=self.corpus.fps, up="XYZ".index(sk.up_axis),
+                               meters_per_unit=sk.meters_per_unit)
+        for name, value in extra.items():
+            out[name] = value
+            out["total"] = out["total"] + getattr(cfg, f"{name}_weight") * value
+        return out
+
     def step(self, batch, update):
-        x, y, gq, gr, kinds = batch
-        out = losses(self.model.features, self.model.network(x, kinds), y, gq, gr, kinds, self.model_cfg)
+        x, kinds = batch[0], batch[4]
+        out = self.losses(self.model.network(x, kinds), batch)
         if self.cfg.relative_loss:
             import torch
 
             with torch.no_grad():  # the pre-filled input x scored as if it were the output
-                prefill = losses(self.model.features, x, y, gq, gr, kinds, self.model_cfg)["total"]
+                prefill = self.losses(x, batch)["total"]
             update("network", out["total"] / prefill.clamp(min=1e-8))
         else:
             update("network", out["total"])

@@ -144,3 +144,19 @@ def test_weights_default_off_and_are_not_recorded():
     assert on["foot_weight"] == 0.3 and on["smooth_weight"] == 1e-4
     with pytest.raises(Exception, match="foot_weight"):
         TC.ModelConfig(foot_weight=-1)
+
+
+def test_a_run_with_the_terms_logs_them_and_records_their_weights(corpus, tmp_path, monkeypatch):
+    import json
+
+    from keyfill.learn.transformer.model import load
+    from keyfill.learn.transformer.task import train
+
+    monkeypatch.setenv("KEYFILL_CACHE", str(tmp_path / "cache"))
+    cfg = dataclasses.replace(TINY, foot_weight=0.3, smooth_weight=2.5e-4)
+    model = train(corpus, tmp_path / "m", cfg, TRAINING, seed=0)
+    log = [json.loads(line) for line in (tmp_path / "m.log.jsonl").read_text().splitlines()]
+    assert log[-1]["loss_foot"] > 0 and log[-1]["loss_smooth"] > 0
+    arch = json.loads((tmp_path / "m" / "config.json").read_text())["architecture"]
+    assert arch["foot_weight"] == 0.3 and arch["smooth_weight"] == 2.5e-4
+    assert model.info["contact_columns"] == 4 and load(tmp_path / "m").config == cfg

@@ -343,8 +343,8 @@ def gan_quality(f: dict) -> list[str]:
              f"{paper['path_cm_per_frame']} per frame, {paper['path_cm_2s']} after 2.1 s (60 fps)"]]
     if "key_errors_every" in f:
         e = f["key_errors_every"]
-        rows.append([f"key errors before post-processing, keys every {e['gap']} frames of {e['clips']} clips: "
-                     "joints / root (cm)", f"{num(e['joints_cm'], 1)} / {num(e['root_cm'], 1)}", "goal: 5 / 30"])
+        rows.append([(f"key errors before post-processing, keys every {e['gap']} frames of {e['clips']} clips: "
+                     "joints / root (cm)"), f"{num(e['joints_cm'], 1)} / {num(e['root_cm'], 1)}", "goal: 5 / 30"])
     held = f.get("test_pattern", "*_normal_*")
     lines = [f"Held-out clips `{held}`; {s['sequences']} key layouts of {num(s['frames'], 0)} frames over them.", ""]
     lines += table(["figure", "measured", "paper"], rows + _sampled_rows(s, paper))

@@ -155,7 +155,7 @@ def key_errors_every(model, corpus, gap: int, seed: int = 0) -> dict:
     """``{"gap", "clips", "joints_cm", "root_cm"}``: the networks' key errors before the exact-key correction with
     keys every ``gap`` frames (and on the last frame) of each clip of ``corpus`` long enough for two gaps."""
     from keyfill.learn.gan.features import centre_keys
-    from keyfill.learn.gan.model import generate
+    from keyfill.learn.gan.model import dna_poses, generate
     from keyfill.learn.gan.poses import relative_positions
 
     sk = model.skeleton
@@ -169,7 +169,8 @@ def key_errors_every(model, corpus, gap: int, seed: int = 0) -> dict:
         poses = relative_positions(q[k], sk.offsets * m, sk.parents)
         poses[:, 0] = root[k] * m
         poses, _ = centre_keys(poses, sk.up_axis)
-        gq, groot = generate(model, k - k[0], poses, seed)
+        dna = dna_poses(model, key_frames=k, seed=seed) if model.config.dna else None  # as complete draws it
+        gq, groot = generate(model, k - k[0], poses, seed, dna=dna)
         rel = relative_positions(gq[k - k[0]], sk.offsets * m, sk.parents)
         joints.append(np.linalg.norm(rel[:, 1:] - poses[:, 1:], axis=-1).mean())
         roots.append(np.linalg.norm(groot[k - k[0]] - poses[:, 0], axis=-1).mean())

@@ -8,7 +8,8 @@ networks' output before any exact-key correction:
   with ``squared=False``), each sequence with keys sampled as in training
   (Appendix C, whole poses) and a DNA of one held-out clip's representative
   poses, one per 3 s of gap (Appendix D); the paper reports 8.4 and 6.5 cm;
-* ``key_errors`` (cm) per kind of key: ``full``, ``root`` (root positions only,
+* ``key_errors`` (cm) per kind of key (the networks given the sequence's DNA, as ``complete`` always
+  gives a DNA model one): ``full``, ``root`` (root positions only,
   5.1), ``half`` (each half of the body with the root, 5.2), ``plane`` (2-D
   joint positions in the XY, XZ and YZ view planes, 5.3): the mean over keys and
   keyed joints of the distance over the given coordinates, for the joints
@@ -56,11 +57,12 @@ def _key_kinds(model: GanModel, K: int) -> dict:
     return kinds
 
 
-def _key_error(model: GanModel, frames, poses, coords, seed: int) -> tuple[float, float]:
-    """``(joint error, root error)`` in metres of one generation through partial keys ``coords``."""
+def _key_error(model: GanModel, frames, poses, coords, seed: int, dna=None) -> tuple[float, float]:
+    """``(joint error, root error)`` in metres of one generation through partial keys ``coords`` (with the Motion
+    DNA ``dna`` a DNA model is given, as ``complete`` always gives one)."""
     m = model.skeleton.meters_per_unit
     centred, _ = centre_keys(poses, model.skeleton.up_axis, coords)
-    q, root = generate(model, frames, centred, seed, coords=coords)
+    q, root = generate(model, frames, centred, seed, dna=dna, coords=coords)
     rel = relative_positions(q[frames], model.skeleton.offsets * m, model.skeleton.parents)
     d = (rel[:, 1:] - centred[:, 1:]) ** 2 * coords[:, 1:]
     given = coords[:, 1:].any(-1)
@@ -142,7 +144,7 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
         dnas = [draw_dna(bank, rng, count) for _ in range(VARIETY)] if cfg.dna else [None]
         for kind, masks in _key_kinds(model, len(k)).items():
             for coords in masks:
-                key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i))
+                key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i, dnas[0]))
         between = np.setdiff1d(np.arange(k[-1] + 1), k)
 
         def world(q, root, between=between):

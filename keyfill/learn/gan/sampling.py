@@ -144,6 +144,14 @@ def sample_keys(pool: ClipPool, rng: np.random.Generator, frames: int, min_gap: 
     return KeyLayout(np.array(frames_out, dtype=np.int64), poses_arr, np.array(clips, dtype=np.int64))
 
 
+def key_roots(num_frames: int, key_frames, key_poses) -> np.ndarray:
+    """``(T, 3)`` float32: each frame's nearest key root (the targets of the root loss, Eq. 10; the dense input's
+    root channels hold them only with ``root_input="centred"``)."""
+    from keyfill.learn.gan.features import nearest_key
+
+    return np.asarray(key_poses, dtype=np.float32)[nearest_key(num_frames, key_frames)[0], 0]
+
+
 def body_halves(skeleton) -> list[np.ndarray]:
     """The two halves of a body, ``(J,)`` bool each, or ``[]`` when the skeleton does not branch into both.
 
@@ -197,15 +205,15 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
     last frames hold the last key, as the padding to a multiple of 64 frames does
     at inference. Returns ``dense (6 J, N)`` (the sparse format with partial keys
     for a ``cfg.partial_keys`` config, :func:`partial_coords`), ``key_mask (N,)``
-    bool, and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)`` poses, as many as
-    :func:`~keyfill.learn.gan.dna.dna_count` says for the keys (Appendix D).
+    bool, ``key_root (N, 3)`` (:func:`key_roots`), and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)``
+    poses, as many as :func:`~keyfill.learn.gan.dna.dna_count` says for the keys (Appendix D).
     """
     N = cfg.sequence_frames
     tail = int(rng.integers(0, 64))
     lay = sample_keys(pool, rng, N - tail, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
     key_mask = np.zeros(N, dtype=bool)
     key_mask[lay.frames] = True
-    out = {"key_mask": key_mask}
+    out = {"key_mask": key_mask, "key_root": key_roots(N, lay.frames, lay.poses)}
     if cfg.partial_keys:
         coords = partial_coords(rng, len(lay.frames), lay.poses.shape[1], halves, cfg.partial_fraction)
         poses, _ = centre_keys(lay.poses, pool.up_axis, coords)
@@ -287,7 +295,8 @@ def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=N
         contact[:L] = pool.contacts[c][s : s + L]
     dense = sparse_input(W, frames, truth[frames], coords) if coords is not None else \
         dense_input(W, frames, truth[frames], cfg.mask_scale, cfg.root_input, pool.up_axis)
-    out = {"dense": dense, "key_mask": key_mask, "valid": np.arange(W) < L, "truth": truth, "contact": contact}
+    out = {"dense": dense, "key_mask": key_mask, "key_root": key_roots(W, frames, truth[frames]), "valid": np.arange(W) < L,
+           "truth": truth, "contact": contact}
     if bank is not None:
         out["dna"] = draw_dna(bank, rng, dna_count(frames, pool.fps, cfg.dna_seconds))
     return out

@@ -318,7 +318,8 @@ class GanTask(TrainingTask):
         cfg = self.cfg
         bank = self.train_bank if pool is self.train_pool else self.val_bank
         wins = [clip_window(pool, rng, cfg, self.halves, bank) for _ in range(count)]
-        arrays = {k: np.stack([w[k] for w in wins]) for k in ("dense", "key_mask", "valid", "truth", "contact")}
+        arrays = {k: np.stack([w[k] for w in wins]) for k in ("dense", "key_mask", "key_root", "valid", "truth",
+                                                               "contact")}
         arrays["noise"] = rng.standard_normal((count, cfg.noise_dim, cfg.window_frames // 64)).astype(np.float32)
         if bank is not None:
             arrays["dna"], arrays["dna_valid"] = pad_dna([w["dna"] for w in wins])
@@ -330,6 +331,7 @@ class GanTask(TrainingTask):
         bank = self.train_bank if pool is self.train_pool else self.val_bank
         seqs = [training_sequence(pool, rng, cfg, self.halves, bank) for _ in range(count)]
         arrays = {"dense": np.stack([q["dense"] for q in seqs]), "key_mask": np.stack([q["key_mask"] for q in seqs]),
+                  "key_root": np.stack([q["key_root"] for q in seqs]),
                   "noise": rng.standard_normal((count, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)}
         if bank is not None:
             arrays["dna"], arrays["dna_valid"] = pad_dna([q["dna"] for q in seqs])
@@ -368,16 +370,20 @@ class GanTask(TrainingTask):
         root = root_path(self._frozen_path(dense.device)(joint_channels(rel)))
         return v, quats, rel, root
 
-    def _key_targets(self, dense, key_mask):
+    def _key_targets(self, dense, key_mask, key_root=None):
         """``(key poses (B, T, J, 3), their root-relative part, given coordinates (B, T, J, 3) bool)`` of the input.
 
         The dense format gives every coordinate at the keys; the sparse one (partial keys) those its mask marks.
+        ``key_root (B, T, 3)`` (the batches' ``key_root``) replaces the root row: the dense input's root
+        channels are no root positions with ``root_input="key-relative"``.
         """
         import torch
 
         B, _, N = dense.shape
         J = self.skeleton.num_joints
         keypose = dense[:, : 3 * J].transpose(1, 2).reshape(B, N, J, 3)  # each frame's nearest key; the key at keys
+        if key_root is not None and not self.cfg.partial_keys:
+            keypose = torch.cat([key_root[:, :, None], keypose[:, :, 1:]], dim=2)
         key_rel = torch.cat([torch.zeros_like(keypose[:, :, :1]), keypose[:, :, 1:]], dim=2)
         if self.cfg.partial_keys:
             coords = dense[:, 3 * J :].transpose(1, 2).reshape(B, N, J, 3) > 0.5
@@ -407,7 +413,7 @@ class GanTask(TrainingTask):
         dev = next(G.parameters()).device
         a = batch.arrays
         dense, key_mask, noise, dna, dna_valid = self._inputs(a, dev)
-        keypose, key_rel, coords = self._key_targets(dense, key_mask)
+        keypose, key_rel, coords = self._key_targets(dense, key_mask, torch.as_tensor(a["key_root"], device=dev))
 
         clear_statistics(G)
         _, quats, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
@@ -512,9 +518,10 @@ class GanTask(TrainingTask):
         dev = next(G.parameters()).device
         with torch.no_grad():
             for _ in range(cfg.val_sequences):
-                dense, key_mask, noise, dna, dna_valid = self._inputs(self._sequences(rng, self.val_pool, 1), dev)
+                seq = self._sequences(rng, self.val_pool, 1)
+                dense, key_mask, noise, dna, dna_valid = self._inputs(seq, dev)
                 _, quats, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
-                keypose, _, coords = self._key_targets(dense, key_mask)
+                keypose, _, coords = self._key_targets(dense, key_mask, torch.as_tensor(seq["key_root"], device=dev))
                 k = torch.nonzero(key_mask[0]).flatten()
                 c = coords[0, k].cpu().numpy()
                 d = (rel[0, k] - keypose[0, k]).cpu().numpy()

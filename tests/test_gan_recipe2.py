@@ -248,3 +248,28 @@ def test_clip_contacts_label_a_real_walk():
     assert names == ["Foot_L", "Toes_L", "Foot_R", "Toes_R"]
     share = labels[0].mean(0)
     assert labels[0].shape == (corpus.starts[1], 4) and (share > 0.1).all() and (share < 0.95).all()
+
+
+def test_root_targets_are_the_key_roots_whatever_the_root_input(corpus, tmp_path):
+    """Eq. 10's targets come from the batch's key roots: with root_input key-relative the dense input's root
+    channels are offsets from the keys' line (0 at keys), which a root loss must not take as positions."""
+    cfg = tiny_config(**RECIPE2)
+    path = fit(GanTask(corpus, cfg, stage="path", epochs=1), tmp_path / "path").output
+    tasks = [GanTask(corpus, dataclasses.replace(cfg, root_input=r), stage="generator", path_model=path, epochs=1)
+             for r in ("key-relative", "centred")]
+    rngs = [np.random.default_rng(4), np.random.default_rng(4)]  # the root input draws nothing: the same batches
+    kinds = set()
+    for _ in range(8):
+        rel, cen = (t.generator_batch(r, t.train_pool).arrays for t, r in zip(tasks, rngs))
+        kinds.add("truth" in rel)
+        got, want = (t._key_targets(torch.as_tensor(a["dense"]), torch.as_tensor(a["key_mask"]),
+                                    torch.as_tensor(a["key_root"]))[0][:, :, 0].numpy() for t, a in zip(tasks, (rel, cen)))
+        m = rel["key_mask"]
+        first_recipe = tasks[1]._key_targets(torch.as_tensor(cen["dense"]), torch.as_tensor(cen["key_mask"]))[0]
+        assert np.allclose(got[m], want[m], atol=1e-6)  # the same targets either way
+        assert np.allclose(first_recipe[:, :, 0].numpy()[m], want[m], atol=1e-6)  # = the centred input's keys
+        assert np.abs(rel["dense"][:, [0, 2]].transpose(0, 2, 1)[m]).max() < 1e-6  # the input is 0 there
+        assert np.abs(got[m][:, [0, 2]]).max() > 0.05  # while the keys are spread over the ground
+        if "truth" in rel:
+            assert np.allclose(got[m], rel["truth"][:, :, 0][m], atol=1e-6)
+    assert kinds == {True, False}  # windows and long sequences both checked

@@ -348,14 +348,22 @@ def gan_quality(f: dict) -> list[str]:
     held = f.get("test_pattern", "*_normal_*")
     lines = [f"Held-out clips `{held}`; {s['sequences']} key layouts of {num(s['frames'], 0)} frames over them.", ""]
     lines += table(["figure", "measured", "paper"], rows + _sampled_rows(s, paper))
+    gaps = in_order(f["realism"])
+    methods = [m for m in in_order(f["realism"][gaps[0]], METHODS) if m != "linear"]  # linear: the feet section
     realism = []
-    for gap in in_order(f["realism"]):
-        by_method = f["realism"][gap]
-        realism += [[gap, m, r["clips"], num(r["foot_skating_cm_s"], 1), num(r["jitter_m_s3"], 1),
-                     num(r.get("gap_error_cm"), 2), num(r["range_violations_pct"], 2), num(r["bone_error_cm"], 2)]
-                    for m, r in ((m, by_method[m]) for m in in_order(by_method, METHODS))]
-    return lines + [""] + table(["realism, keys every", "method", "clips", "foot skating cm/s", "jitter m/s^3",
-                                 "gap error cm", "range violations %", "bone error cm"], realism)
+    for m in methods:
+        row = [m]
+        for gap in gaps:
+            r = f["realism"][gap].get(m)
+            row += ["-"] * 3 if r is None else [num(r["foot_skating_cm_s"], 1), num(r["jitter_m_s3"], 1),
+                                                 num(r.get("gap_error_cm"), 2)]
+        realism.append(row + [num(max(f["realism"][g][m]["range_violations_pct"] for g in gaps if m in f["realism"][g]), 2)])
+    head = ["method"] + [f"{what}, keys every {gap}" for gap in gaps for what in ("skating cm/s", "jitter m/s^3",
+                                                                                 "gap error cm")]
+    clips = ", ".join(f"{f['realism'][g]['real']['clips']} clips at keys every {g}" for g in gaps if "real" in f["realism"][g])
+    bones = max(r["bone_error_cm"] for g in gaps for r in f["realism"][g].values())
+    return lines + ["", f"Realism of whole clips ({clips}; largest bone-length error {num(bones, 2)} cm):", ""] + \
+        table(head + ["range violations %"], realism)
 
 
 def gan_dna(f: dict) -> list[str]:

@@ -46,7 +46,8 @@ def test_the_page_is_what_the_records_give():
 
 
 def test_the_page_stays_short():
-    assert len(make_page.PAGE.read_text().splitlines()) <= 400
+    # 450 since issue 31 (each gan model is measured on two held-out sets; the realism tables are one row per method)
+    assert len(make_page.PAGE.read_text().splitlines()) <= 450
 
 
 def test_a_changed_figure_is_caught(copy):

@@ -207,6 +207,12 @@ def test_a_missing_gpu_names_the_device_flag(files, capsys):
                                                  "use --device cpu")
 
 
+def test_a_graph_runs_on_the_cpu_only(files, capsys):
+    code, _, err = run(capsys, "complete", HUMAN_KEYS, "-o", "o.usda", "--method", "gan", "--runtime", "onnx",
+                       "--device", "cuda")
+    assert code == 2 and one_error_line(err) == "--device cuda needs --runtime torch: an ONNX graph runs on the CPU"
+
+
 def test_batch_error_lines_and_json_write_flags(files, capsys):
     code, out, err = run(capsys, "complete", "a.bvh", "b.bvh", "-o", "out/", "--key-every", "0", "--json")
     lines = err.strip().splitlines()

@@ -88,8 +88,9 @@ class GanConfig:
     Attributes:
         preset: name of the width preset the widths came from (``"custom"`` when changed).
         widths: channel widths per network (see :data:`PRESETS`).
-        noise_dim: channels of Gaussian noise joined to every latent step (keyfill's
-            source of variety until Motion DNA lands; the seed of ``complete`` draws it).
+        noise_dim: channels of Gaussian noise joined to every latent step (the first recipe's
+            source of variety, drawn by the seed of ``complete``; the second recipe has none, and
+            the seed draws the Motion DNA from the model's bank instead).
         style_dim: channels of the per-sequence style vector joined to every latent
             step (the Motion DNA vector ``w``; 0: none, the decoder then takes no style).
         dna_width: hidden width of the Motion DNA encoder (section 3.5.1, Table 5), which

@@ -25,7 +25,10 @@ is frozen and the local motion generator is trained against the discriminator.
   :meth:`GanTask.save` writes a ``"gan"`` model folder of stage ``"full"``.
 
 Both stages use RMSprop with PyTorch's defaults (section 3.7) at the config's
-learning rates, kept constant. All randomness of a batch is drawn in
+learning rates, kept constant, or with the second recipe's settings Adam with a
+warm-up and cosine decay (``optimizer``, ``lr_schedule``); in-clip windows, the
+reconstruction and foot-sliding terms and the moving average of the generator
+are the second recipe's too (``keyfill.learn.gan.config``). All randomness of a batch is drawn in
 :meth:`GanTask.batches` from ``numpy.random.default_rng([seed, stage, epoch])``
 (keys, clips, headings, noise, crop starts), so a resumed run draws what an
 uninterrupted one would; the task's own state is the generator step count that

@@ -13,14 +13,13 @@ fast as the same motion in ``.usdc``. Recorded in ``benchmarks/results/formats.j
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import results
+from timing import timed_ms
 
 from keyfill import io
 from keyfill.motion import Motion
@@ -38,25 +37,14 @@ def motion() -> Motion:
                   np.concatenate([clip.positions] * reps)[:FRAMES])
 
 
-def timed(fn, repeat: int) -> float:
-    """Median seconds of ``repeat`` calls of ``fn`` after one untimed call."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
-
-
 def measure(m: Motion, repeat: int) -> dict:
     """``{suffix: {"write_s", "read_s", "bytes"}}``."""
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for suffix in SUFFIXES:
             path = Path(tmp) / f"walk{suffix}"
-            write = timed(lambda path=path: io.save(m, path), repeat)
-            read = timed(lambda path=path: io.load(path), repeat)
+            write = timed_ms(lambda path=path: io.save(m, path), repeat, warmup=1)["median"] / 1e3
+            read = timed_ms(lambda path=path: io.load(path), repeat, warmup=1)["median"] / 1e3
             size = sum(p.stat().st_size for p in Path(tmp).glob(f"walk{suffix}*")) + (
                 (Path(tmp) / "walk.bin").stat().st_size if suffix == ".gltf" else 0)
             out[suffix] = {"write_s": write, "read_s": read, "bytes": size}

@@ -74,17 +74,16 @@ def train(name: str, changes: dict, path_model: str, epochs: int, work: Path, da
     return rows[-1]
 
 
-def saturation(folder: Path, data: list[str]) -> float:
-    """The share of pre-tanh joint values beyond 2 over 16 held-out in-clip windows of the run's model."""
+def saturation(folder: Path, corpus) -> float:
+    """The share of pre-tanh joint values beyond 2 over 16 held-out in-clip windows of the run's model
+    (``corpus``: the training corpus, whose seeded split gives the validation clips)."""
     import numpy as np
     import torch
 
-    from keyfill.learn.corpus import load_corpus
     from keyfill.learn.gan.model import load_model
     from keyfill.learn.gan.task import GanTask
 
     model = load_model(folder)
-    corpus = load_corpus(data, fold=model.folded).select((), EXCLUDE)
     task = GanTask(corpus, model.config, stage="path")  # the same split of validation clips, no networks
     arrays = task._windows(np.random.default_rng([0, 97]), task.val_pool, 16)
     with torch.no_grad():
@@ -117,6 +116,9 @@ def main(argv=None) -> int:
     with ThreadPoolExecutor(args.jobs) as pool:
         rows = dict(zip(runs, pool.map(lambda kv: train(kv[0], kv[1], args.path_model, args.epochs, work, data),
                                        runs.items())))
+    from keyfill.learn.corpus import load_corpus
+
+    corpus = load_corpus(data).select((), EXCLUDE)  # read once: every run trained on it
     out = {}
     for name, row in rows.items():
         mpu = 0.01  # the Bandai-Namco files are in centimetres: the log's file units
@@ -124,7 +126,7 @@ def main(argv=None) -> int:
                      "window_foot_speed_cm_s": row.get("window_foot_speed", float("nan")) * mpu * 100,
                      "key_joint_error_cm": row["key_joint_error"] * mpu * 100,
                      "key_root_error_cm": row["key_root_error"] * mpu * 100,
-                     "saturated_pct": 100 * saturation(work / slug(name), data), "seconds": row.get("seconds")}
+                     "saturated_pct": 100 * saturation(work / slug(name), corpus), "seconds": row.get("seconds")}
         r = out[name]
         print(f"{name:<48} window {r['window_error_cm']:6.2f} cm  feet {r['window_foot_speed_cm_s']:6.2f} cm/s  "
               f"keys {r['key_joint_error_cm']:5.2f} / {r['key_root_error_cm']:6.2f} cm  saturated "

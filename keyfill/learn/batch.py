@@ -90,7 +90,7 @@ def one_torch_thread(spec: CompleteSpec):
     from keyfill.learn.registry import get
 
     m = get(spec.method)
-    if not m.learned or select(m, spec.options.model, spec.options.runtime) is not None:
+    if not m.learned or select(m, spec.options.model, spec.options.runtime, spec.options.device) is not None:
         yield
         return
     import torch

@@ -133,15 +133,23 @@ def check_binding(graph: Graph, folder: Path) -> None:
                          f"export it again with 'keyfill export {folder}'")
 
 
-def select(method, model: str | None, runtime: str) -> Graph | None:
+def select(method, model: str | None, runtime: str, device: str = "cpu") -> Graph | None:
     """The graph that completes with ``method`` (a registry entry), or None for the torch path.
 
     ``runtime``: ``torch`` never uses a graph; ``onnx`` requires one (the
     ``--model`` graph file, or ``model.onnx`` in the model folder); ``auto``
     uses one when onnxruntime is installed and the folder holds a graph.
+    Graphs run on the CPU: a ``device`` other than ``"cpu"`` takes the torch
+    path under ``auto`` (unless ``model`` is a graph file) and is refused under ``onnx``.
     """
     if runtime not in RUNTIMES:
         raise UsageError(f"runtime is one of {', '.join(RUNTIMES)}, not {runtime!r}", params="runtime")
+    if device != "cpu" and method.learned:
+        if runtime == "onnx":
+            raise UsageError(f"device {device} needs runtime torch: an ONNX graph runs on the CPU",
+                             params=("device", "runtime"))
+        if runtime == "auto" and not is_graph(model):
+            return None
     if is_graph(model):
         if runtime == "torch":
             raise UsageError(f"{model}: an ONNX graph runs with runtime onnx (or auto), not torch", params="runtime")

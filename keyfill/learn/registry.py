@@ -459,19 +459,10 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
 
 
 def _graph(m: Method, options: CompleteOptions):
-    """The exported graph that completes for ``m`` under ``options.runtime``, or None (the torch path).
+    """The exported graph that completes for ``m`` under ``options.runtime``, or None (the torch path)."""
+    from keyfill.learn.onnx import select
 
-    Graphs run on the CPU: a ``device`` other than ``"cpu"`` takes the torch path under ``auto`` and is
-    refused under ``onnx``."""
-    from keyfill.learn.onnx import is_graph, select
-
-    if options.device != "cpu" and m.learned:
-        if options.runtime == "onnx":
-            raise UsageError(f"device {options.device} needs runtime torch: an ONNX graph runs on the CPU",
-                             params=("device", "runtime"))
-        if options.runtime == "auto" and not is_graph(options.model):
-            return None
-    return select(m, options.model, options.runtime)
+    return select(m, options.model, options.runtime, options.device)
 
 
 def _one(function, motion, keys, options):

@@ -59,7 +59,7 @@ import numpy as np
 
 from keyfill.errors import DataError
 from keyfill.learn.gan.dna import dna_count, draw_dna
-from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
+from keyfill.learn.gan.features import centre_keys, dense_input, nearest_key, sparse_input
 from keyfill.learn.gan.poses import ClipPool, turn
 
 
@@ -147,8 +147,6 @@ def sample_keys(pool: ClipPool, rng: np.random.Generator, frames: int, min_gap: 
 def key_roots(num_frames: int, key_frames, key_poses) -> np.ndarray:
     """``(T, 3)`` float32: each frame's nearest key root (the targets of the root loss, Eq. 10; the dense input's
     root channels hold them only with ``root_input="centred"``)."""
-    from keyfill.learn.gan.features import nearest_key
-
     return np.asarray(key_poses, dtype=np.float32)[nearest_key(num_frames, key_frames)[0], 0]
 
 

@@ -141,17 +141,46 @@ def model_folder(path: str | os.PathLike) -> Path:
     return p
 
 
+_CONFIGS: dict[bytes, dict] = {}  # validated configs by the SHA-256 of their bytes: one parse and check each
+
+
 def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
-    """The validated ``config.json`` of the model at ``path``."""
+    """The validated ``config.json`` of the model at ``path`` (a fresh copy each call).
+
+    Bytes read and checked before are not parsed and checked again (the schema check takes a few ms, and one
+    completion through the rig bridge asks for the config three times); the file itself is read every time."""
+    import copy
+    import hashlib
+
     folder = model_folder(path)
     try:
         size = (folder / CONFIG).stat().st_size
         if size > MAX_CONFIG_BYTES:
             raise ModelError(f"{folder}: its {CONFIG} is {size} bytes; a model config is at most {MAX_CONFIG_BYTES}")
+        data = (folder / CONFIG).read_bytes()
+    except OSError as e:
+        raise ModelError(f"{folder}: damaged model config ({' '.join(str(e).split())[:200]})") from None
+    digest = hashlib.sha256(data).digest()
+    config = _CONFIGS.get(digest) or _parse_config(data, folder)
+    if kind is not None and config.get("kind") != kind:  # before the schema: a model of another kind is that
+        raise ModelError(f"{folder}: a {config.get('kind')!r} model, not a {kind!r} model")
+    if digest not in _CONFIGS:
+        from keyfill.learn.config_schema import check_config
+
+        check_config(config, folder / CONFIG)  # every field the loaders use, by the one schema of every kind
+        if len(_CONFIGS) >= 32:
+            _CONFIGS.pop(next(iter(_CONFIGS)))
+        _CONFIGS[digest] = config
+    return copy.deepcopy(config)
+
+
+def _parse_config(data: bytes, folder: Path) -> dict:
+    """The config of :func:`read_config` from the bytes of ``folder``'s ``config.json``: parsed, of the keyfill
+    model format and version, naming its kind (not yet checked against its kind's schema)."""
+    try:
         # NaN, Infinity, 1e999 and integers beyond 64 bits are refused; deep nesting raises RecursionError
-        config = json.loads((folder / CONFIG).read_text(encoding="utf-8"), parse_constant=_no_constant,
-                            parse_int=_int64, parse_float=_finite)
-    except (OSError, UnicodeDecodeError, ValueError) as e:
+        config = json.loads(data.decode("utf-8"), parse_constant=_no_constant, parse_int=_int64, parse_float=_finite)
+    except (UnicodeDecodeError, ValueError) as e:
         raise ModelError(f"{folder}: damaged model config ({' '.join(str(e).split())[:200]})") from None
     except RecursionError:
         raise ModelError(f"{folder}: damaged model config (nested too deeply)") from None
@@ -161,11 +190,6 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
         raise ModelError(f"{folder}: model format version {config.get('version')!r}; this keyfill reads {VERSION}")
     if not isinstance(config.get("kind"), str):
         raise ModelError(f"{folder}: the model config names no kind (the method that made it)")
-    if kind is not None and config.get("kind") != kind:
-        raise ModelError(f"{folder}: a {config.get('kind')!r} model, not a {kind!r} model")
-    from keyfill.learn.config_schema import check_config
-
-    check_config(config, folder / CONFIG)  # every field the loaders use, by the one schema of every kind
     return config
 
 

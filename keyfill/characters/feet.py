@@ -208,8 +208,7 @@ def _leg_world(rotations: np.ndarray, positions: np.ndarray, skeleton: Skeleton,
     where = {j: i for i, j in enumerate(sub)}
     sub_parents = np.array([where[int(parents[j])] if parents[j] >= 0 else -1 for j in sub])
     w, p = fk(rotations[:, sub], positions[:, sub], sub_parents)
-    F, J = rotations.shape[:2]
-    W, P = np.empty((F, J, 4)), np.empty((F, J, 3))
+    W, P = np.empty(rotations.shape[:2] + (4,)), np.empty(rotations.shape[:2] + (3,))
     W[:, sub], P[:, sub] = w, p
     return W, P
 
@@ -499,8 +498,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     foot_joints = [j for chain in chains.values() for j in chain if j is not None]
     W, P = _leg_world(motion.rotations, motion.positions, sk, foot_joints)
     feet = P[:, [j for _, j in cols]]
-    floor, ground_used = _planted_heights(feet, [r for r, _ in cols], key_frames, _ground_value(ground), up, H,
-                                          settings)
+    floor, ground_used = _planted_heights(feet, [r for r, _ in cols], key_frames, _ground_value(ground), up, H, settings)
     if labels is None:
         labels = label_contacts(feet, floor, fps=fps, up_axis=sk.up_axis, hip_height=H, settings=settings)
     elif np.shape(labels) != (F, len(cols)):
@@ -530,8 +528,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     need = _hip_drop(targets, thighs, reach, up, settings.max_hip_drop * H)
     drop = _smooth_drop(need, ease, _key_fade(key_frames, F, ease))
     drop[(drop < 1e-12 * H) | np.isin(np.arange(F), key_frames)] = 0.0
-    shift = np.zeros((F, 3))
-    shift[:, up] = -drop
+    shift = -drop[:, None] * np.eye(3)[up]  # (F, 3) along the up axis
     changed = np.any(offsets != 0, axis=-1) | (drop > 0)[:, None]  # (F, 2)
     changed[key_frames] = False
     rotations, positions = motion.rotations.copy(), motion.positions.copy()
@@ -541,14 +538,16 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
         local = shift if parent < 0 else R.quat_rotate(R.quat_conjugate(W[:, parent]), shift)
         positions[drop > 0, mover] += local[drop > 0]
     frames = np.flatnonzero(changed.any(axis=1))
+    moved = ankles + shift[:, None]  # the ankles: with the hips, then where the IK put them; toes go along
     if len(frames):
-        _solve_legs(rotations, W, P, frames, legs, chains, sides, sk.parents, shift, targets, changed)
+        solved = _solve_legs(rotations, W, P, frames, legs, chains, sides, sk.parents, shift, targets, changed)
+        moved[frames] = np.where(changed[frames, :, None], solved, moved[frames])
     locked = motion.replace(rotations=rotations, positions=positions)
-    P_new = _leg_world(rotations, positions, sk, foot_joints)[1]
-    miss = np.linalg.norm(P_new[:, legs[:, 2]] - targets, axis=-1) > 1e-6 * H
+    feet_after = feet + (moved - ankles)[:, [sides.index(role[-1]) for role, _ in cols]]  # feet keep their turn
+    miss = np.linalg.norm(moved - targets, axis=-1) > 1e-6 * H
     report = {
         "skating_before": _skating(feet, labels, up, fps),
-        "skating_after": _skating(P_new[:, [j for _, j in cols]], labels, up, fps),
+        "skating_after": _skating(feet_after, labels, up, fps),
         "intervals": int(intervals),
         "frames_in_contact": int(labels.any(axis=1).sum()),
         "frames_changed": len(frames),
@@ -561,14 +560,14 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
 
 
 def _translated_joint(skeleton: Skeleton, hips: int) -> int:
-    """The joint whose translation moves the hips: the hips, or their nearest ancestor with position channels
-    when they have none (a file writes only channels), else the hips."""
+    """The joint whose translation moves the hips: they or their nearest ancestor with position channels."""
     return next((j for j in [hips, *_ancestors(skeleton.parents, hips)]
                  if any(c in POSITION_CHANNELS for c in skeleton.channels[j])), hips)
 
 
-def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, targets, changed) -> None:
-    """Two-bone IK of both legs on ``frames``, written into ``rotations`` (local, in place) where ``changed``.
+def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, targets, changed) -> np.ndarray:
+    """Two-bone IK of both legs on ``frames``, written into ``rotations`` (local, in place) where ``changed``;
+    returns the solved ankles' world positions ``(len(frames), 2, 3)``.
 
     The thigh gets ``qa W``, the shin ``qb qa W``, the foot its old world rotation; the knee bends towards
     its side in the motion (plus a hundredth of the leg towards the toes, for a straight knee)."""
@@ -583,11 +582,11 @@ def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, ta
         pole = pole + 0.01 * np.linalg.norm(b - a, axis=-1, keepdims=True) * fwd
     qa, qb = two_bone_ik(a, b, c, targets[frames], pole)
     qba = R.quat_mul(qb, qa)
+    solved = a + R.quat_rotate(qa, b - a) + R.quat_rotate(qba, c - b)
     Wf = W[frames]
     for i in range(len(sides)):
-        rows = frames[changed[frames, i]]
         sel = changed[frames, i]
-        thigh, shin, foot = legs[i]
+        (thigh, shin, foot), rows = legs[i], frames[sel]
         qa_i, qba_i, Wi = qa[sel, i], qba[sel, i], Wf[sel]
         parent_thigh = Wi[:, parents[thigh]] if parents[thigh] >= 0 else R.quat_identity((len(rows),))
         new = {
@@ -598,3 +597,4 @@ def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, ta
         for j, q in new.items():  # in the old rotation's hemisphere
             q = R.quat_normalize(q)
             rotations[rows, j] = np.where(np.sum(q * rotations[rows, j], axis=-1, keepdims=True) < 0, -q, q)
+    return solved

@@ -11,6 +11,7 @@ the up axis (:func:`turn`) turns both, which is how training draws headings.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass, field
 
@@ -69,9 +70,12 @@ class ClipPool:
     def __len__(self) -> int:
         return len(self.root)
 
-    @property
+    @functools.cached_property
     def lengths(self) -> np.ndarray:
-        return np.array([len(r) for r in self.root], dtype=np.int64)
+        """``(C,)`` frames per clip (computed once: the sampling asks for it several times a window)."""
+        out = np.array([len(r) for r in self.root], dtype=np.int64)
+        out.setflags(write=False)
+        return out
 
     def draw(self, rng: np.random.Generator, usable: np.ndarray | None = None) -> int:
         """A random clip (of ``usable`` indices, default all): with ``groups``, a random content first, then

@@ -141,15 +141,14 @@ def model_folder(path: str | os.PathLike) -> Path:
     return p
 
 
-_CONFIGS: dict[bytes, dict] = {}  # validated configs by the SHA-256 of their bytes: one parse and check each
+_CHECKED: dict[bytes, None] = {}  # the SHA-256 of config bytes that passed the schema check (insertion order)
 
 
 def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
-    """The validated ``config.json`` of the model at ``path`` (a fresh copy each call).
+    """The validated ``config.json`` of the model at ``path`` (parsed afresh each call).
 
-    Bytes read and checked before are not parsed and checked again (the schema check takes a few ms, and one
-    completion through the rig bridge asks for the config three times); the file itself is read every time."""
-    import copy
+    Bytes that passed the schema check before are not checked again (the check takes a few ms, and one
+    completion through the rig bridge asks for the config three times)."""
     import hashlib
 
     folder = model_folder(path)
@@ -160,18 +159,18 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
         data = (folder / CONFIG).read_bytes()
     except OSError as e:
         raise ModelError(f"{folder}: damaged model config ({' '.join(str(e).split())[:200]})") from None
-    digest = hashlib.sha256(data).digest()
-    config = _CONFIGS.get(digest) or _parse_config(data, folder)
+    config = _parse_config(data, folder)
     if kind is not None and config.get("kind") != kind:  # before the schema: a model of another kind is that
         raise ModelError(f"{folder}: a {config.get('kind')!r} model, not a {kind!r} model")
-    if digest not in _CONFIGS:
+    digest = hashlib.sha256(data).digest()
+    if digest not in _CHECKED:
         from keyfill.learn.config_schema import check_config
 
         check_config(config, folder / CONFIG)  # every field the loaders use, by the one schema of every kind
-        if len(_CONFIGS) >= 32:
-            _CONFIGS.pop(next(iter(_CONFIGS)))
-        _CONFIGS[digest] = config
-    return copy.deepcopy(config)
+        if len(_CHECKED) >= 64:
+            _CHECKED.pop(next(iter(_CHECKED)))
+        _CHECKED[digest] = None
+    return config
 
 
 def _parse_config(data: bytes, folder: Path) -> dict:

@@ -105,3 +105,21 @@ def test_weights_that_do_not_fit(tmp_path, skeleton):
     tensors, _ = load_model(tmp_path / "m")
     with pytest.raises(ModelError, match="do not fit"):
         load_state(torch.nn.Linear(4, 2), tensors, tmp_path / "m")
+
+
+def test_a_config_changed_on_disk_is_read_again(tmp_path, skeleton):
+    """read_config skips only the schema check of bytes it passed before: a config edited in place (same size,
+    within one clock tick) is read as it now is, and one damaged after a good read is refused."""
+    from keyfill.learn.modelfile import read_config
+
+    path = save_model(tmp_path / "m", "toy", _net().state_dict(),
+                      {"skeleton": skeleton.to_json(hierarchy_only=True), "hidden": 3})
+    assert read_config(path)["hidden"] == 3
+    read_config(path)["hidden"] = 99  # each call gives a config of its own
+    assert read_config(path)["hidden"] == 3
+    text = (path / CONFIG).read_text()
+    (path / CONFIG).write_text(text.replace('"hidden": 3', '"hidden": 4'))
+    assert read_config(path)["hidden"] == 4
+    (path / CONFIG).write_text(text.replace('"format"', '"f0rmat"'))
+    with pytest.raises(ModelError, match="not a keyfill model"):
+        read_config(path)

@@ -110,3 +110,22 @@ def test_resampling_to_the_input_grid_hits_the_keys_and_holds_outside():
         np.testing.assert_allclose(fine.positions[key], coarse.positions[g], atol=1e-12)
     np.testing.assert_allclose(fine.positions[:4], np.broadcast_to(coarse.positions[0], (4, *coarse.positions.shape[1:])))
     np.testing.assert_allclose(fine.positions[61:], np.broadcast_to(coarse.positions[grid[-1]], (5, *coarse.positions.shape[1:])))
+
+
+def test_the_bridge_makes_each_rig_once_and_keeps_the_callers_skeleton(monkeypatch):
+    from keyfill.learn import rig_bridge
+
+    motion, cmu = io.load(MIXAMO), io.load(CMU)
+    served = rig_bridge.Served(cmu.skeleton, 30.0, False)
+    fresh = make_rig(motion.skeleton)
+    monkeypatch.setattr(rig_bridge, "_RIGS", {})
+    calls = []
+    monkeypatch.setattr(rig_bridge, "make_rig", lambda *a, **k: calls.append(a) or make_rig(*a, **k))
+    for _ in range(3):
+        rig, model_rig = rig_bridge.rigs(motion, served, None, 0, "")
+        assert rig.skeleton is motion.skeleton and model_rig.skeleton is cmu.skeleton  # end sites and all
+        assert rig.roles == fresh.roles and rig.hip_height == fresh.hip_height
+        np.testing.assert_array_equal(rig.reference, fresh.reference)
+    assert len(calls) == 2  # one per skeleton
+    rig_bridge.rigs(motion, served, {"hand_l": "mixamorig:LeftHand"}, 0, "")
+    assert len(calls) == 3  # a rig map is part of what a rig is made from

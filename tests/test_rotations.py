@@ -92,6 +92,25 @@ def test_slerp_ends_midpoint_and_shortest_path():
     np.testing.assert_allclose(R.quat_angle(mid, b), R.quat_angle(a, b) / 2, atol=1e-12)
 
 
+def test_slerp_matches_the_log_map_form_at_every_angle():
+    """The one-pass weights agree with q0 exp(t log(q0* q1)) from tiny angles to half a turn, both signs."""
+    rng = np.random.default_rng(6)
+    a = random_quats(rng, 600)
+    angles = np.concatenate([np.geomspace(1e-14, 1e-6, 200), rng.uniform(0, np.pi, 350), np.pi - np.geomspace(1e-9, 1e-3, 50)])
+    axis = rng.normal(size=(600, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    b = R.quat_mul(a, R.quat_from_rotvec(axis * angles[:, None])) * rng.choice([-1.0, 1.0], size=(600, 1))
+    t = rng.uniform(-0.2, 1.2, size=600)
+    d = R.quat_mul(R.quat_conjugate(a), b)
+    d = np.where(d[:, :1] < 0, -d, d)
+    expected = R.quat_mul(a, R.quat_from_rotvec(R.quat_to_rotvec(d) * t[:, None]))
+    got = R.quat_slerp(a, b, t)
+    assert R.quat_angle(got, expected).max() < 1e-7  # near a half turn the shorter way is ill-conditioned
+    small = angles < 1e-6
+    assert R.quat_angle(got[small], expected[small]).max() < 1e-14
+    assert np.array_equal(R.quat_slerp(a, b, np.zeros(600)), R.quat_normalize(a))  # exactly q0 at t = 0
+
+
 def _nearest_representation_distance(prev, cur):
     """L1 distance from ``prev`` to the nearest Euler representation of ``cur``'s rotation."""
     alt = np.array([cur[0] + np.pi, np.pi - cur[1], cur[2] + np.pi])

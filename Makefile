@@ -139,8 +139,9 @@ transformer-model: $(MODELS)/bandai2-transformer/weights.safetensors
 # holds out for its figures, so that both methods' feet benchmark sees them unseen. Two steps, one thread
 # each, as transformer-model: the base model with the benchmark's config (60 epochs of 6,528 windows, about
 # 2.4 h from the 2.9 h the first recipe measured for 7,880), then 24 epochs from it with
-# benchmarks/transformer_recipe2.json: the shipped model's fine-tune settings plus the foot-sliding and
-# excess-jerk terms (foot_weight 0.3, smooth_weight 0.00025). Interrupted, each continues from its checkpoint.
+# benchmarks/transformer_recipe2.json: the shipped model's fine-tune settings (the foot-sliding and excess-jerk
+# terms cost accuracy on the validation clips and are off; docs/transformer.md). Interrupted, each continues
+# from its checkpoint.
 TRANSFORMER2_TRAIN = $(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' \
     --exclude '*_elderly_*' --exclude 'dataset-1_*_old_*' --exclude 'dataset-1_*_sad_*' \
     --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 1

@@ -1,4 +1,7 @@
-"""The loss magnitudes that set benchmarks/transformer_recipe2.json's foot_weight and smooth_weight (issue 30).
+"""The loss magnitudes of the transformer's realism terms (foot_weight, smooth_weight) on issue 30's data.
+
+They set the terms' trial weights (0.3 and 0.00025); a validation A/B then turned both off in
+benchmarks/transformer_recipe2.json (docs/transformer.md, "Retraining for unseen styles").
 
 Not a training and not a record of docs/benchmarks.md: on the first batches of the retraining's data
 (Bandai-Namco dataset-2 and dataset-1 without the held-out styles, as ``make transformer-model-2``), with

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextvars
 import functools
+import hashlib
 import json
 import math
 import os
@@ -149,8 +150,6 @@ def read_config(path: str | os.PathLike, kind: str | None = None) -> dict:
 
     Bytes that passed the schema check before are not checked again (the check takes a few ms, and one
     completion through the rig bridge asks for the config three times)."""
-    import hashlib
-
     folder = model_folder(path)
     try:
         size = (folder / CONFIG).stat().st_size

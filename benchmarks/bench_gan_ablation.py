@@ -49,6 +49,7 @@ RUNS = {
     "RMSprop at a constant rate, no moving average": {"optimizer": "rmsprop", "lr_schedule": "constant",
                                                        "lr_generator": 1e-4, "lr_discriminator": 1e-4,
                                                        "ema_decay": 0.0},
+    "spline base (third recipe)": {"base": "spline", "output_init": "zero"},
 }
 EXCLUDE = ("*_normal_*", "dataset-1_*_sad_*", "dataset-1_*_feminine_*")
 
@@ -65,8 +66,10 @@ def train(name: str, changes: dict, path_model: str, epochs: int, work: Path, da
         config = work / f"{slug(name)}.json"
         config.write_text(json.dumps({**json.loads(RECIPE.read_text()), **changes}))
         cmd = [str(Path(sys.executable).with_name("keyfill")), "train", "gan", *data, *[a for p in EXCLUDE for a in ("--exclude", p)],
-               "--config", str(config), "--seed", "0", "-o", str(folder), "--stage", "generator", "--path-model",
-               path_model, "--dna", "--threads", "1", "--epochs", str(epochs), "-q"]
+               "--config", str(config), "--seed", "0", "-o", str(folder), "--stage", "generator", "--dna",
+               "--threads", "1", "--epochs", str(epochs), "-q"]
+        if changes.get("base") != "spline":  # a spline base takes the spline's root path, no predictor
+            cmd += ["--path-model", path_model]
         if Path(f"{folder}.checkpoint.pt").is_file():
             cmd.append("--resume")
         subprocess.run(cmd, check=True)
@@ -84,14 +87,16 @@ def saturation(folder: Path, corpus) -> float:
     from keyfill.learn.gan.task import GanTask
 
     model = load_model(folder)
-    task = GanTask(corpus, model.config, stage="path")  # the same split of validation clips, no networks
+    spline = model.config.base == "spline"  # its windows need the spline base: the generator stage's pools
+    task = GanTask(corpus, model.config, stage="generator" if spline else "path")  # the same validation split
     arrays = task._windows(np.random.default_rng([0, 97]), task.val_pool, 16)
     with torch.no_grad():
         dna = torch.as_tensor(arrays["dna"]) if "dna" in arrays else None
         valid = torch.as_tensor(arrays["dna_valid"]) if "dna_valid" in arrays else None
         noise = torch.zeros(16, model.config.noise_dim, arrays["dense"].shape[-1] // 64)
+        base = torch.as_tensor(arrays["base"]) if spline else None
         v = model.generator(torch.as_tensor(arrays["dense"]), noise if model.config.noise_dim else None,
-                            dna=dna, dna_valid=valid)
+                            dna=dna, dna_valid=valid, base=base)
     return float((v[:, 6:].abs() > 2).float().mean())
 
 

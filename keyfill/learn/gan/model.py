@@ -58,6 +58,7 @@ from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
 from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
+from keyfill.learn.gan.spline_base import spline_root, spline_values
 from keyfill.limits import check_count, check_fps
 from keyfill.motion import Skeleton
 
@@ -231,7 +232,7 @@ def check_keys(model: GanModel, frames: np.ndarray) -> None:
 
 
 def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None,
-             dna=None, coords=None):
+             dna=None, coords=None, key_quats=None):
     """Run both networks over the key range.
 
     Args:
@@ -245,6 +246,9 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         coords: ``(K, J, 3)`` bool, the coordinates partial keys give (a ``partial_keys`` model's
             sparse input; None: every coordinate). The root path is moved onto the key roots
             along the axes they give.
+        key_quats: ``([B,] K, J, 4)`` the keys' local rotations, for a model with ``base="spline"``
+            (:mod:`keyfill.learn.gan.spline_base`: the network corrects their cubic spline, and the root
+            path is the spline through the key roots).
 
     Returns:
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
@@ -255,10 +259,13 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     poses = key_poses[None] if single else key_poses
     T = int(key_frames[-1]) + 1
     x = network_input(model, key_frames, poses, coords)
+    base = spline_input(model, key_frames, key_quats, len(poses), x.shape[-1])
     run = getattr(model.generator, "run_numpy", None)  # an exported graph (keyfill.learn.gan.onnx)
-    quats, root = (run if run is not None else _run_torch)(model, x, seed, style, dna)
-    q, root = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
+    quats, root = (run if run is not None else _run_torch)(model, x, seed, style, dna, base)
     kr = poses[:, :, 0]
+    if base is not None:
+        root = np.stack([spline_root(T, key_frames, r) for r in kr])
+    q, root = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
     if coords is None:
         root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
     else:
@@ -283,9 +290,22 @@ def network_input(model: GanModel, key_frames, poses: np.ndarray, coords=None) -
                      for p in poses])
 
 
-def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna) -> tuple[np.ndarray, np.ndarray]:
+def spline_input(model: GanModel, key_frames, key_quats, batch: int, frames: int) -> np.ndarray | None:
+    """The generator's base ``(B, 6 + 3 D, T')`` float32 for a model with ``base="spline"`` (None for the others):
+    the RC-FK values of the cubic spline through ``key_quats ([B,] K, J, 4)``, ``T'`` padded frames."""
+    if model.config.base != "spline":
+        return None
+    if key_quats is None:
+        raise ValueError("a gan model with a spline base needs the keys' rotations (key_quats)")
+    kq = np.asarray(key_quats, dtype=np.float64)
+    kq = np.broadcast_to(kq[None] if kq.ndim == 3 else kq, (batch, *kq.shape[-3:]))
+    return np.stack([spline_values(model.ranges, frames, key_frames, q) for q in kq])
+
+
+def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None):
     """The torch networks on ``x`` (:func:`network_input`): ``(quats (B, T', J, 4), root (B, T', 3))`` float32,
-    the root path from 0 (noise from ``torch.Generator().manual_seed(seed)``, one draw for the batch)."""
+    the root path from 0 (noise from ``torch.Generator().manual_seed(seed)``, one draw for the batch); with a
+    ``base`` (:func:`spline_input`) the output corrects it and the root is None (the caller's spline)."""
     import torch
 
     from keyfill.learn.gan.network import GENERATOR_MULTIPLE, joint_channels, root_path
@@ -303,8 +323,10 @@ def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna) -> tuple[n
         d = torch.as_tensor(np.asarray(dna, dtype=np.float32), device=dev)
         d = (d[None] if d.ndim == 3 else d).expand(B, -1, -1, -1)
     with torch.inference_mode():
-        v = model.generator(x, noise, w, dna=d)
+        v = model.generator(x, noise, w, dna=d, base=None if base is None else torch.as_tensor(base, device=dev))
         quats, rel = model.generator.rcfk(v, cfg.output_smoothing)
+        if base is not None:
+            return quats.cpu().numpy(), None
         root = root_path(model.path(joint_channels(rel)))
     return quats.cpu().numpy(), root.cpu().numpy()
 
@@ -409,7 +431,7 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     poses[:, 0] = p[k, 0] * m
     poses, shift = centre_keys(poses, model.skeleton.up_axis, coords)
     k0 = int(k[0])
-    gq, groot = generate(model, k - k0, poses, seed, dna=dna, coords=coords)
+    gq, groot = generate(model, k - k0, poses, seed, dna=dna, coords=coords, key_quats=q[k])
     if coords is None:  # whole keys: exact in the ranges' angles, so the ranges hold between keys
         gq = snap_in_range(model.ranges, gq, k - k0, q[k])
     span = slice(k0, int(k[-1]) + 1)
@@ -526,7 +548,7 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         shifts.append(shift)
     k0, end = int(k[0]), int(k[-1])
     dna = dna_poses(model, key_frames=k, seed=seed) if model.config.dna else None  # from the bank, as complete
-    gq, groot = generate(model, k - k0, poses, seed, dna=dna)
+    gq, groot = generate(model, k - k0, poses, seed, dna=dna, key_quats=np.asarray(quats)[:, k])
     out_q, out_r = [], []
     undriven = _undriven(model, skeleton.num_joints)
     for b in range(len(poses)):

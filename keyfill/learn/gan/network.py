@@ -17,7 +17,8 @@ path predictor a multiple of 16 (:func:`pad_frames` pads by repeating the last f
   stride-2 layers encode to ``T / 64`` latent steps; per-step noise
   (``noise_dim`` channels) and a per-sequence style vector (``style_dim``
   channels; the Motion DNA hook, zero when not given) are joined to every latent
-  step; the decoder goes back up with six transposed layers. With a Motion DNA
+  step; the decoder goes back up with six transposed layers (or linear up-sampling), and
+  its output may be a correction added to a base (the spline of ``GanConfig.base``). With a Motion DNA
   encoder (:class:`DnaEncoder`, ``generator.dna``) the style vector is made from
   representative poses.
 * :class:`DnaEncoder`: ``(B, 3 (J - 1), P)`` root-free representative poses
@@ -143,18 +144,20 @@ class Generator(nn.Module):
         self.decoder = _stack(encoder[-1] + noise_dim + style_dim, decoder, DECODER, DECODER_RATIOS, form, upsampling)
         k, s, p = DECODER_OUT
         self.output = nn.Conv1d(decoder[-1], rcfk.channels, k, s, p)
-        if output_init == "small":  # pre-tanh angles near 0: mid-range, where tanh has its full slope
+        if output_init in ("small", "zero"):  # pre-tanh angles near 0 (mid-range), or no change to a base
             with torch.no_grad():
-                self.output.weight.mul_(0.1)
+                self.output.weight.mul_(0.1 if output_init == "small" else 0.0)
                 self.output.bias.zero_()
         self.rcfk = rcfk
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D), persistent=False)
 
-    def forward(self, dense, noise=None, style=None, dna=None, dna_valid=None):
+    def forward(self, dense, noise=None, style=None, dna=None, dna_valid=None, base=None):
         """``dense (B, 6 J, T)`` -> ``(B, 6 + 3 D, T)``; ``noise (B, noise_dim, T / 64)``, ``style (B, style_dim)``.
 
         ``dna (B, P, J - 1, 3)`` root-free representative poses (metres) with ``dna_valid (B, P)``
         make the style through ``self.dna`` (instead of ``style``). Missing noise or style count as zeros.
+        ``base (B, 6 + 3 D, T)``: values the output is added to (``GanConfig.base = "spline"``,
+        :func:`keyfill.learn.gan.spline_base.spline_values`); None: the identity root rotation.
         """
         B, _, T = dense.shape
         if T % GENERATOR_MULTIPLE:
@@ -169,6 +172,8 @@ class Generator(nn.Module):
             s = style if style is not None else z.new_zeros(B, self.style_dim)
             parts.append(s[:, :, None].expand(B, self.style_dim, z.shape[-1]))
         v = self.output(self.decoder(torch.cat(parts, dim=1)))
+        if base is not None:
+            return v + base
         root = v[:, :6] + self.identity_6d[:, None].to(v.dtype)
         return torch.cat([root, v[:, 6:]], dim=1)
 

@@ -2,7 +2,8 @@
 
 ``keyfill export`` writes the generator (with its Motion DNA encoder and the
 RC-FK layer, output smoothing included) and the global path predictor as one
-graph with :func:`export_onnx`; ``keyfill complete --method gan --runtime onnx``
+graph with :func:`export_onnx` (a model with a spline base: the generator alone, the
+spline an input); ``keyfill complete --method gan --runtime onnx``
 runs it with :func:`complete_graph`: the same numpy pre- and post-processing as
 the torch path (:func:`keyfill.learn.gan.model.generate` and around it: the dense
 or sparse input, re-centred keys, the root moved onto the key roots, joints in
@@ -41,12 +42,16 @@ CONTRACT = {
         "dna": ["batch", "poses", "joints - 1", 3, "float32",
                 "root-free representative poses (metres); only for a model with Motion DNA"],
         "dna_valid": ["batch", "poses", "bool", "which poses are real (padding: false); only with dna"],
+        "base": ["batch", "6 + 3 * driven joints", "frames", "float32",
+                 ("keyfill.learn.gan.spline_base spline_values of the keys' rotations; only for a model with "
+                  "base \"spline\"")],
     },
     "outputs": {
         "quats": ["batch", "frames", "joints", 4, "float32",
                   "local unit quaternions (w, x, y, z); root first; joints not driven hold the identity"],
         "root": ["batch", "frames", 3, "float32",
-                 "root path (metres) from 0 at frame 0, before it is moved onto the key roots"],
+                 ("root path (metres) from 0 at frame 0, before it is moved onto the key roots; not given by a "
+                  "model with base \"spline\", whose root path is the spline through the key roots")],
     },
 }
 
@@ -57,8 +62,8 @@ class GraphGenerator:
     def __init__(self, graph):
         self.graph = graph
 
-    def run_numpy(self, model: GanModel, x: np.ndarray, seed: int, style, dna) -> tuple[np.ndarray, np.ndarray]:
-        """As :func:`keyfill.learn.gan.model._run_torch`: ``(quats (B, T', J, 4), root (B, T', 3))`` float32."""
+    def run_numpy(self, model: GanModel, x: np.ndarray, seed: int, style, dna, base=None):
+        """As :func:`keyfill.learn.gan.model._run_torch`: ``(quats (B, T', J, 4), root (B, T', 3) or None)`` float32."""
         if style is not None:
             raise UsageError("an exported gan graph takes a Motion DNA, not a style vector; use runtime torch")
         feed = {"dense": np.ascontiguousarray(x, dtype=np.float32)}
@@ -69,6 +74,9 @@ class GraphGenerator:
             d = np.broadcast_to(d[None] if d.ndim == 3 else d, (len(x), *d.shape[-3:]))
             feed["dna"] = np.ascontiguousarray(d)
             feed["dna_valid"] = np.ones(d.shape[:2], dtype=bool)
+        if base is not None:
+            feed["base"] = np.ascontiguousarray(base, dtype=np.float32)
+            return self.graph.run(feed)[0], None
         quats, root = self.graph.run(feed)
         return quats, root
 
@@ -168,16 +176,24 @@ def export_onnx(model: GanModel, folder, path) -> None:
         args += [torch.zeros(2, 3, J - 1, 3), torch.ones(2, 3, dtype=torch.bool)]
         dims += [{0: batch, 1: poses}, {0: batch, 1: poses}]
         names += ["dna", "dna_valid"]
-    contract = {**CONTRACT, "inputs": {k: CONTRACT["inputs"][k] for k in names}, "joints": J,
+    outputs = list(CONTRACT["outputs"])
+    if model.config.base == "spline":
+        args.append(torch.zeros(2, model.generator.rcfk.channels, 2 * FRAME_MULTIPLE))
+        dims.append({0: batch, 2: FRAME_MULTIPLE * steps})
+        names.append("base")
+        outputs = ["quats"]
+    contract = {**CONTRACT, "inputs": {k: CONTRACT["inputs"][k] for k in names},
+                "outputs": {k: CONTRACT["outputs"][k] for k in outputs}, "joints": J,
                 "frame_multiple": FRAME_MULTIPLE, "max_frames": model.config.max_frames}
     meta = metadata(KIND, folder, read_config(folder), contract)
     if model.config.dna:
         meta["keyfill.dna_bank"] = _bank_text(model.bank)
-    export_module(module, tuple(args), path, names, list(CONTRACT["outputs"]), tuple(dims), meta)
+    export_module(module, tuple(args), path, names, outputs, tuple(dims), meta)
 
 
 def _module(model: GanModel):
-    """The torch module the graph is exported from: ``(dense[, dna, dna_valid]) -> (quats, root)``."""
+    """The torch module the graph is exported from: ``(dense[, dna, dna_valid]) -> (quats, root)``, or with a spline
+    base ``(dense[, dna, dna_valid], base) -> quats``."""
     from torch import nn
 
     from keyfill.learn.gan.network import joint_channels, root_path
@@ -194,4 +210,19 @@ def _module(model: GanModel):
             quats, rel = self.generator.rcfk(v, smoothing)
             return quats, root_path(self.path(joint_channels(rel)))
 
-    return Networks()
+    class SplineNetworks(nn.Module):  # the root path is the caller's spline
+        def __init__(self):
+            super().__init__()
+            self.generator = model.generator.cpu()
+
+        def forward(self, dense, dna, dna_valid, base):
+            v = self.generator(dense, None, None, dna=dna, dna_valid=dna_valid, base=base)
+            return self.generator.rcfk.rotations(v, smoothing)
+
+    class SplineNetworksNoDna(SplineNetworks):
+        def forward(self, dense, base):
+            return super().forward(dense, None, None, base)
+
+    if model.config.base != "spline":
+        return Networks()
+    return SplineNetworks() if model.config.dna else SplineNetworksNoDna()

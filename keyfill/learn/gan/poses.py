@@ -57,6 +57,8 @@ class ClipPool:
             empty when not needed.
         foot_joints: ``(n,)`` the joints of the contact columns.
         groups: ``(C,)`` content group per clip (draws balanced by content), or None (every clip alike).
+        quats: per clip ``(T_c, J, 4)`` float32 local rotations (for a spline base,
+            :mod:`keyfill.learn.gan.spline_base`), or empty when not needed.
     """
 
     relative: tuple[np.ndarray, ...]
@@ -66,6 +68,7 @@ class ClipPool:
     contacts: tuple[np.ndarray, ...] = ()
     foot_joints: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     groups: np.ndarray | None = None
+    quats: tuple[np.ndarray, ...] = ()
 
     def __len__(self) -> int:
         return len(self.root)
@@ -88,9 +91,10 @@ class ClipPool:
         return int(rng.choice(usable[g == content]))
 
 
-def clip_pool(corpus, clips=None, labels: bool = False) -> ClipPool:
+def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False) -> ClipPool:
     """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`;
-    ``labels``: with foot contacts and content groups (:mod:`keyfill.learn.gan.labels`)."""
+    ``labels``: with foot contacts and content groups (:mod:`keyfill.learn.gan.labels`); ``rotations``: with
+    the local rotations."""
     s = corpus.skeleton
     m = s.meters_per_unit
     clips = list(range(len(corpus))) if clips is None else [int(i) for i in clips]
@@ -102,9 +106,11 @@ def clip_pool(corpus, clips=None, labels: bool = False) -> ClipPool:
     bounds = np.concatenate([[0], np.cumsum([corpus.starts[i + 1] - corpus.starts[i] for i in clips])])
     rel = tuple(rel_all[a:b] for a, b in itertools.pairwise(bounds))
     root = tuple(np.asarray(corpus.root[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float64) * m for i in clips)
+    quats = tuple(np.asarray(corpus.quats[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float32)
+                  for i in clips) if rotations else ()
     if not labels:
-        return ClipPool(rel, root, float(corpus.fps), s.up_axis)
+        return ClipPool(rel, root, float(corpus.fps), s.up_axis, quats=quats)
     from keyfill.learn.gan.labels import clip_contacts, content_groups
 
     contacts, joints = clip_contacts(corpus, clips)
-    return ClipPool(rel, root, float(corpus.fps), s.up_axis, contacts, joints, content_groups(corpus, clips))
+    return ClipPool(rel, root, float(corpus.fps), s.up_axis, contacts, joints, content_groups(corpus, clips), quats)

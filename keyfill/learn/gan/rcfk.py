@@ -50,22 +50,9 @@ def rotation_6d_to_matrix(x):
     return torch.stack([c1, c2, c3], dim=-1)
 
 
-def matrix_to_rotation_6d(m):
-    """6D vectors ``(..., 6)`` of rotation matrices ``(..., 3, 3)`` (numpy or torch): the first two columns."""
-    xp = R._xp(m)
-    return xp.concat([m[..., :, 0], m[..., :, 1]], axis=-1)
-
-
 def range_map(v, lo, hi):
     """``lo + (hi - lo) * (tanh(v) + 1) / 2``: any ``v`` into ``[lo, hi]`` (Eq. 3 as meant)."""
     return lo + (hi - lo) * (torch.tanh(v) + 1) * 0.5
-
-
-def range_unmap(u, lo, hi, limit: float = 4.0):
-    """The inverse of :func:`range_map` (numpy), clipped to ``|v| <= limit``; 0 where the range is empty."""
-    w = np.asarray(hi) - np.asarray(lo)
-    t = np.where(w > 0, 2 * (np.asarray(u) - lo) / np.where(w > 0, w, 1) - 1, 0.0)
-    return np.arctanh(np.clip(t, -np.tanh(limit), np.tanh(limit)))
 
 
 def binomial_lowpass(x, order: int, dim: int):

@@ -61,6 +61,7 @@ from keyfill.errors import DataError
 from keyfill.learn.gan.dna import dna_count, draw_dna
 from keyfill.learn.gan.features import centre_keys, dense_input, nearest_key, sparse_input
 from keyfill.learn.gan.poses import ClipPool, turn
+from keyfill.learn.gan.spline_base import spline_root, spline_values, turned_rotations
 
 
 @dataclass(frozen=True)
@@ -72,11 +73,13 @@ class KeyLayout:
         poses: ``(K, J, 3)`` metres: row 0 the root (re-centred on the keys' mean
             ground position), rows 1.. root-relative joint positions.
         clips: ``(K,)`` the clip each key came from (for tests and statistics).
+        quats: ``(K, J, 4)`` the keys' local rotations, turned as their poses (a pool with rotations), or None.
     """
 
     frames: np.ndarray
     poses: np.ndarray
     clips: np.ndarray
+    quats: np.ndarray | None = None
 
 
 def _ground_mask(up_axis: str) -> np.ndarray:
@@ -100,11 +103,13 @@ def sample_keys(pool: ClipPool, rng: np.random.Generator, frames: int, min_gap: 
     # the clip's placement: world root = turn(root) + shift (shift is zero on the up axis)
     shift = -turn(pool.root[c][f], heading, pool.up_axis) * ground
     t = 0
-    frames_out, poses, clips = [0], [], [c]
+    frames_out, poses, clips, quats = [0], [], [c], []
 
     def pose_in_clip(c, f):
         pose = turn(pool.relative[c][f].astype(np.float64), heading, pool.up_axis)
         pose[0] = turn(pool.root[c][f], heading, pool.up_axis) + shift
+        if pool.quats:
+            quats.append(turned_rotations(pool.quats[c][f], heading, pool.up_axis))
         return pose
 
     poses.append(pose_in_clip(c, f))
@@ -141,7 +146,8 @@ def sample_keys(pool: ClipPool, rng: np.random.Generator, frames: int, min_gap: 
         poses.append(pose_in_clip(c, f))
         clips.append(c)
     poses_arr, _ = centre_keys(np.array(poses), pool.up_axis)
-    return KeyLayout(np.array(frames_out, dtype=np.int64), poses_arr, np.array(clips, dtype=np.int64))
+    return KeyLayout(np.array(frames_out, dtype=np.int64), poses_arr, np.array(clips, dtype=np.int64),
+                     np.array(quats) if quats else None)
 
 
 def key_roots(num_frames: int, key_frames, key_poses) -> np.ndarray:
@@ -196,7 +202,13 @@ def partial_coords(rng: np.random.Generator, num_keys: int, num_joints: int, hal
     return coords
 
 
-def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None) -> dict:
+def _spline_arrays(ranges, num_frames: int, key_frames, key_quats, key_roots) -> dict:
+    """``base (6 + 3 D, N)`` and ``spline_root (N, 3)``: the spline of ``GanConfig.base`` through the keys."""
+    return {"base": spline_values(ranges, num_frames, key_frames, key_quats),
+            "spline_root": spline_root(num_frames, key_frames, key_roots).astype(np.float32)}
+
+
+def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None, ranges=None) -> dict:
     """One generator training sequence of ``cfg.sequence_frames`` (``N``) frames as arrays.
 
     The keys span the first ``N - tail`` frames, ``tail`` drawn from 0 to 63: the
@@ -204,7 +216,9 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
     at inference. Returns ``dense (6 J, N)`` (the sparse format with partial keys
     for a ``cfg.partial_keys`` config, :func:`partial_coords`), ``key_mask (N,)``
     bool, ``key_root (N, 3)`` (:func:`key_roots`), and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)``
-    poses, as many as :func:`~keyfill.learn.gan.dna.dna_count` says for the keys (Appendix D).
+    poses, as many as :func:`~keyfill.learn.gan.dna.dna_count` says for the keys (Appendix D). With the
+    driven joints' ``ranges`` (a spline base; the pool has rotations) also ``base (6 + 3 D, N)`` and
+    ``spline_root (N, 3)`` (:mod:`keyfill.learn.gan.spline_base`).
     """
     N = cfg.sequence_frames
     tail = int(rng.integers(0, 64))
@@ -218,6 +232,8 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
         out["dense"] = sparse_input(N, lay.frames, poses, coords)
     else:
         out["dense"] = dense_input(N, lay.frames, lay.poses, cfg.mask_scale, cfg.root_input, pool.up_axis)
+    if ranges is not None:
+        out.update(_spline_arrays(ranges, N, lay.frames, lay.quats, lay.poses[:, 0]))
     if bank is not None:
         out["dna"] = draw_dna(bank, rng, dna_count(lay.frames, pool.fps, cfg.dna_seconds))
     return out
@@ -251,14 +267,15 @@ def _window_keys(rng: np.random.Generator, length: int, min_every: int, max_ever
     return np.array(frames, dtype=np.int64)
 
 
-def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None) -> dict:
+def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None, ranges=None) -> dict:
     """One in-clip training window of ``cfg.window_frames`` (``W``) frames as arrays (the module docstring).
 
     Returns ``dense (6 J, W)``, ``key_mask (W,)`` bool, ``valid (W,)`` bool (frames of the clip; the rest
     hold the last key), ``truth (W, J, 3)`` float32 metres (row 0 the root, re-centred as the keys are;
     rows 1.. root-relative joints, the last valid frame repeated), ``contact (W, n)`` bool (False past the
     clip), and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)`` poses. A ``cfg.partial_keys`` config
-    keys part of the poses as :func:`training_sequence` does (the sparse format).
+    keys part of the poses as :func:`training_sequence` does (the sparse format), and with ``ranges`` it has the
+    spline arrays of :func:`training_sequence` too.
     """
     W = cfg.window_frames
     c = pool.draw(rng, np.flatnonzero(pool.lengths >= 2))
@@ -295,6 +312,9 @@ def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=N
         dense_input(W, frames, truth[frames], cfg.mask_scale, cfg.root_input, pool.up_axis)
     out = {"dense": dense, "key_mask": key_mask, "key_root": key_roots(W, frames, truth[frames]), "valid": np.arange(W) < L,
            "truth": truth, "contact": contact}
+    if ranges is not None:
+        key_quats = turned_rotations(pool.quats[c][s + frames], heading, pool.up_axis)
+        out.update(_spline_arrays(ranges, W, frames, key_quats, truth[frames, 0]))
     if bank is not None:
         out["dna"] = draw_dna(bank, rng, dna_count(frames, pool.fps, cfg.dna_seconds))
     return out

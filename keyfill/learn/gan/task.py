@@ -90,7 +90,8 @@ class GanTask(TrainingTask):
         corpus: a :class:`~keyfill.learn.corpus.Corpus` (clips of one skeleton).
         config: the settings.
         stage: ``"path"`` or ``"generator"``.
-        path_model: for the generator stage, the model folder holding the trained path predictor.
+        path_model: for the generator stage, the model folder holding the trained path predictor (none with
+            ``base="spline"``: the root's path is the spline's).
         epochs: passes of ``steps_per_epoch`` steps (None: the config's ``path_epochs`` or ``generator_epochs``).
         checkpoint_every: epochs between the loop's checkpoints.
     """
@@ -118,10 +119,12 @@ class GanTask(TrainingTask):
         self.val_clips = np.sort(order[:n_val])
         self.train_clips = np.sort(order[n_val:])
         labels = self.cfg.in_clip_fraction > 0 and stage == "generator"  # contacts and content groups
-        self.train_pool = clip_pool(corpus, self.train_clips, labels)
-        self.val_pool = clip_pool(corpus, self.val_clips, labels) if n_val else None
+        spline = self.cfg.base == "spline" and stage == "generator"
+        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline)
+        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
+        self.spline_ranges = self.ranges if spline else None  # the sampling's spline base
         self.halves = body_halves(self.skeleton) if self.cfg.partial_keys else []
         self.train_bank = build_bank(corpus, self.train_clips) if self.cfg.dna else None
         self.val_bank = build_bank(corpus, self.val_clips) if self.cfg.dna and n_val else None
@@ -130,7 +133,10 @@ class GanTask(TrainingTask):
         self.nets: dict = {}
         self.path_net = None
         self.path_hash = ""
-        if stage == "generator":
+        if stage == "generator" and self.cfg.base == "spline" and path_model is not None:
+            raise UsageError("a gan model with base \"spline\" takes its root path from the spline through the key "
+                             "roots; leave out the path predictor (--path-model)")
+        if stage == "generator" and self.cfg.base != "spline":
             if path_model is None:
                 raise UsageError("the generator stage needs the trained path predictor: give path_model (a gan model "
                                  "folder from the path stage)")
@@ -226,12 +232,13 @@ class GanTask(TrainingTask):
         return self._generator_step(batch, update)
 
     def validate(self, epoch: int) -> dict:
-        """Held-out scores: ``path_loss`` (Eq. 5, m^2) or ``key_joint_error`` / ``key_root_error`` (file units)."""
+        """Held-out scores (:mod:`keyfill.learn.gan.validation`): ``path_loss`` (Eq. 5, m^2), or the key, window
+        and Motion DNA errors of the generator stage."""
+        from keyfill.learn.gan.validation import validate_generator, validate_path
+
         if self.val_pool is None or not self.nets:
             return {}
-        if self.stage == "path":
-            return self._validate_path()
-        return self._validate_generator()
+        return validate_path(self) if self.stage == "path" else validate_generator(self)
 
     def log_row(self, epoch: int, losses: dict, validation: dict) -> dict:
         """The loop's row, with the root weight (a schedule, not a loss) logged as ``root_weight``."""
@@ -320,9 +327,9 @@ class GanTask(TrainingTask):
         """The arrays of ``count`` in-clip windows of ``pool`` (:func:`~keyfill.learn.gan.sampling.clip_window`)."""
         cfg = self.cfg
         bank = self.train_bank if pool is self.train_pool else self.val_bank
-        wins = [clip_window(pool, rng, cfg, self.halves, bank) for _ in range(count)]
+        wins = [clip_window(pool, rng, cfg, self.halves, bank, self.spline_ranges) for _ in range(count)]
         arrays = {k: np.stack([w[k] for w in wins]) for k in ("dense", "key_mask", "key_root", "valid", "truth",
-                                                               "contact")}
+                                                               "contact", "base", "spline_root") if k in wins[0]}
         arrays["noise"] = rng.standard_normal((count, cfg.noise_dim, cfg.window_frames // 64)).astype(np.float32)
         if bank is not None:
             arrays["dna"], arrays["dna_valid"] = pad_dna([w["dna"] for w in wins])
@@ -332,10 +339,10 @@ class GanTask(TrainingTask):
         """``dense``, ``key_mask``, ``noise`` (and ``dna``, ``dna_valid``) of ``count`` sequences of ``pool``."""
         cfg = self.cfg
         bank = self.train_bank if pool is self.train_pool else self.val_bank
-        seqs = [training_sequence(pool, rng, cfg, self.halves, bank) for _ in range(count)]
-        arrays = {"dense": np.stack([q["dense"] for q in seqs]), "key_mask": np.stack([q["key_mask"] for q in seqs]),
-                  "key_root": np.stack([q["key_root"] for q in seqs]),
-                  "noise": rng.standard_normal((count, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)}
+        seqs = [training_sequence(pool, rng, cfg, self.halves, bank, self.spline_ranges) for _ in range(count)]
+        arrays = {k: np.stack([q[k] for q in seqs]) for k in ("dense", "key_mask", "key_root", "base", "spline_root")
+                  if k in seqs[0]}
+        arrays["noise"] = rng.standard_normal((count, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)
         if bank is not None:
             arrays["dna"], arrays["dna_valid"] = pad_dna([q["dna"] for q in seqs])
         return arrays
@@ -364,13 +371,15 @@ class GanTask(TrainingTask):
             p.to(dev)
         return p
 
-    def generator_outputs(self, G, dense, noise, dna=None, dna_valid=None):
-        """``(v, quats, relative (B, T, J, 3), root (B, T, 3))`` of the generator and the frozen path predictor."""
+    def generator_outputs(self, G, t: dict):
+        """``(v, quats, relative (B, T, J, 3), root (B, T, 3))`` of the generator on the tensors ``t`` of
+        :meth:`inputs`; the root from the frozen path predictor, or the spline of a spline base."""
         from keyfill.learn.gan.network import joint_channels, root_path
 
-        v = G(dense, noise, dna=dna, dna_valid=dna_valid)
+        v = G(t["dense"], t["noise"], dna=t["dna"], dna_valid=t["dna_valid"], base=t["base"])
         quats, rel = _unwrap(G).rcfk(v)
-        root = root_path(self._frozen_path(dense.device)(joint_channels(rel)))
+        root = t["spline_root"] if t["spline_root"] is not None else \
+            root_path(self._frozen_path(t["dense"].device)(joint_channels(rel)))
         return v, quats, rel, root
 
     def _key_targets(self, dense, key_mask, key_root=None):
@@ -394,15 +403,16 @@ class GanTask(TrainingTask):
             coords = key_mask[:, :, None, None].expand(B, N, J, 3)
         return keypose, key_rel, coords
 
-    def _inputs(self, a: dict, dev):
-        """The generator's tensors of a batch's arrays: ``(dense, key_mask, noise, dna, dna_valid)``."""
+    def inputs(self, a: dict, dev) -> dict:
+        """The generator's tensors of a batch's arrays: ``dense``, ``key_mask``, ``key_root``, ``noise``, ``dna``,
+        ``dna_valid``, ``base``, ``spline_root`` (None where the batch has none or the config uses none)."""
         import torch
 
-        def get(name):
-            return torch.as_tensor(a[name], device=dev) if name in a else None
-
-        return get("dense"), get("key_mask"), get("noise") if self.cfg.noise_dim else None, get("dna"), \
-            get("dna_valid")
+        names = ("dense", "key_mask", "key_root", "noise", "dna", "dna_valid", "base", "spline_root")
+        t = {k: torch.as_tensor(a[k], device=dev) if k in a else None for k in names}
+        if not self.cfg.noise_dim:
+            t["noise"] = None
+        return t
 
     def _generator_step(self, batch: Batch, update):
         import torch
@@ -415,11 +425,12 @@ class GanTask(TrainingTask):
         G, D = self.nets["generator"], self.nets["discriminator"]
         dev = next(G.parameters()).device
         a = batch.arrays
-        dense, key_mask, noise, dna, dna_valid = self._inputs(a, dev)
-        keypose, key_rel, coords = self._key_targets(dense, key_mask, torch.as_tensor(a["key_root"], device=dev))
+        t = self.inputs(a, dev)
+        key_mask, dna, dna_valid = t["key_mask"], t["dna"], t["dna_valid"]
+        keypose, key_rel, coords = self._key_targets(t["dense"], key_mask, t["key_root"])
 
         clear_statistics(G)
-        _, quats, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
+        _, quats, rel, root = self.generator_outputs(G, t)
         pasted = torch.where(coords, key_rel, rel)  # keys pasted in before D sees the motion
         fake = self._crops(joint_channels(pasted), torch.as_tensor(a["starts"], device=dev), cfg.real_frames)
         real = torch.as_tensor(a["real"], device=dev)
@@ -484,101 +495,6 @@ class GanTask(TrainingTask):
         K = idx.shape[1]
         g = x[:, None].expand(B, K, C, x.shape[-1]).gather(3, idx[:, :, None, :].expand(B, K, C, length))
         return g.reshape(B * K, C, length)
-
-    # --- validation ---
-
-    def _validate_path(self) -> dict:
-        import torch
-
-        from keyfill.learn.gan.losses import displacement_loss
-        from keyfill.learn.gan.network import joint_channels
-
-        net = self.nets["path"]
-        was = net.training
-        net.eval()
-        rng = np.random.default_rng([self.cfg.seed, 99])
-        rel, root, lengths = clip_batch(self.val_pool, rng, min(len(self.val_pool), 64), self.cfg.sequence_frames)
-        dev = next(net.parameters()).device
-        with torch.no_grad():
-            loss = displacement_loss(net(joint_channels(torch.as_tensor(rel, device=dev))),
-                                     torch.as_tensor(root, device=dev), torch.as_tensor(lengths, device=dev))
-        net.train(was)
-        return {"path_loss": float(loss)}
-
-    def _validate_generator(self) -> dict:
-        """Mean key errors over the given coordinates (joints, and the root after Eq. 10's re-centring) and,
-        with Motion DNA, the errors of Eqs. 11-12 as mean joint distances; file units."""
-        import torch
-
-        from keyfill.learn.gan.losses import dna_losses, root_free
-
-        G = self.nets["generator"]
-        was = G.training
-        G.eval()
-        rng = np.random.default_rng([self.cfg.seed, 98])
-        cfg = self.cfg
-        errors = {"key_joint_error": [], "key_root_error": [], "dna_error_1": [], "dna_error_2": []}
-        dev = next(G.parameters()).device
-        with torch.no_grad():
-            for _ in range(cfg.val_sequences):
-                seq = self._sequences(rng, self.val_pool, 1)
-                dense, key_mask, noise, dna, dna_valid = self._inputs(seq, dev)
-                _, quats, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
-                keypose, _, coords = self._key_targets(dense, key_mask, torch.as_tensor(seq["key_root"], device=dev))
-                k = torch.nonzero(key_mask[0]).flatten()
-                c = coords[0, k].cpu().numpy()
-                d = (rel[0, k] - keypose[0, k]).cpu().numpy()
-                joints = c[:, 1:].any(-1)
-                if joints.any():
-                    errors["key_joint_error"].append(np.sqrt((d[:, 1:] ** 2 * c[:, 1:]).sum(-1))[joints].mean())
-                rk, kr, cr = root[0, k].cpu().numpy(), keypose[0, k, 0].cpu().numpy(), c[:, 0]
-                n = np.maximum(cr.sum(0), 1)
-                aligned = rk - (rk * cr).sum(0) / n + (kr * cr).sum(0) / n
-                if cr.any():
-                    errors["key_root_error"].append(np.sqrt(((aligned - kr) ** 2 * cr).sum(-1))[cr.any(-1)].mean())
-                if cfg.dna:
-                    e1, e2 = dna_losses(root_free(quats, rel), dna, dna_valid, key_mask,
-                                        round(cfg.dna_seconds * self.corpus.fps), squared=False)
-                    errors["dna_error_1"].append(float(e1))
-                    errors["dna_error_2"].append(float(e2))
-        if cfg.in_clip_fraction > 0:
-            errors.update(self._window_errors(G, dev))
-        G.train(was)
-        m = self.skeleton.meters_per_unit
-        return {name: float(np.mean(v) / m) for name, v in errors.items() if v}
-
-    def _window_errors(self, G, dev) -> dict:
-        """On held-out in-clip windows: ``window_error`` (the mean world joint position error on the frames
-        between keys, the root path moved onto the key roots as ``complete`` does; metres) and
-        ``window_foot_speed`` (the mean horizontal foot speed where the ground truth is in contact, m/s;
-        file units per second once the caller divides)."""
-        import torch
-
-        rng = np.random.default_rng([self.cfg.seed, 97])
-        a = self._windows(rng, self.val_pool, max(4 * self.cfg.val_sequences, 1))
-        dense, _, noise, dna, dna_valid = self._inputs(a, dev)
-        with torch.no_grad():
-            _, _, rel, root = self.generator_outputs(G, dense, noise, dna, dna_valid)
-        truth = a["truth"]
-        km, valid = a["key_mask"], a["valid"]
-        root = root.cpu().numpy()
-        n = km.sum(1, keepdims=True)[..., None]
-        root = root + ((truth[:, :, 0] - root) * km[..., None]).sum(1, keepdims=True) / n
-        world = rel.cpu().numpy() + root[:, :, None]
-        true_world = truth[:, :, 1:] + truth[:, :, :1]
-        between = valid & ~km
-        err = np.linalg.norm(world[:, :, 1:] - true_world, axis=-1).mean(-1)[between]
-        out = {"window_error": [float(err.mean())] if err.size else []}
-        feet = self.val_pool.foot_joints
-        if len(feet):
-            up = 1 if self.skeleton.up_axis == "Y" else 2
-            ground = [x for x in range(3) if x != up]
-            w = world[:, :, feet][..., ground]
-            speed = np.linalg.norm(np.diff(w, axis=1), axis=-1) * self.corpus.fps
-            both = a["contact"][:, 1:] & a["contact"][:, :-1]
-            if both.any():
-                out["window_foot_speed"] = [float(speed[both].mean())]
-        return out
 
     # --- the path predictor of the generator stage ---
 

@@ -44,7 +44,9 @@ def _make_task(common, options: dict, progress) -> GanTask:
 
 
 def _started(task: GanTask) -> str:
-    what = "the global path predictor" if task.stage == "path" else "the local motion generator, path predictor frozen,"
+    what = ("the global path predictor" if task.stage == "path" else
+            "the local motion generator over the cubic spline," if task.cfg.base == "spline" else
+            "the local motion generator, path predictor frozen,")
     return (f"training {what} with {task.cfg.preset} widths on {len(task.train_clips)} clips, validating on "
             f"{len(task.val_clips)}; {task.epochs} epochs of {task.cfg.steps_per_epoch} steps")
 
@@ -87,8 +89,8 @@ TRAINING = TrainingSpec(
     options=(
         Option("stage", "path", "Which stage to train: the path predictor, or the generator.",
                choices=STAGES),
-        Option("path_model", None, "The gan model folder of the path stage (the generator stage needs it).",
-               metavar="FOLDER"),
+        Option("path_model", None, "The gan model folder of the path stage (the generator stage needs it, "
+               "unless its config's base is \"spline\").", metavar="FOLDER"),
         Option("preset", "cpu", "Layer widths: 'cpu' (small, trains on a CPU) or 'paper' (Table 5).",
                choices=("cpu", "paper")),
         Option("config", None, "JSON file of gan settings overriding the preset's (see docs/gan.md).", type="file"),

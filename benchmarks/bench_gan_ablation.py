@@ -50,6 +50,7 @@ RUNS = {
                                                        "lr_generator": 1e-4, "lr_discriminator": 1e-4,
                                                        "ema_decay": 0.0},
     "spline base (third recipe)": {"base": "spline", "output_init": "zero"},
+    "linear base": {"base": "linear", "output_init": "zero"},
 }
 EXCLUDE = ("*_normal_*", "dataset-1_*_sad_*", "dataset-1_*_feminine_*")
 
@@ -68,7 +69,7 @@ def train(name: str, changes: dict, path_model: str, epochs: int, work: Path, da
         cmd = [str(Path(sys.executable).with_name("keyfill")), "train", "gan", *data, *[a for p in EXCLUDE for a in ("--exclude", p)],
                "--config", str(config), "--seed", "0", "-o", str(folder), "--stage", "generator", "--dna",
                "--threads", "1", "--epochs", str(epochs), "-q"]
-        if changes.get("base") != "spline":  # a spline base takes the spline's root path, no predictor
+        if changes.get("base", "none") == "none":  # a base gives the root path: no predictor
             cmd += ["--path-model", path_model]
         if Path(f"{folder}.checkpoint.pt").is_file():
             cmd.append("--resume")
@@ -87,7 +88,7 @@ def saturation(folder: Path, corpus) -> float:
     from keyfill.learn.gan.task import GanTask
 
     model = load_model(folder)
-    spline = model.config.base == "spline"  # its windows need the spline base: the generator stage's pools
+    spline = model.config.base != "none"  # its windows need the base: the generator stage's pools
     task = GanTask(corpus, model.config, stage="generator" if spline else "path")  # the same validation split
     arrays = task._windows(np.random.default_rng([0, 97]), task.val_pool, 16)
     with torch.no_grad():

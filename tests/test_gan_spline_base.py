@@ -15,7 +15,7 @@ from test_gan_recipe2 import RECIPE2
 
 from keyfill import rotations as R
 from keyfill.errors import UsageError
-from keyfill.interpolate import cubic, cubic_arrays
+from keyfill.interpolate import cubic, cubic_arrays, linear
 from keyfill.kinematics import fk
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.gan.config import GanConfig
@@ -108,6 +108,20 @@ def test_a_fresh_spline_model_completes_as_the_cubic_spline(models, motion):
     assert np.abs(a - b).mean() < 1e-3 * height
     assert np.array_equal(gan.rotations[keys.frames], motion.rotations[keys.frames])
     assert np.array_equal(gan.positions[keys.frames], motion.positions[keys.frames])
+
+
+def test_a_fresh_linear_base_model_completes_as_the_protocols_interpolation(corpus, motion, tmp_path):
+    cfg = tiny_config(**{**SPLINE, "base": "linear", "max_frames": 256})
+    task = GanTask(corpus, cfg, "generator", epochs=1)
+    folder = task.save(tmp_path / "linear", built(task), [])
+    keys = Keys(np.array([0, 40, 100, 160, 239]))
+    a = world(complete(motion, keys, "gan", CompleteOptions(model=str(folder), feet="free")).motion)
+    b = world(linear(motion, keys))
+    height = np.ptp(b[..., 1])
+    assert np.abs(a - b).max() < 0.02 * height and np.abs(a - b).mean() < 1e-3 * height
+    k = np.array([0, 10, 30])
+    roots = np.array([[0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 2.0]])
+    assert np.allclose(spline_root(31, k, roots, "linear")[20], [1.0, 0.5, 1.0])  # halfway from key 1 to key 2
 
 
 def test_a_trained_spline_model_moves_off_the_spline_and_hits_its_keys(models, motion):

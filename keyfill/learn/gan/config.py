@@ -74,7 +74,7 @@ CHOICES = {
     "optimizer": ("rmsprop", "adam"),
     "lr_schedule": ("constant", "cosine"),
     "root_weight_schedule": ("steps", "run"),
-    "base": ("none", "spline"),
+    "base": ("none", "spline", "linear"),
 }
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
@@ -144,7 +144,7 @@ class GanConfig:
         output_init: the generator's output convolution: ``"default"`` PyTorch's initialisation,
             ``"small"`` a tenth of it and a zero bias, so a fresh generator's pre-``tanh`` angles sit
             near 0, the middle of every joint's range, instead of at its limits; ``"zero"`` zero weights
-            and bias (with ``base="spline"``: a fresh generator gives the spline).
+            and bias (with a ``base``: a fresh generator gives that interpolation).
         upsampling: the decoder's up-sampling layers: ``"transposed"`` convolutions (Table 5), or
             ``"linear"`` interpolation by 2 then a convolution of kernel 3 (no checkerboard ripple).
         root_input: the root channels of the dense input: ``"centred"`` the nearest key's root position
@@ -171,11 +171,12 @@ class GanConfig:
         foot_weight: weight of the foot-sliding term on in-clip windows: the mean squared horizontal
             speed (m/s)^2 of the foot joints on frames the ground truth has them in contact
             (:func:`keyfill.characters.feet.label_contacts`).
-        base: what the generator's output is added to: ``"none"`` (the paper: the output is the pose), or
-            ``"spline"`` (the third recipe): the RC-FK values of the cubic spline through the keys'
-            rotations, and the root's path is the spline through the key roots instead of the path
-            predictor's (:mod:`keyfill.learn.gan.spline_base`). Needs whole keys (not ``partial_keys``):
-            partial keys have no rotations to interpolate.
+        base: what the generator's output is added to: ``"none"`` (the paper: the output is the pose),
+            ``"spline"`` (keyfill's cubic spline) or ``"linear"`` (slerp and lerp, the LaFAN1 protocol's
+            interpolation): the RC-FK values of that interpolation of the keys' rotations, and the root's
+            path is its interpolation of the key roots instead of the path predictor's
+            (:mod:`keyfill.learn.gan.spline_base`, the third recipe). Needs whole keys (not
+            ``partial_keys``): partial keys have no rotations to interpolate.
         seed: the seed of the clip split and of every batch (epoch ``e`` draws from
             ``numpy.random.default_rng([seed, stage, e])``).
     """
@@ -267,8 +268,8 @@ class GanConfig:
                 raise UsageError(f"GAN setting {name!r} must be one of {', '.join(choices)}; got {getattr(self, name)!r}")
         if self.window_frames % 64 or self.real_frames > self.window_frames and self.in_clip_fraction > 0:
             raise UsageError("window_frames must be a multiple of 64 and at least real_frames")
-        if self.base == "spline" and self.partial_keys:
-            raise UsageError("base \"spline\" interpolates the keys' rotations, which partial keys do not give; "
+        if self.base != "none" and self.partial_keys:
+            raise UsageError(f"base {self.base!r} interpolates the keys' rotations, which partial keys do not give; "
                              "train a partial-key model with base \"none\"")
         if self.min_key_every > self.max_key_every or self.max_key_every > self.max_gap:
             raise UsageError(f"in-clip key spacing needs min_key_every <= max_key_every <= max_gap, got "

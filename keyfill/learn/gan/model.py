@@ -246,9 +246,9 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         coords: ``(K, J, 3)`` bool, the coordinates partial keys give (a ``partial_keys`` model's
             sparse input; None: every coordinate). The root path is moved onto the key roots
             along the axes they give.
-        key_quats: ``([B,] K, J, 4)`` the keys' local rotations, for a model with ``base="spline"``
-            (:mod:`keyfill.learn.gan.spline_base`: the network corrects their cubic spline, and the root
-            path is the spline through the key roots).
+        key_quats: ``([B,] K, J, 4)`` the keys' local rotations, for a model with a base (``GanConfig.base``,
+            :mod:`keyfill.learn.gan.spline_base`: the network corrects their interpolation, and the root
+            path is the interpolation of the key roots).
 
     Returns:
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
@@ -264,7 +264,7 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     quats, root = (run if run is not None else _run_torch)(model, x, seed, style, dna, base)
     kr = poses[:, :, 0]
     if base is not None:
-        root = np.stack([spline_root(T, key_frames, r) for r in kr])
+        root = np.stack([spline_root(T, key_frames, r, model.config.base) for r in kr])
     q, root = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
     if coords is None:
         root = root + (kr.mean(1) - root[:, key_frames].mean(1))[:, None]
@@ -291,15 +291,15 @@ def network_input(model: GanModel, key_frames, poses: np.ndarray, coords=None) -
 
 
 def spline_input(model: GanModel, key_frames, key_quats, batch: int, frames: int) -> np.ndarray | None:
-    """The generator's base ``(B, 6 + 3 D, T')`` float32 for a model with ``base="spline"`` (None for the others):
-    the RC-FK values of the cubic spline through ``key_quats ([B,] K, J, 4)``, ``T'`` padded frames."""
-    if model.config.base != "spline":
+    """The generator's base ``(B, 6 + 3 D, T')`` float32 for a model with a base (``GanConfig.base``; None for the
+    others): the RC-FK values of its interpolation of ``key_quats ([B,] K, J, 4)``, ``T'`` padded frames."""
+    if model.config.base == "none":
         return None
     if key_quats is None:
-        raise ValueError("a gan model with a spline base needs the keys' rotations (key_quats)")
+        raise ValueError("a gan model with a base needs the keys' rotations (key_quats)")
     kq = np.asarray(key_quats, dtype=np.float64)
     kq = np.broadcast_to(kq[None] if kq.ndim == 3 else kq, (batch, *kq.shape[-3:]))
-    return np.stack([spline_values(model.ranges, frames, key_frames, q) for q in kq])
+    return np.stack([spline_values(model.ranges, frames, key_frames, q, model.config.base) for q in kq])
 
 
 def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None):

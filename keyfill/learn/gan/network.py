@@ -156,7 +156,7 @@ class Generator(nn.Module):
 
         ``dna (B, P, J - 1, 3)`` root-free representative poses (metres) with ``dna_valid (B, P)``
         make the style through ``self.dna`` (instead of ``style``). Missing noise or style count as zeros.
-        ``base (B, 6 + 3 D, T)``: values the output is added to (``GanConfig.base = "spline"``,
+        ``base (B, 6 + 3 D, T)``: values the output is added to (``GanConfig.base``,
         :func:`keyfill.learn.gan.spline_base.spline_values`); None: the identity root rotation.
         """
         B, _, T = dense.shape

@@ -44,14 +44,14 @@ CONTRACT = {
         "dna_valid": ["batch", "poses", "bool", "which poses are real (padding: false); only with dna"],
         "base": ["batch", "6 + 3 * driven joints", "frames", "float32",
                  ("keyfill.learn.gan.spline_base spline_values of the keys' rotations; only for a model with "
-                  "base \"spline\"")],
+                  "base (GanConfig.base)")],
     },
     "outputs": {
         "quats": ["batch", "frames", "joints", 4, "float32",
                   "local unit quaternions (w, x, y, z); root first; joints not driven hold the identity"],
         "root": ["batch", "frames", 3, "float32",
                  ("root path (metres) from 0 at frame 0, before it is moved onto the key roots; not given by a "
-                  "model with base \"spline\", whose root path is the spline through the key roots")],
+                  "model with a base (GanConfig.base), whose root path is its interpolation of the key roots")],
     },
 }
 
@@ -177,7 +177,7 @@ def export_onnx(model: GanModel, folder, path) -> None:
         dims += [{0: batch, 1: poses}, {0: batch, 1: poses}]
         names += ["dna", "dna_valid"]
     outputs = list(CONTRACT["outputs"])
-    if model.config.base == "spline":
+    if model.config.base != "none":
         args.append(torch.zeros(2, model.generator.rcfk.channels, 2 * FRAME_MULTIPLE))
         dims.append({0: batch, 2: FRAME_MULTIPLE * steps})
         names.append("base")
@@ -223,6 +223,6 @@ def _module(model: GanModel):
         def forward(self, dense, base):
             return super().forward(dense, None, None, base)
 
-    if model.config.base != "spline":
+    if model.config.base == "none":
         return Networks()
     return SplineNetworks() if model.config.dna else SplineNetworksNoDna()

@@ -202,10 +202,10 @@ def partial_coords(rng: np.random.Generator, num_keys: int, num_joints: int, hal
     return coords
 
 
-def _spline_arrays(ranges, num_frames: int, key_frames, key_quats, key_roots) -> dict:
-    """``base (6 + 3 D, N)`` and ``spline_root (N, 3)``: the spline of ``GanConfig.base`` through the keys."""
-    return {"base": spline_values(ranges, num_frames, key_frames, key_quats),
-            "spline_root": spline_root(num_frames, key_frames, key_roots).astype(np.float32)}
+def _spline_arrays(ranges, base: str, num_frames: int, key_frames, key_quats, key_roots) -> dict:
+    """``base (6 + 3 D, N)`` and ``spline_root (N, 3)``: the interpolation ``base`` (``GanConfig.base``) of the keys."""
+    return {"base": spline_values(ranges, num_frames, key_frames, key_quats, base),
+            "spline_root": spline_root(num_frames, key_frames, key_roots, base).astype(np.float32)}
 
 
 def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None, ranges=None) -> dict:
@@ -217,7 +217,7 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
     for a ``cfg.partial_keys`` config, :func:`partial_coords`), ``key_mask (N,)``
     bool, ``key_root (N, 3)`` (:func:`key_roots`), and with a Motion DNA ``bank`` its ``dna (P, J - 1, 3)``
     poses, as many as :func:`~keyfill.learn.gan.dna.dna_count` says for the keys (Appendix D). With the
-    driven joints' ``ranges`` (a spline base; the pool has rotations) also ``base (6 + 3 D, N)`` and
+    driven joints' ``ranges`` (a base, ``cfg.base``; the pool has rotations) also ``base (6 + 3 D, N)`` and
     ``spline_root (N, 3)`` (:mod:`keyfill.learn.gan.spline_base`).
     """
     N = cfg.sequence_frames
@@ -233,7 +233,7 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
     else:
         out["dense"] = dense_input(N, lay.frames, lay.poses, cfg.mask_scale, cfg.root_input, pool.up_axis)
     if ranges is not None:
-        out.update(_spline_arrays(ranges, N, lay.frames, lay.quats, lay.poses[:, 0]))
+        out.update(_spline_arrays(ranges, cfg.base, N, lay.frames, lay.quats, lay.poses[:, 0]))
     if bank is not None:
         out["dna"] = draw_dna(bank, rng, dna_count(lay.frames, pool.fps, cfg.dna_seconds))
     return out
@@ -314,7 +314,7 @@ def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=N
            "truth": truth, "contact": contact}
     if ranges is not None:
         key_quats = turned_rotations(pool.quats[c][s + frames], heading, pool.up_axis)
-        out.update(_spline_arrays(ranges, W, frames, key_quats, truth[frames, 0]))
+        out.update(_spline_arrays(ranges, cfg.base, W, frames, key_quats, truth[frames, 0]))
     if bank is not None:
         out["dna"] = draw_dna(bank, rng, dna_count(frames, pool.fps, cfg.dna_seconds))
     return out

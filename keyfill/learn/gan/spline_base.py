@@ -1,20 +1,21 @@
-"""The cubic spline under the generator (``GanConfig.base = "spline"``, the third recipe of issue 31).
+"""The interpolation under the generator (``GanConfig.base``, the third recipe of issue 31).
 
-The paper's generator makes every frame's pose from the keys' positions alone. With
-``base="spline"`` it makes a *correction* to keyfill's cubic interpolation instead (the
-delta-interpolator reading of in-betweening, Oreshkin et al. 2022, there over linear
+The paper's generator makes every frame's pose from the keys' positions alone. With a base
+(``"spline"``: keyfill's cubic spline, :func:`keyfill.interpolate.cubic_arrays`; ``"linear"``: the
+LaFAN1 protocol's interpolation, slerp and lerp) it makes a *correction* to that interpolation instead
+(the delta-interpolator reading of in-betweening, Oreshkin et al. 2022, there over linear
 interpolation): its output is added to
 
-* :func:`spline_values`: the RC-FK values of the cubic spline through the keys' local rotations
-  (:func:`keyfill.interpolate.cubic_arrays`): the root's 6D vector, and each driven joint's
+* :func:`spline_values`: the RC-FK values of the interpolation through the keys' local rotations:
+  the root's 6D vector, and each driven joint's
   Euler angles (:func:`~keyfill.learn.gan.ranges.range_angles`) clipped into its range and taken
   back through the inverse of the range map (:func:`range_unmap`, to
   ``|v| <= LIMIT``), so a zero network output gives the spline, inside the ranges;
 
-and the root's path is :func:`spline_root`, the cubic spline through the key roots (the path
-predictor is not used: through keys every 15-90 frames the spline's hips are about 1 cm from the
-real path, the predictor's 10-50 cm after 2 s). A fresh generator of this recipe (zero output
-layer) therefore starts as the cubic spline, and training moves it only where that pays.
+and the root's path is :func:`spline_root`, the same interpolation of the key roots (the path
+predictor is not used: through keys every 15-90 frames the cubic spline's hips are about 1 cm from
+the real path, the predictor's 10-50 cm after 2 s). A fresh generator of this recipe (zero output
+layer) therefore starts as the interpolation, and training moves it only where that pays.
 
 Shapes: ``T`` frames, ``K`` keys, ``J`` joints, ``D`` driven joints; rotations are unit
 quaternions ``(w, x, y, z)``, positions metres.
@@ -60,8 +61,9 @@ def turned_rotations(quats: np.ndarray, angle: float, up_axis: str = "Y") -> np.
     return out
 
 
-def _cubic(num_frames: int, key_frames, key_rotations=None, key_positions=None):
-    from keyfill.interpolate import cubic_arrays
+def _curves(base: str, num_frames: int, key_frames, key_rotations=None, key_positions=None):
+    """``(rotations (T, N, 4), positions (T, 1, 3))`` of ``base`` through the keys (identity / zero where not given)."""
+    from keyfill.interpolate import cubic_arrays, segment_coordinates
 
     k = np.asarray(key_frames, dtype=np.int64)
     rot = np.zeros((num_frames, 1, 4)) if key_rotations is None else np.zeros((num_frames, *key_rotations.shape[1:]))
@@ -71,23 +73,30 @@ def _cubic(num_frames: int, key_frames, key_rotations=None, key_positions=None):
         rot[k] = key_rotations
     if key_positions is not None:
         pos[k, 0] = key_positions
-    q, p = cubic_arrays(rot, pos, k)
+    if base == "spline":
+        q, p = cubic_arrays(rot, pos, k)
+    else:
+        s, u = segment_coordinates(num_frames, k)
+        p = pos[k[s]] + u[:, None, None] * (pos[k[s + 1]] - pos[k[s]])
+        q = R.quat_slerp(rot[k[s]], rot[k[s + 1]], np.broadcast_to(u[:, None], rot.shape[:2]))
     q[k], p[k] = rot[k], pos[k]
     return q, p
 
 
-def spline_values(ranges: JointRanges, num_frames: int, key_frames, key_quats: np.ndarray) -> np.ndarray:
-    """``(6 + 3 D, T)`` float32: the RC-FK values of the cubic spline through ``key_quats (K, J, 4)`` (local
-    rotations, root first) at ``key_frames (K,)`` (increasing, within ``[0, T)``); frames after the last key
-    hold it."""
-    q, _ = _cubic(num_frames, key_frames, key_rotations=np.asarray(key_quats, dtype=np.float64))
+def spline_values(ranges: JointRanges, num_frames: int, key_frames, key_quats: np.ndarray,
+                  base: str = "spline") -> np.ndarray:
+    """``(6 + 3 D, T)`` float32: the RC-FK values of the ``base`` interpolation (``"spline"`` or ``"linear"``)
+    through ``key_quats (K, J, 4)`` (local rotations, root first) at ``key_frames (K,)`` (increasing, within
+    ``[0, T)``); frames after the last key hold it."""
+    q, _ = _curves(base, num_frames, key_frames, key_rotations=np.asarray(key_quats, dtype=np.float64))
     six = matrix_to_rotation_6d(R.quat_to_matrix(q[:, 0]))  # (T, 6)
     ang = np.clip(range_angles(ranges, q), ranges.lo, ranges.hi)  # (T, D, 3)
     v = range_unmap(ang, ranges.lo, ranges.hi, LIMIT).reshape(num_frames, -1)
     return np.concatenate([six, v], axis=1).T.astype(np.float32)
 
 
-def spline_root(num_frames: int, key_frames, key_roots: np.ndarray) -> np.ndarray:
-    """``(T, 3)`` float64: the cubic spline through ``key_roots (K, 3)`` at ``key_frames``; the last key held after it."""
-    _, p = _cubic(num_frames, key_frames, key_positions=np.asarray(key_roots, dtype=np.float64))
+def spline_root(num_frames: int, key_frames, key_roots: np.ndarray, base: str = "spline") -> np.ndarray:
+    """``(T, 3)`` float64: the ``base`` interpolation through ``key_roots (K, 3)`` at ``key_frames``; the last key
+    held after it."""
+    _, p = _curves(base, num_frames, key_frames, key_positions=np.asarray(key_roots, dtype=np.float64))
     return p[:, 0]

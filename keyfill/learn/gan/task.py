@@ -91,7 +91,7 @@ class GanTask(TrainingTask):
         config: the settings.
         stage: ``"path"`` or ``"generator"``.
         path_model: for the generator stage, the model folder holding the trained path predictor (none with
-            ``base="spline"``: the root's path is the spline's).
+            a base, ``GanConfig.base``: the root's path is its interpolation of the key roots).
         epochs: passes of ``steps_per_epoch`` steps (None: the config's ``path_epochs`` or ``generator_epochs``).
         checkpoint_every: epochs between the loop's checkpoints.
     """
@@ -119,7 +119,7 @@ class GanTask(TrainingTask):
         self.val_clips = np.sort(order[:n_val])
         self.train_clips = np.sort(order[n_val:])
         labels = self.cfg.in_clip_fraction > 0 and stage == "generator"  # contacts and content groups
-        spline = self.cfg.base == "spline" and stage == "generator"
+        spline = self.cfg.base != "none" and stage == "generator"
         self.train_pool = clip_pool(corpus, self.train_clips, labels, spline)
         self.val_pool = clip_pool(corpus, self.val_clips, labels, spline) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
@@ -133,10 +133,10 @@ class GanTask(TrainingTask):
         self.nets: dict = {}
         self.path_net = None
         self.path_hash = ""
-        if stage == "generator" and self.cfg.base == "spline" and path_model is not None:
-            raise UsageError("a gan model with base \"spline\" takes its root path from the spline through the key "
-                             "roots; leave out the path predictor (--path-model)")
-        if stage == "generator" and self.cfg.base != "spline":
+        if stage == "generator" and self.cfg.base != "none" and path_model is not None:
+            raise UsageError(f"a gan model with base {self.cfg.base!r} takes its root path from that interpolation of "
+                             f"the key roots; leave out the path predictor (--path-model)")
+        if stage == "generator" and self.cfg.base == "none":
             if path_model is None:
                 raise UsageError("the generator stage needs the trained path predictor: give path_model (a gan model "
                                  "folder from the path stage)")

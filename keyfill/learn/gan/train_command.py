@@ -45,7 +45,7 @@ def _make_task(common, options: dict, progress) -> GanTask:
 
 def _started(task: GanTask) -> str:
     what = ("the global path predictor" if task.stage == "path" else
-            "the local motion generator over the cubic spline," if task.cfg.base == "spline" else
+            f"the local motion generator over the {task.cfg.base} base," if task.cfg.base != "none" else
             "the local motion generator, path predictor frozen,")
     return (f"training {what} with {task.cfg.preset} widths on {len(task.train_clips)} clips, validating on "
             f"{len(task.val_clips)}; {task.epochs} epochs of {task.cfg.steps_per_epoch} steps")
@@ -90,7 +90,7 @@ TRAINING = TrainingSpec(
         Option("stage", "path", "Which stage to train: the path predictor, or the generator.",
                choices=STAGES),
         Option("path_model", None, "The gan model folder of the path stage (the generator stage needs it, "
-               "unless its config's base is \"spline\").", metavar="FOLDER"),
+               "unless its config has a base).", metavar="FOLDER"),
         Option("preset", "cpu", "Layer widths: 'cpu' (small, trains on a CPU) or 'paper' (Table 5).",
                choices=("cpu", "paper")),
         Option("config", None, "JSON file of gan settings overriding the preset's (see docs/gan.md).", type="file"),

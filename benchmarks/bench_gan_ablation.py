@@ -51,6 +51,7 @@ RUNS = {
                                                        "ema_decay": 0.0},
     "spline base (third recipe)": {"base": "spline", "output_init": "zero"},
     "linear base": {"base": "linear", "output_init": "zero"},
+    "spline base with adversarial weight 0.1": {"base": "spline", "output_init": "zero", "adv_weight": 0.1},
 }
 EXCLUDE = ("*_normal_*", "dataset-1_*_sad_*", "dataset-1_*_feminine_*")
 

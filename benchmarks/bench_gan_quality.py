@@ -38,8 +38,9 @@ than the default records under ``gan_quality-<model folder>-<patterns>``.
 
 Without the corpus the script says ``skipped`` and exits 0. The run is recorded in
 ``benchmarks/results/gan_quality-<model folder>.json`` (``results.py``; not with ``--no-record``):
-``model``, ``transformer``, ``paper`` (the paper's figures), ``path_cm`` (``{frames: cm}``), ``sampled``
-(the quality report of part 2), ``realism`` (``{gap: {method: figures}}``) and ``seconds``.
+``model``, ``transformer``, ``paper`` (the paper's figures), ``path_cm`` (``{frames: cm}``; not for a model
+with a base, which has no path predictor), ``sampled`` (the quality report of part 2), ``realism``
+(``{gap: {method: figures}}``) and ``seconds``.
 """
 
 from __future__ import annotations
@@ -170,7 +171,7 @@ def key_errors_every(model, corpus, gap: int, seed: int = 0) -> dict:
         poses[:, 0] = root[k] * m
         poses, _ = centre_keys(poses, sk.up_axis)
         dna = dna_poses(model, key_frames=k, seed=seed) if model.config.dna else None  # as complete draws it
-        gq, groot = generate(model, k - k[0], poses, seed, dna=dna)
+        gq, groot = generate(model, k - k[0], poses, seed, dna=dna, key_quats=q[k])
         rel = relative_positions(gq[k - k[0]], sk.offsets * m, sk.parents)
         joints.append(np.linalg.norm(rel[:, 1:] - poses[:, 1:], axis=-1).mean())
         roots.append(np.linalg.norm(groot[k - k[0]] - poses[:, 0], axis=-1).mean())
@@ -237,7 +238,8 @@ def main(argv=None) -> int:
     model = load_model(args.model)
     patterns = tuple(p.strip() for p in args.test_pattern.split(",") if p.strip())
     corpus = load_corpus([data], fold=model.folded).select(include=patterns)
-    report = {"path_cm": path_errors(model, clip_pool(corpus))}
+    # a model with a base has no path predictor: its root path is the base's interpolation of the key roots
+    report = {"path_cm": path_errors(model, clip_pool(corpus))} if model.config.base == "none" else {}
     report["sampled"] = quality_report(model, corpus, range(len(corpus)), args.sequences, args.frames, args.seed)
     report["key_errors_every"] = key_errors_every(model, corpus, 30, args.seed)
     files = sorted({f for p in patterns for f in bvh_files([data], p)})[: args.clips]
@@ -257,9 +259,10 @@ def main(argv=None) -> int:
     def cm(v):
         return "-" if v is None else f"{v:.2f}"
 
-    p = report["path_cm"]
-    print(f"path predictor error (cm): per frame {cm(p[1])} (paper 0.7 at 60 fps), after 64 frames {cm(p[64])}, "
-          f"after 128 frames {cm(p[128])} (paper 5.5 at 60 fps)")
+    if "path_cm" in report:
+        p = report["path_cm"]
+        print(f"path predictor error (cm): per frame {cm(p[1])} (paper 0.7 at 60 fps), after 64 frames {cm(p[64])}, "
+              f"after 128 frames {cm(p[128])} (paper 5.5 at 60 fps)")
     s = report["sampled"]
     full = s["key_errors"]["full"]
     print(f"{s['sequences']} sequences of {s['frames']} frames: key errors before post-processing "

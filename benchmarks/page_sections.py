@@ -337,9 +337,10 @@ def _sampled_rows(s: dict, paper: dict) -> list[list[str]]:
 
 def gan_quality(f: dict) -> list[str]:
     """Table 2 (path predictor), Table 4 (key errors) and realism of one gan model on one held-out set."""
-    p, s, paper = f["path_cm"], f["sampled"], f["paper"]
+    s, paper = f["sampled"], f["paper"]
+    p = f.get("path_cm")  # none for a model with a base (its root path is the keys' interpolation)
     rows = [["path predictor error per frame / after 64 / after 128 frames (cm)",
-             f"{num(p['1'])} / {num(p['64'], 1)} / {num(p['128'], 1)}",
+             f"{num(p['1'])} / {num(p['64'], 1)} / {num(p['128'], 1)}" if p else "none (the spline's root path)",
              f"{paper['path_cm_per_frame']} per frame, {paper['path_cm_2s']} after 2.1 s (60 fps)"]]
     if "key_errors_every" in f:
         e = f["key_errors_every"]

@@ -190,3 +190,16 @@ def test_lafan_windows_complete_through_the_spline_base(models, motion):
     _, cp = cubic_arrays(quats.transpose(1, 0, 2, 3).reshape(60, -1, 4), root.transpose(1, 0, 2), k)
     assert np.allclose(gr, cp.transpose(1, 0, 2), atol=1e-6 * np.ptp(root))  # the root is the spline's
     assert np.abs(gq[:, k] - quats[:, k]).max() < 1e-9
+
+
+def test_the_quality_report_of_a_spline_model_keys_its_base(models, corpus):
+    """Table 4's figures through a base: the key layouts carry their rotations, and the keys come out of the
+    network about where the spline puts them (on the keys, but for range clipping and the correction)."""
+    from keyfill.learn.gan.model import load_model
+    from keyfill.learn.gan.quality import quality_report
+
+    model = load_model(models[1])
+    report = quality_report(model, corpus, range(len(corpus)), sequences=2, frames=200, seed=0)
+    full = report["key_errors"]["full"]
+    assert full["root_cm"] < 1e-6  # the root path is the spline through the key roots
+    assert np.isfinite(full["joints_cm"]) and report["dna_error_1_cm"] > 0

@@ -57,12 +57,12 @@ def _key_kinds(model: GanModel, K: int) -> dict:
     return kinds
 
 
-def _key_error(model: GanModel, frames, poses, coords, seed: int, dna=None) -> tuple[float, float]:
+def _key_error(model: GanModel, frames, poses, coords, seed: int, dna=None, key_quats=None) -> tuple[float, float]:
     """``(joint error, root error)`` in metres of one generation through partial keys ``coords`` (with the Motion
-    DNA ``dna`` a DNA model is given, as ``complete`` always gives one)."""
+    DNA ``dna`` a DNA model is given, as ``complete`` always gives one; ``key_quats`` for a model with a base)."""
     m = model.skeleton.meters_per_unit
     centred, _ = centre_keys(poses, model.skeleton.up_axis, coords)
-    q, root = generate(model, frames, centred, seed, dna=dna, coords=coords)
+    q, root = generate(model, frames, centred, seed, dna=dna, coords=coords, key_quats=key_quats)
     rel = relative_positions(q[frames], model.skeleton.offsets * m, model.skeleton.parents)
     d = (rel[:, 1:] - centred[:, 1:]) ** 2 * coords[:, 1:]
     given = coords[:, 1:].any(-1)
@@ -125,7 +125,7 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
     if model.generator is None:
         raise DataError("the quality report needs a full gan model (both stages)")
     cfg = model.config
-    pool = clip_pool(corpus, clips)
+    pool = clip_pool(corpus, clips, rotations=cfg.base != "none")  # a base interpolates the keys' rotations
     bank = build_bank(corpus, clips) if cfg.dna else None
     if cfg.dna and len(np.unique(bank.clips)) < VARIETY:
         raise DataError(f"the variety figure needs DNAs of {VARIETY} clips; {len(np.unique(bank.clips))} given")
@@ -144,14 +144,14 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
         dnas = [draw_dna(bank, rng, count) for _ in range(VARIETY)] if cfg.dna else [None]
         for kind, masks in _key_kinds(model, len(k)).items():
             for coords in masks:
-                key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i, dnas[0]))
+                key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i, dnas[0], lay.quats))
         between = np.setdiff1d(np.arange(k[-1] + 1), k)
 
         def world(q, root, between=between):
             return (relative_positions(q, off, par) + root[:, None])[between]
 
         if cfg.dna:
-            outs = [generate(model, k, lay.poses, i, dna=d) for d in dnas]
+            outs = [generate(model, k, lay.poses, i, dna=d, key_quats=lay.quats) for d in dnas]
             for q, _ in outs[:1]:
                 key_mask = np.zeros(len(q), dtype=bool)
                 key_mask[k] = True
@@ -163,7 +163,8 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
                 if np.any(np.diff(k) >= min_frames):  # Eq. 12 has terms only in gaps of 3 s or more
                     dna_err[2].append(float(e[1]))
             variety["dna"].append(_pairwise([world(q, r) for q, r in outs]))
-        seeds = [generate(model, k, lay.poses, i * VARIETY + s, dna=dnas[0]) for s in range(VARIETY)]
+        seeds = [generate(model, k, lay.poses, i * VARIETY + s, dna=dnas[0], key_quats=lay.quats)
+                 for s in range(VARIETY)]
         variety["seed"].append(_pairwise([world(q, r) for q, r in seeds]))
     report = {"sequences": sequences, "frames": N, "clips": len(pool),
               "key_errors": {kind: {"joints_cm": _cm([e[0] for e in v]), "root_cm": _cm([e[1] for e in v])}

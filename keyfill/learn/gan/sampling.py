@@ -31,6 +31,11 @@ every 30-60 frames, as users key), or, a quarter of the time, the LaFAN1
 layout: 10 context frames, a gap of 5-45 and the target key. The frames after
 the layout hold its last key, as the padding at inference does.
 
+**A base** (``GanConfig.base``, the third recipe): the pool holds the clips' rotations too, each key's
+rotations are turned with its pose (:func:`~keyfill.learn.gan.spline_base.turned_rotations`), and a
+sequence or window also carries ``base``, the RC-FK values of the interpolation through its keys, and
+``spline_root``, the interpolation of its key roots (:mod:`keyfill.learn.gan.spline_base`).
+
 **Real sequences for the discriminator** (:func:`real_crops`) are random crops
 of ``real_frames`` frames of single clips (clips shorter than that are not
 used), each turned to a random heading; with content groups in the pool

@@ -46,6 +46,9 @@ def models(corpus, tmp_path_factory):
     task = GanTask(corpus, cfg, "generator", epochs=1)
     fresh = task.save(root / "fresh", built(task), [])
     trained = fit(GanTask(corpus, cfg, "generator", epochs=1), root / "trained").model
+    from safetensors.numpy import load_file
+
+    assert not any(k.startswith("path.") for k in load_file(trained / "weights.safetensors"))  # no predictor
     return fresh, trained
 
 
@@ -156,6 +159,8 @@ def test_the_spline_settings_that_cannot_work_are_refused(corpus, tmp_path):
     cfg = tiny_config(**SPLINE)
     with pytest.raises(UsageError, match="path predictor"):
         GanTask(corpus, cfg, "generator", path_model=tmp_path)
+    with pytest.raises(UsageError, match="no path predictor"):
+        GanTask(corpus, cfg, "path")
     with pytest.raises(UsageError, match="base"):
         GanConfig(base="bezier")
 

@@ -105,7 +105,8 @@ class GanModel:
         config: the settings it was built and trained with.
         skeleton: the skeleton it serves (constant offsets; file units).
         ranges: the RC-FK joint ranges.
-        generator, path: the torch modules (``generator`` is None for a ``"path"`` stage model).
+        generator, path: the torch modules (``generator`` is None for a ``"path"`` stage model, ``path`` for a
+            model with a base, whose root path is the keys' interpolation).
         folded: whether its corpus folded a static top joint into the hips.
         fps: the corpus frame rate.
         stage: ``"path"`` or ``"full"``.
@@ -146,7 +147,7 @@ class GanModel:
         return method
 
     def tensors(self) -> dict:
-        out = {f"path.{k}": v for k, v in self.path.state_dict().items()}
+        out = {} if self.path is None else {f"path.{k}": v for k, v in self.path.state_dict().items()}
         if self.generator is not None:
             out.update({f"generator.{k}": v for k, v in self.generator.state_dict().items()})
         if self.bank is not None and self.config.dna:
@@ -195,7 +196,8 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
         raise ModelError(f"{folder}: a gan model of stage {model_stage!r} (only the global path predictor); "
                          f"train its generator (the second stage) before completing motions with it")
     gen = nets["generator"] if model_stage == "full" else None
-    for name, net in (("path", nets["path"]), ("generator", gen)):
+    path_net = nets["path"] if cfg.base == "none" else None  # a base gives the root path
+    for name, net in (("path", path_net), ("generator", gen)):
         if net is None:
             continue
         part = {k[len(name) + 1 :]: v for k, v in tensors.items() if k.startswith(name + ".")}
@@ -206,7 +208,7 @@ def load_model(path: str | os.PathLike, device: str = "cpu", stage: str | None =
         if "dna_bank.poses" not in tensors or "dna_bank.clips" not in tensors:
             raise ModelError(f"{folder}: a gan model with Motion DNA but no bank of representative poses")
         bank = DnaBank(tensors["dna_bank.poses"].numpy(), tensors["dna_bank.clips"].numpy())
-    return GanModel(cfg, skel, ranges, gen, nets["path"], bool(config["folded_root"]), fps,
+    return GanModel(cfg, skel, ranges, gen, path_net, bool(config["folded_root"]), fps,
                     model_stage, dict(config.get("training") or {}), bank)
 
 

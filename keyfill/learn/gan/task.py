@@ -133,6 +133,9 @@ class GanTask(TrainingTask):
         self.nets: dict = {}
         self.path_net = None
         self.path_hash = ""
+        if stage == "path" and self.cfg.base != "none":
+            raise UsageError(f"a gan model with base {self.cfg.base!r} has no path predictor to train: its root path "
+                             f"is that interpolation of the key roots; train its generator stage alone")
         if stage == "generator" and self.cfg.base != "none" and path_model is not None:
             raise UsageError(f"a gan model with base {self.cfg.base!r} takes its root path from that interpolation of "
                              f"the key roots; leave out the path predictor (--path-model)")
@@ -287,7 +290,7 @@ class GanTask(TrainingTask):
             if self.ema:  # the model keeps the moving average (the checkpoint keeps both)
                 gen = build_networks(self.skeleton, self.ranges, self.cfg)["generator"]
                 gen.load_state_dict({k: v.cpu() for k, v in self.ema.items()})
-        if path is None:
+        if path is None and self.cfg.base == "none":
             path = build_networks(self.skeleton, self.ranges, self.cfg)["path"]
         history = list(history or [])
         final = {k: v for k, v in (history[-1] if history else {}).items()

@@ -176,6 +176,22 @@ def quat_continuous_np(q: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.moveaxis(q, 0, axis)
 
 
+def quat_continuous_between(q: np.ndarray, anchors) -> np.ndarray:
+    """Quaternions ``(T, ..., 4)`` with signs made continuous along axis 0 (as :func:`quat_continuous_np`)
+    between the ``anchors`` (increasing frame indices), which keep their signs: every other frame continues
+    the chain from the last anchor before it (frames before the first anchor, from frame 0)."""
+    q = np.array(q, dtype=np.float64, copy=True)
+    if len(q) < 2:
+        return q
+    first = np.zeros((1, *q.shape[1:-1]), dtype=np.int64)
+    c = np.concatenate([first, np.cumsum(np.sum(q[1:] * q[:-1], axis=-1) < 0, axis=0)])  # (T, ...) sign changes
+    a = np.asarray(anchors, dtype=np.int64)
+    last = np.searchsorted(a, np.arange(len(q)), side="right") - 1  # the last anchor at or before each frame
+    base = np.where((last >= 0).reshape(-1, *[1] * (c.ndim - 1)), c[a[np.maximum(last, 0)]], 0)
+    q[(c - base) % 2 == 1] *= -1
+    return q
+
+
 def _quat_matrix_entry(q, r: int, c: int):
     """Entry ``(r, c)`` of the rotation matrices of unit quaternions ``(..., 4)``."""
     w, v = q[..., 0], (q[..., 1], q[..., 2], q[..., 3])

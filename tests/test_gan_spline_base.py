@@ -208,3 +208,22 @@ def test_the_quality_report_of_a_spline_model_keys_its_base(models, corpus):
     full = report["key_errors"]["full"]
     assert full["root_cm"] < 1e-6  # the root path is the spline through the key roots
     assert np.isfinite(full["joints_cm"]) and report["dna_error_1_cm"] > 0
+
+
+def test_benchmark_windows_keep_the_keys_quaternion_hemisphere(models, motion):
+    """RC-FK gives the root with w >= 0; the LaFAN1 metrics compare quaternions sign and all, so a window whose
+    root turns through 180 degrees between its keys (w crosses 0) must not flip sign there."""
+    from keyfill.learn.corpus import fold_root
+    from keyfill.learn.gan.model import load_model
+
+    model = load_model(models[1])
+    q, p = fold_root(motion.rotations, motion.positions, motion.skeleton.parents)
+    q = q[:60].copy()  # the root turns from 144 to 234 degrees: w crosses 0 at frame 24, in the gap
+    q[:, 0] = R.quat_continuous_np(np.stack([heading_quat(a, motion.skeleton.up_axis)
+                                             for a in np.pi * (0.8 + np.arange(60) / 120)]))
+    assert q[0, 0, 0] > 0 > q[-1, 0, 0]
+    quats, root = np.stack([q, -q]), np.stack([p[0:60, 0], p[0:60, 0]])
+    k = np.append(np.arange(10), 59)
+    gq, _ = model.benchmark_method(0)(model.skeleton, quats, root, k)
+    assert np.array_equal(gq[:, k], quats[:, k])
+    assert (np.sum(gq[:, 1:] * gq[:, :-1], axis=-1) > 0).all()

@@ -189,3 +189,19 @@ def test_torch_path_is_differentiable_and_finite_at_identity():
     e = torch.tensor([[0.1, 0.2, 0.3]], dtype=torch.float64, requires_grad=True)
     R.quat_to_rotvec(R.euler_to_quat(e, "ZXY")).sum().backward()
     assert torch.isfinite(e.grad).all() and e.grad.abs().sum() > 0
+
+
+def test_quat_continuous_between_keeps_the_anchors_and_chains_from_them():
+    # a turn about Z past 180 degrees with a sign convention flipping it halfway (w >= 0), 2 tracks
+    angles = np.linspace(0.0, 1.6 * np.pi, 9)
+    smooth = R.quat_continuous_np(R.quat_from_rotvec(np.stack([np.zeros(9), np.zeros(9), angles], -1)))
+    q = np.where(smooth[:, :1] < 0, -smooth, smooth)  # w >= 0: the track jumps sign where w crosses 0
+    qq = np.stack([q, q], 1)
+    qq[6, 0] = smooth[6]  # track 0's anchors on the smooth track's hemisphere
+    qq[6, 1] = -smooth[6]  # track 1's anchor 6 on the other: it stays there
+    out = R.quat_continuous_between(qq, [0, 6])
+    assert np.array_equal(out[[0, 6]], qq[[0, 6]])
+    d = np.sum(out[1:] * out[:-1], -1)
+    assert (d[:, 0] > 0).all() and np.allclose(out[:, 0], smooth)  # track 0: one chain through the anchors
+    assert (d[:5, 1] > 0).all() and d[5, 1] < 0 and (d[6:, 1] > 0).all()  # track 1 restarts at its anchor 6
+    assert np.allclose(np.abs(np.sum(out * qq, -1)), 1.0)  # the same rotations

@@ -393,6 +393,16 @@ def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray
     return rot, pos
 
 
+def _key_hemispheres(quats: np.ndarray, key_frames: np.ndarray, key_quats: np.ndarray) -> np.ndarray:
+    """``quats (T, J, 4)`` with each key frame on its key's hemisphere (``key_quats (K, J, 4)``) and the frames
+    between continuing it: RC-FK's root has ``w >= 0`` and its joints an Euler conversion's sign, where the
+    LaFAN1 metrics compare quaternions sign and all (``complete`` gets continuous tracks from the rig bridge)."""
+    q = np.array(quats, dtype=np.float64, copy=True)
+    flip = np.sum(q[key_frames] * key_quats, axis=-1) < 0
+    q[key_frames] = np.where(flip[..., None], -q[key_frames], q[key_frames])
+    return R.quat_continuous_between(q, key_frames)
+
+
 def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> tuple[object, dict]:
     """Fill every frame of ``motion`` between its ``keys`` (reads only the key frames; see the module docstring).
 
@@ -563,7 +573,7 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         pos[k0 : end + 1, 0] = (groot[b] + shifts[b]) / m
         rot[:k0], rot[end + 1 :] = rot[k0], rot[end]
         pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
-        pred = src.replace(rotations=R.quat_normalize(rot), positions=pos)
+        pred = src.replace(rotations=_key_hemispheres(R.quat_normalize(rot), k, src.rotations[k]), positions=pos)
         fixed, _ = snap_to_keys(pred, src, Keys(k))
         out_q.append(fixed.rotations)
         out_r.append(fixed.positions[:, 0])

@@ -65,19 +65,21 @@ fuzz: $(STAMP)
 
 # The human models of the distribution models/bandai (CC BY-NC 4.0; MODELS: where to train them; a
 # retrained model replaces a shipped one by copying its folder into models/bandai/keyfill_models_bandai/).
-# The gan models of docs/gan.md and docs/benchmarks.md, by the second recipe (benchmarks/gan_recipe2.json,
-# docs/gan.md "The second recipe"), trained on Bandai-Namco dataset-2 and dataset-1 (unpacked from
-# ../shared/data into data/bandai2 and data/bandai1 on first use) with three styles held out for the
-# figures: `normal` (both datasets), and dataset-1's `sad` and `feminine`. The global path predictor
-# (the first recipe's, on dataset-2 alone: 9 minutes; on both datasets its whole-clip batches grow to
-# 1,024 frames and an epoch takes 7x as long), then two generators on it, one with Motion DNA (gaps up to 600 frames) and one that also takes partial
-# keys (gaps up to 318). An interrupted run continues from its checkpoints; a finished stage is not
+# The gan models of docs/gan.md and docs/benchmarks.md, trained on Bandai-Namco dataset-2 and dataset-1
+# (unpacked from ../shared/data into data/bandai2 and data/bandai1 on first use) with three styles held
+# out for the figures: `normal` (both datasets), and dataset-1's `sad` and `feminine`. `bandai2-gan`
+# (Motion DNA, gaps up to 600 frames) by the third recipe (benchmarks/gan_recipe3.json, docs/gan.md
+# "The third recipe"): a generator correcting the cubic spline, no path predictor. `bandai2-gan-partial`
+# (partial keys too, gaps up to 318) by the second (benchmarks/gan_recipe2.json): partial keys give no
+# rotations to interpolate, so its root path comes from the global path predictor (the first recipe's, on
+# dataset-2 alone: 9 minutes; on both datasets its whole-clip batches grow to 1,024 frames and an epoch
+# takes 7x as long). An interrupted run continues from its checkpoints; a finished stage is not
 # retrained. Torch thread counts are part of the recipe (results are bitwise reproducible for a given count).
 BANDAI2 := data/bandai2/bandai_namco_motiondataset2/data
 BANDAI1 := data/bandai1/Bandai-Namco-Research-Motiondataset-1/data
 MODELS := data/models
 GAN_TRAIN = $(BIN)/keyfill train gan $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
-    --exclude 'dataset-1_*_feminine_*' --config benchmarks/gan_recipe2.json --seed 0
+    --exclude 'dataset-1_*_feminine_*' --seed 0
 resume_if = $(if $(wildcard $(1).checkpoint.pt),--resume)
 
 $(BANDAI2): | $(STAMP)
@@ -91,15 +93,16 @@ $(MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2)
 	$(BIN)/keyfill train gan $(BANDAI2) --exclude '*_normal_*' --seed 0 -o $(MODELS)/bandai2-gan-path --stage path \
 	    --threads 2 $(call resume_if,$(MODELS)/bandai2-gan-path)
 
-$(MODELS)/bandai2-gan/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors
+$(MODELS)/bandai2-gan/weights.safetensors: | $(BANDAI2) $(BANDAI1)
 	@mkdir -p $(dir $(@D))
-	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan --stage generator --path-model $(MODELS)/bandai2-gan-path \
+	$(GAN_TRAIN) --config benchmarks/gan_recipe3.json -o $(MODELS)/bandai2-gan --stage generator \
 	    --dna --threads 1 $(call resume_if,$(MODELS)/bandai2-gan)
 
-$(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors
+$(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/weights.safetensors | $(BANDAI1)
 	@mkdir -p $(dir $(@D))
-	$(GAN_TRAIN) -o $(MODELS)/bandai2-gan-partial --stage generator --path-model $(MODELS)/bandai2-gan-path \
-	    --dna --partial-keys --threads 1 $(call resume_if,$(MODELS)/bandai2-gan-partial)
+	$(GAN_TRAIN) --config benchmarks/gan_recipe2.json -o $(MODELS)/bandai2-gan-partial --stage generator \
+	    --path-model $(MODELS)/bandai2-gan-path --dna --partial-keys --threads 1 \
+	    $(call resume_if,$(MODELS)/bandai2-gan-partial)
 
 # `make -j2 gan-models` trains the two generators side by side, one core each
 gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-partial/weights.safetensors

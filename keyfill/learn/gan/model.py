@@ -2,7 +2,7 @@
 
 A model folder (:mod:`keyfill.learn.modelfile`) holds ``weights.safetensors``
 with the generator's tensors under ``generator.`` and the path predictor's
-under ``path.``, and a ``config.json`` with the skeleton it serves, whether its
+under ``path.`` (none for a model with a base, ``GanConfig.base``), and a ``config.json`` with the skeleton it serves, whether its
 corpus folded a static top joint into the hips, the frame rate, the
 :class:`~keyfill.learn.gan.config.GanConfig`, the joint ranges of the RC-FK
 layer (plain arrays, :class:`~keyfill.learn.gan.ranges.JointRanges`), the
@@ -21,7 +21,9 @@ training tool and is not saved in the model (training checkpoints keep it).
 2. the generator, with noise drawn from ``torch.Generator().manual_seed(seed)``,
    gives every frame's local rotations through RC-FK; the path predictor gives
    root velocities, summed to a path and moved (a least-squares translation,
-   as in Eq. 10) onto the key roots;
+   as in Eq. 10) onto the key roots. With a base the generator corrects the keys'
+   interpolation (:func:`spline_input`) and the root path is that interpolation of
+   the key roots (:mod:`keyfill.learn.gan.spline_base`);
 3. joints the network does not drive (leaves) are interpolated between keys;
    frames outside the key range hold the generated first or last frame, so
    the exact-key correction puts them on the nearest key.
@@ -235,7 +237,7 @@ def check_keys(model: GanModel, frames: np.ndarray) -> None:
 
 def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None,
              dna=None, coords=None, key_quats=None):
-    """Run both networks over the key range.
+    """Run the networks over the key range (the generator, and the path predictor of a model without a base).
 
     Args:
         key_frames: ``(K,)`` increasing, starting at 0.

@@ -7,7 +7,9 @@ is frozen and the local motion generator is trained against the discriminator.
   clips (:func:`keyfill.learn.gan.sampling.clip_batch`) and minimises Eq. 5.
   :meth:`GanTask.save` writes a ``"gan"`` model folder of stage ``"path"``.
 * ``stage="generator"``: networks ``{"generator", "discriminator"}``; the path
-  predictor comes frozen from ``path_model`` (a model folder of either stage).
+  predictor comes frozen from ``path_model`` (a model folder of either stage), or with a
+  base (``GanConfig.base``, the third recipe) there is none: the generator corrects the keys'
+  interpolation and the root path is that interpolation of the key roots, so Eq. 10 is 0.
   Each step draws ``batch_size`` key layouts of ``sequence_frames`` frames
   (:func:`~keyfill.learn.gan.sampling.sample_keys`), the noise, and real crops,
   then updates the discriminator once and the generator once (section 3.7):

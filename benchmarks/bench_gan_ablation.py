@@ -91,7 +91,7 @@ def saturation(folder: Path, corpus) -> float:
     model = load_model(folder)
     spline = model.config.base != "none"  # its windows need the base: the generator stage's pools
     task = GanTask(corpus, model.config, stage="generator" if spline else "path")  # the same validation split
-    arrays = task._windows(np.random.default_rng([0, 97]), task.val_pool, 16)
+    arrays = task.windows(np.random.default_rng([0, 97]), task.val_pool, 16)
     with torch.no_grad():
         dna = torch.as_tensor(arrays["dna"]) if "dna" in arrays else None
         valid = torch.as_tensor(arrays["dna_valid"]) if "dna_valid" in arrays else None

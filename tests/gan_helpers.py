@@ -51,5 +51,12 @@ def built(task, seed: int = 0):
     return nets
 
 
+def world(m):
+    """World joint positions ``(T, J, 3)`` of a :class:`~keyfill.motion.Motion`."""
+    from keyfill.kinematics import fk
+
+    return fk(m.rotations, m.positions, m.skeleton.parents)[1]
+
+
 def mean_of(log, name, part=slice(None)):
     return float(np.mean([entry[name] for entry in log[part]]))

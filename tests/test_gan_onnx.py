@@ -15,13 +15,12 @@ pytest.importorskip("onnxruntime")
 pytest.importorskip("onnxscript")
 torch = pytest.importorskip("torch")
 
-from gan_helpers import fit, synthetic_corpus, tiny_config
+from gan_helpers import fit, synthetic_corpus, tiny_config, world
 from synthetic_corpus import walker_motion, walker_skeleton
 from test_gan_recipe2 import RECIPE2
 
 from keyfill import io
 from keyfill.cli.main import main
-from keyfill.kinematics import fk
 from keyfill.learn import onnx as kx
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.registry import complete
@@ -52,10 +51,6 @@ def models(tmp_path_factory):
 @pytest.fixture(scope="module")
 def motion():
     return walker_motion(walker_skeleton(), 240, np.random.default_rng(42))
-
-
-def world(m):
-    return fk(m.rotations, m.positions, m.skeleton.parents)[1]
 
 
 @pytest.mark.parametrize("keys", [Keys(np.array([0, 50, 130, 200])), Keys(np.array([5, 20, 44])),

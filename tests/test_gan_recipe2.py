@@ -262,10 +262,10 @@ def test_root_targets_are_the_key_roots_whatever_the_root_input(corpus, tmp_path
     for _ in range(8):
         rel, cen = (t.generator_batch(r, t.train_pool).arrays for t, r in zip(tasks, rngs))
         kinds.add("truth" in rel)
-        got, want = (t._key_targets(torch.as_tensor(a["dense"]), torch.as_tensor(a["key_mask"]),
+        got, want = (t.key_targets(torch.as_tensor(a["dense"]), torch.as_tensor(a["key_mask"]),
                                     torch.as_tensor(a["key_root"]))[0][:, :, 0].numpy() for t, a in zip(tasks, (rel, cen)))
         m = rel["key_mask"]
-        first_recipe = tasks[1]._key_targets(torch.as_tensor(cen["dense"]), torch.as_tensor(cen["key_mask"]))[0]
+        first_recipe = tasks[1].key_targets(torch.as_tensor(cen["dense"]), torch.as_tensor(cen["key_mask"]))[0]
         assert np.allclose(got[m], want[m], atol=1e-6)  # the same targets either way
         assert np.allclose(first_recipe[:, :, 0].numpy()[m], want[m], atol=1e-6)  # = the centred input's keys
         assert np.abs(rel["dense"][:, [0, 2]].transpose(0, 2, 1)[m]).max() < 1e-6  # the input is 0 there

@@ -9,14 +9,13 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from gan_helpers import built, fit, synthetic_corpus, tiny_config
+from gan_helpers import built, fit, synthetic_corpus, tiny_config, world
 from synthetic_corpus import walker_motion, walker_skeleton
 from test_gan_recipe2 import RECIPE2
 
 from keyfill import rotations as R
 from keyfill.errors import UsageError
 from keyfill.interpolate import cubic, cubic_arrays, linear
-from keyfill.kinematics import fk
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.poses import clip_pool, relative_positions, turn
@@ -55,10 +54,6 @@ def models(corpus, tmp_path_factory):
 @pytest.fixture(scope="module")
 def motion():
     return walker_motion(walker_skeleton(), 240, np.random.default_rng(42))
-
-
-def world(m):
-    return fk(m.rotations, m.positions, m.skeleton.parents)[1]
 
 
 @pytest.mark.parametrize("up", ["Y", "Z"])

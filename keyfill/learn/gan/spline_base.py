@@ -62,25 +62,20 @@ def turned_rotations(quats: np.ndarray, angle: float, up_axis: str = "Y") -> np.
 
 
 def _curves(base: str, num_frames: int, key_frames, key_rotations=None, key_positions=None):
-    """``(rotations (T, N, 4), positions (T, 1, 3))`` of ``base`` through the keys (identity / zero where not given)."""
-    from keyfill.interpolate import cubic_arrays, segment_coordinates
+    """``(rotations (T, N, 4), positions (T, 3))`` of ``base`` through the keys (identity / zero where not given):
+    :func:`keyfill.interpolate.cubic_windows` or :func:`~keyfill.interpolate.linear_windows` on one window."""
+    from keyfill.interpolate import cubic_windows, linear_windows
 
     k = np.asarray(key_frames, dtype=np.int64)
     rot = np.zeros((num_frames, 1, 4)) if key_rotations is None else np.zeros((num_frames, *key_rotations.shape[1:]))
     rot[..., 0] = 1.0
-    pos = np.zeros((num_frames, 1, 3))
+    pos = np.zeros((num_frames, 3))
     if key_rotations is not None:
         rot[k] = key_rotations
     if key_positions is not None:
-        pos[k, 0] = key_positions
-    if base == "spline":
-        q, p = cubic_arrays(rot, pos, k)
-    else:
-        s, u = segment_coordinates(num_frames, k)
-        p = pos[k[s]] + u[:, None, None] * (pos[k[s + 1]] - pos[k[s]])
-        q = R.quat_slerp(rot[k[s]], rot[k[s + 1]], np.broadcast_to(u[:, None], rot.shape[:2]))
-    q[k], p[k] = rot[k], pos[k]
-    return q, p
+        pos[k] = key_positions
+    q, p = (cubic_windows if base == "spline" else linear_windows)(None, rot[None], pos[None], k)
+    return q[0], p[0]
 
 
 def spline_values(ranges: JointRanges, num_frames: int, key_frames, key_quats: np.ndarray,
@@ -98,5 +93,4 @@ def spline_values(ranges: JointRanges, num_frames: int, key_frames, key_quats: n
 def spline_root(num_frames: int, key_frames, key_roots: np.ndarray, base: str = "spline") -> np.ndarray:
     """``(T, 3)`` float64: the ``base`` interpolation through ``key_roots (K, 3)`` at ``key_frames``; the last key
     held after it."""
-    _, p = _curves(base, num_frames, key_frames, key_positions=np.asarray(key_roots, dtype=np.float64))
-    return p[:, 0]
+    return _curves(base, num_frames, key_frames, key_positions=np.asarray(key_roots, dtype=np.float64))[1]

@@ -315,11 +315,11 @@ class GanTask(TrainingTask):
         cfg = self.cfg
         if cfg.in_clip_fraction > 0 and rng.random() < cfg.in_clip_fraction:
             B = max(cfg.batch_size * cfg.sequence_frames // cfg.window_frames, 1)
-            arrays = self._windows(rng, pool, B)
+            arrays = self.windows(rng, pool, B)
             frames = arrays["valid"].sum(1)
         else:
             B = cfg.batch_size
-            arrays = self._sequences(rng, pool, B)
+            arrays = self.sequences(rng, pool, B)
             frames = cfg.sequence_frames
         if self.stage == "generator":
             crops = cfg.crops_per_sequence
@@ -328,7 +328,7 @@ class GanTask(TrainingTask):
             arrays["starts"] = crop_starts(rng, B, crops, frames, cfg.real_frames)
         return Batch("generator", arrays)
 
-    def _windows(self, rng, pool, count: int) -> dict:
+    def windows(self, rng, pool, count: int) -> dict:
         """The arrays of ``count`` in-clip windows of ``pool`` (:func:`~keyfill.learn.gan.sampling.clip_window`)."""
         cfg = self.cfg
         bank = self.train_bank if pool is self.train_pool else self.val_bank
@@ -340,7 +340,7 @@ class GanTask(TrainingTask):
             arrays["dna"], arrays["dna_valid"] = pad_dna([w["dna"] for w in wins])
         return arrays
 
-    def _sequences(self, rng, pool, count: int) -> dict:
+    def sequences(self, rng, pool, count: int) -> dict:
         """``dense``, ``key_mask``, ``noise`` (and ``dna``, ``dna_valid``) of ``count`` sequences of ``pool``."""
         cfg = self.cfg
         bank = self.train_bank if pool is self.train_pool else self.val_bank
@@ -387,7 +387,7 @@ class GanTask(TrainingTask):
             root_path(self._frozen_path(t["dense"].device)(joint_channels(rel)))
         return v, quats, rel, root
 
-    def _key_targets(self, dense, key_mask, key_root=None):
+    def key_targets(self, dense, key_mask, key_root=None):
         """``(key poses (B, T, J, 3), their root-relative part, given coordinates (B, T, J, 3) bool)`` of the input.
 
         The dense format gives every coordinate at the keys; the sparse one (partial keys) those its mask marks.
@@ -432,7 +432,7 @@ class GanTask(TrainingTask):
         a = batch.arrays
         t = self.inputs(a, dev)
         key_mask, dna, dna_valid = t["key_mask"], t["dna"], t["dna_valid"]
-        keypose, key_rel, coords = self._key_targets(t["dense"], key_mask, t["key_root"])
+        keypose, key_rel, coords = self.key_targets(t["dense"], key_mask, t["key_root"])
 
         clear_statistics(G)
         _, quats, rel, root = self.generator_outputs(G, t)

@@ -52,11 +52,11 @@ def validate_generator(task) -> dict:
     dev = next(G.parameters()).device
     with torch.no_grad():
         for _ in range(cfg.val_sequences):
-            seq = task._sequences(rng, task.val_pool, 1)
+            seq = task.sequences(rng, task.val_pool, 1)
             t = task.inputs(seq, dev)
             key_mask, dna, dna_valid = t["key_mask"], t["dna"], t["dna_valid"]
             _, quats, rel, root = task.generator_outputs(G, t)
-            keypose, _, coords = task._key_targets(t["dense"], key_mask, t["key_root"])
+            keypose, _, coords = task.key_targets(t["dense"], key_mask, t["key_root"])
             k = torch.nonzero(key_mask[0]).flatten()
             c = coords[0, k].cpu().numpy()
             d = (rel[0, k] - keypose[0, k]).cpu().numpy()
@@ -88,7 +88,7 @@ def window_errors(task, G, dev) -> dict:
     import torch
 
     rng = np.random.default_rng([task.cfg.seed, 97])
-    a = task._windows(rng, task.val_pool, max(4 * task.cfg.val_sequences, 1))
+    a = task.windows(rng, task.val_pool, max(4 * task.cfg.val_sequences, 1))
     with torch.no_grad():
         _, _, rel, root = task.generator_outputs(G, task.inputs(a, dev))
     truth = a["truth"]

@@ -77,6 +77,9 @@ TRAINING = TrainingSpec(
     folder (--path-model), freezes the predictor and trains the local motion
     generator against a discriminator on long sequences whose keys come from
     several clips. The result completes motions: keyfill complete --method gan.
+    A config with a base (benchmarks/gan_recipe3.json: the generator corrects
+    the cubic spline, whose root path it keeps) trains the generator stage
+    alone, without --path-model.
 
     \b
     Examples:
@@ -85,6 +88,7 @@ TRAINING = TrainingSpec(
       keyfill train gan bandai2/data -o models/gan --stage generator --path-model models/gan-path --resume
       keyfill train gan bandai2/data -o models/gan-dna --stage generator --path-model models/gan-path --dna \\
           --partial-keys
+      keyfill train gan bandai2/data -o models/gan-spline --stage generator --config benchmarks/gan_recipe3.json --dna
     """,
     options=(
         Option("stage", "path", "Which stage to train: the path predictor, or the generator.",

@@ -21,7 +21,7 @@ METHODS = ("real", "zero-velocity", "interpolation", "linear", "cubic", "velocit
 LAYOUTS = ("in-filling, key every 5", "in-filling, key every 10", "in-filling, key every 15",
            "blending, 10 + gap 15 + 10", "blending, 10 + gap 30 + 10")
 KEY_KINDS = {"full": "whole keys", "root": "root-only keys (5.1)", "half": "half-body keys (5.2)",
-             "plane": "2-D keys (5.3)"}
+             "plane": "2-D keys (5.3)", "sketch": "2-D sketch keys, bones stretched (5.3)"}
 
 
 def in_order(mapping: dict, preferred=()) -> list:

@@ -217,10 +217,12 @@ def test_quality_report_of_a_tiny_model(models):
     clips_dir = models[0].model.parent / "clips"
     corpus = load_corpus([clips_dir], cache=False)
     report = quality_report(model, corpus, range(len(corpus)), sequences=2, frames=200, seed=0)
-    assert set(report["key_errors"]) == {"full", "root", "half", "plane"}
+    assert set(report["key_errors"]) == {"full", "root", "half", "plane", "sketch"}
     assert report["key_errors"]["root"]["joints_cm"] is None  # root-only keys give no joint
     assert all(np.isfinite(v["root_cm"]) for v in report["key_errors"].values())
-    assert all(np.isfinite(report["key_errors"][k]["joints_cm"]) for k in ("full", "half", "plane"))
+    assert all(np.isfinite(report["key_errors"][k]["joints_cm"]) for k in ("full", "half", "plane", "sketch"))
+    # a sketch's keys are the plane keys' with stretched bones, scored against the true poses
+    assert report["key_errors"]["sketch"]["joints_cm"] != report["key_errors"]["plane"]["joints_cm"]
     assert report["dna_error_1_cm"] > 0 and report["variety_cm"]["dnas"] > 0 and report["variety_cm"]["seeds"] > 0
 
 

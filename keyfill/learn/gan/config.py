@@ -62,7 +62,7 @@ _RANGES = {
     "generator_epochs": (1, 1_000_000, True), "val_fraction": (0, 0.9, True), "val_sequences": (0, 100_000, True),
     "in_clip_fraction": (0, 1, True), "window_frames": (64, 65_536, True), "min_key_every": (1, 10_000, True),
     "max_key_every": (1, 10_000, True), "warmup_fraction": (0, 1, True), "ema_decay": (0, 1, True),
-    "recon_weight": (0, 1e6, True), "foot_weight": (0, 1e6, True),
+    "recon_weight": (0, 1e6, True), "foot_weight": (0, 1e6, True), "sketch_stretch": (0, 1, True),
 }
 #: the choices of the recipe's named settings; the first of each is the first recipe's (and the default, so
 #: that model folders written before the setting existed load and give their old bytes)
@@ -75,7 +75,11 @@ CHOICES = {
     "lr_schedule": ("constant", "cosine"),
     "root_weight_schedule": ("steps", "run"),
     "base": ("none", "spline", "linear"),
+    "dna_source": ("any", "own"),
 }
+#: settings added after models were shipped, with their defaults: :meth:`GanConfig.to_json` leaves them out at
+#: the default, so the config.json of older folders and what ``--resume`` compares keep their bytes
+LATER_DEFAULTS = {"dna_norm": False, "dna_source": "any", "sketch_stretch": 0.0}
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
@@ -100,12 +104,22 @@ class GanConfig:
         dna_weight: weight of each of the two DNA losses (Eqs. 11-12; Appendix A: 50).
         dna_seconds: one representative frame per this many seconds of the gaps between
             keys (Appendix D), and the shortest gap Eq. 12 places a pose in (3 s).
+        dna_norm: the DNA encoder's vector ``w`` is layer-normalised over its ``style_dim`` channels
+            (zero mean, unit variance per sequence, no learned scale) before the decoder takes it; without
+            it the third recipe's ``w`` came out at RMS 0.07 beside the encoder's features at 0.69.
+        dna_source: where an in-clip window's Motion DNA comes from: ``"any"`` one random training clip
+            (as the long sequences'), ``"own"`` the clip the window is cut from, so the DNA describes the
+            motion the reconstruction term asks for and the generator has a reason to read it.
         partial_keys: train on partial keys too (section 5), with the sparse input format
             (keyed coordinates at key frames and a 0/1 mask, Fig. 4's top rows), so the
             model serves whole, root-only, half-body and 2-D keys; ``max_gap`` is then at
             most 318 frames (a key is seen only where it is).
         partial_fraction: the share of training sequences keyed partially (the rest get
             whole poses), split equally between root paths, half bodies and 2-D keys.
+        sketch_stretch: ``s`` > 0: half the 2-D-keyed training sequences of a partial-key model take
+            their keys from a stick figure whose every bone, at every key, is scaled by
+            ``exp(U(-s, s))`` (section 5.3's casually drawn keys); the key losses keep the true poses,
+            so the model learns to lift uneven sketches to feasible poses. 0: exact 2-D keys only.
         mask_scale: the dense mask (distance to the nearest key, frames) is divided by this.
         sequence_frames: frames ``N`` of a generator training sequence (a multiple of 64).
         min_gap, max_gap: key gaps drawn in training, frames (the paper: up to 600 of
@@ -188,8 +202,11 @@ class GanConfig:
     dna_width: int = 0
     dna_weight: float = 50.0
     dna_seconds: float = 3.0
+    dna_norm: bool = False
+    dna_source: str = "any"
     partial_keys: bool = False
     partial_fraction: float = 0.6
+    sketch_stretch: float = 0.0
     mask_scale: float = 64.0
     sequence_frames: int = 1024
     min_gap: int = 1
@@ -268,6 +285,10 @@ class GanConfig:
                 raise UsageError(f"GAN setting {name!r} must be one of {', '.join(choices)}; got {getattr(self, name)!r}")
         if self.window_frames % 64 or self.real_frames > self.window_frames and self.in_clip_fraction > 0:
             raise UsageError("window_frames must be a multiple of 64 and at least real_frames")
+        if self.sketch_stretch and not self.partial_keys:
+            raise UsageError("sketch_stretch stretches the 2-D keys of partial-key training; it needs partial_keys")
+        if (self.dna_norm or self.dna_source != "any") and not self.dna:
+            raise UsageError("dna_norm and dna_source need a Motion DNA encoder (dna_width > 0, --dna)")
         if self.base != "none" and self.partial_keys:
             raise UsageError(f"base {self.base!r} interpolates the keys' rotations, which partial keys do not give; "
                              "train a partial-key model with base \"none\"")
@@ -289,7 +310,8 @@ class GanConfig:
         return self.dna_width > 0
 
     def to_json(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields as JSON values; those of :data:`LATER_DEFAULTS` only where they differ from the default."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if LATER_DEFAULTS.get(k, object()) != v}
 
     @classmethod
     def from_json(cls, data: dict) -> GanConfig:

@@ -8,11 +8,15 @@ style vector joined to every latent step (section 3.5.1).
   each clip (at least one), and the clip each came from. Training draws from the
   bank of its training clips; a model folder keeps that bank, so ``complete``
   without a DNA file draws its poses from it by the seed.
+* :func:`key_dna`: the default DNA of a model trained with its windows' own DNA
+  (``GanConfig.dna_source`` ``"own"``): the keys' own poses, since a DNA drawn
+  from another clip would steer the in-betweens towards that clip's motion.
 * :func:`dna_count`: Appendix D's number of poses for a key layout: one per 3 s
   of each gap between keys (``floor(gap / 3 s)`` summed; at least one).
 * :func:`draw_dna`: ``count`` poses of one random clip of a bank (the stand-in
-  for the paper's "motion class": a clip is one kind of motion); drawn without
-  repetition while the clip has enough, with repetition beyond.
+  for the paper's "motion class": a clip is one kind of motion), or of a given
+  clip (an in-clip window's own, ``GanConfig.dna_source`` ``"own"``); drawn
+  without repetition while the clip has enough, with repetition beyond.
 """
 
 from __future__ import annotations
@@ -66,12 +70,27 @@ def dna_count(key_frames, fps: float, seconds: float = 3.0) -> int:
     return max(1, int(np.sum(gaps // max(round(seconds * fps), 1))))
 
 
-def draw_dna(bank: DnaBank, rng: np.random.Generator, count: int) -> np.ndarray:
-    """``(count, J - 1, 3)`` poses of one random clip of ``bank`` (see the module docstring)."""
+def key_dna(key_quats: np.ndarray, offsets: np.ndarray, parents, count: int) -> np.ndarray:
+    """``([B,] P, J - 1, 3)`` float32: root-free poses of keys ``key_quats ([B,] K, J, 4)`` (local rotations; ``offsets``
+    in metres), the ``P = min(count, K)`` most representative of them (:func:`~keyfill.learn.representative.pick_frames`
+    over the keys in order), per window when batched."""
+    q = np.asarray(key_quats, dtype=np.float64)
+    if q.ndim == 4:
+        return np.stack([key_dna(w, offsets, parents, count) for w in q])
+    picked = pick_frames(rotation_change(q), count)
+    return root_free_poses(q[picked], offsets, parents).astype(np.float32)
+
+
+def draw_dna(bank: DnaBank, rng: np.random.Generator, count: int, clip: int | None = None) -> np.ndarray:
+    """``(count, J - 1, 3)`` poses of one random clip of ``bank``, or of clip ``clip`` (see the module docstring)."""
     if len(bank) == 0:
         raise DataError("the Motion DNA bank holds no poses")
-    owners = np.unique(bank.clips)
-    rows = np.flatnonzero(bank.clips == owners[int(rng.integers(len(owners)))])
+    if clip is None:
+        owners = np.unique(bank.clips)
+        clip = owners[int(rng.integers(len(owners)))]
+    rows = np.flatnonzero(bank.clips == clip)
+    if len(rows) == 0:
+        raise DataError(f"the Motion DNA bank holds no pose of clip {clip}")
     pick = rng.choice(rows, size=count, replace=len(rows) < count)
     return bank.poses[pick]
 

@@ -57,7 +57,7 @@ from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.learn import installed_models
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
-from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna
+from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna, key_dna
 from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
 from keyfill.learn.gan.spline_base import spline_root, spline_values
@@ -93,7 +93,7 @@ def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> d
     w = cfg.widths
     return {
         "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim, cfg.dna_width,
-                               cfg.residual_form, cfg.upsampling, cfg.output_init),
+                               cfg.residual_form, cfg.upsampling, cfg.output_init, cfg.dna_norm),
         "discriminator": Discriminator(3 * (J - 1), w["discriminator"], cfg.residual_form),
         "path": PathPredictor(3 * (J - 1), w["path"]),
     }
@@ -336,7 +336,7 @@ def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None)
 
 
 def dna_poses(model: GanModel, source=None, frames=None, count: int | None = None, key_frames=None,
-              seed: int = 0) -> np.ndarray:
+              seed: int = 0, key_quats=None) -> np.ndarray:
     """The Motion DNA for :func:`generate`: ``(P, J - 1, 3)`` root-free poses in metres.
 
     Args:
@@ -346,6 +346,9 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
         count: how many poses (None: Appendix D's count for ``key_frames``, one per 3 s of gap).
         key_frames: the keys, for the default count.
         seed: the draw from the bank (``numpy.random.default_rng(seed)``).
+        key_quats: ``([B,] K, J, 4)`` the keys' rotations in the model's hierarchy: without a ``source``, a
+            model trained on its windows' own DNA (``dna_source`` ``"own"``) takes its DNA from them
+            (:func:`~keyfill.learn.gan.dna.key_dna`) instead of the bank.
     """
     from keyfill.learn.corpus import model_hierarchy
     from keyfill.learn.representative import pick_frames, root_free_poses, rotation_change
@@ -356,6 +359,9 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
     if count is None:
         count = dna_count(key_frames, model.fps, cfg.dna_seconds) if key_frames is not None else 1
     check_count("count", count, cfg.max_frames)  # at most a pose per frame the model fills at once
+    m = model.skeleton.meters_per_unit
+    if source is None and key_quats is not None and cfg.dna_source == "own":
+        return key_dna(key_quats, model.skeleton.offsets * m, model.skeleton.parents, int(count))
     if source is None:
         return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
     q, _ = model_hierarchy(model.skeleton, model.folded, source.skeleton, source.rotations, source.positions,
@@ -366,7 +372,6 @@ def dna_poses(model: GanModel, source=None, frames=None, count: int | None = Non
     bad = frames[(frames < 0) | (frames >= len(q))]
     if len(bad):
         raise UsageError(f"DNA frame {int(bad[0])} is outside the motion (frames 0-{len(q) - 1})")
-    m = model.skeleton.meters_per_unit
     return root_free_poses(q[frames], model.skeleton.offsets * m, model.skeleton.parents).astype(np.float32)
 
 
@@ -427,11 +432,11 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
                              "with partial_keys (see docs/gan.md)")
         coords = keys.coordinate_mask(motion.num_joints)
     check_keys(model, k)
-    if model.config.dna and dna is None:
-        dna = dna_poses(model, key_frames=k, seed=seed)
     lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
     skel = motion.skeleton
     q, p = model_hierarchy(model.skeleton, model.folded, skel, lin_q, lin_p, int(k[0]), hint=TRAIN_HINT)
+    if model.config.dna and dna is None:
+        dna = dna_poses(model, key_frames=k, seed=seed, key_quats=q[k])
     if model.folded and coords is not None:  # the folded top joint is the hips: keyed where either of them is
         c = skel.children(0)[0]
         coords = coords.copy()
@@ -561,7 +566,8 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         poses[b], shift = centre_keys(poses[b], model.skeleton.up_axis)
         shifts.append(shift)
     k0, end = int(k[0]), int(k[-1])
-    dna = dna_poses(model, key_frames=k, seed=seed) if model.config.dna else None  # from the bank, as complete
+    dna = dna_poses(model, key_frames=k, seed=seed, key_quats=np.asarray(quats)[:, k]) if model.config.dna \
+        else None  # as complete: from the bank, or the keys' own poses
     gq, groot = generate(model, k - k0, poses, seed, dna=dna, key_quats=np.asarray(quats)[:, k])
     out_q, out_r = [], []
     undriven = _undriven(model, skeleton.num_joints)

@@ -95,10 +95,14 @@ class DnaEncoder(nn.Module):
         channels: ``3 (J - 1)`` values of a root-free pose.
         width: hidden width (Table 5: 1024).
         style_dim: channels of the vector ``w``.
+        normalise: layer-normalise ``w`` over its channels (``GanConfig.dna_norm``: zero mean, unit
+            variance per sequence, no learned scale), so it reaches the decoder at the size of the
+            encoder's features.
     """
 
-    def __init__(self, channels: int, width: int, style_dim: int):
+    def __init__(self, channels: int, width: int, style_dim: int, normalise: bool = False):
         super().__init__()
+        self.normalise = normalise
         self.conv1 = nn.Conv1d(channels, width, 1, bias=False)
         self.scale1, self.bias1 = nn.Parameter(torch.ones(width)), nn.Parameter(torch.zeros(width))
         self.act = nn.PReLU(width)
@@ -115,7 +119,8 @@ class DnaEncoder(nn.Module):
         else:
             m = valid.to(h.dtype)[:, None]
             pooled = (h * m).sum(-1) / m.sum(-1).clamp_min(1)
-        return self.linear(pooled)
+        w = self.linear(pooled)
+        return nn.functional.layer_norm(w, w.shape[-1:]) if self.normalise else w
 
 
 class Generator(nn.Module):
@@ -128,18 +133,19 @@ class Generator(nn.Module):
         noise_dim, style_dim: channels joined to every latent step.
         dna_width: hidden width of a :class:`DnaEncoder` (``self.dna``) making the style
             vector from representative poses; 0: none (the style is given directly).
+        dna_norm: the encoder's ``normalise``.
         form, upsampling: of the residual layers (:class:`~keyfill.learn.gan.layers.ResidualConv`).
         output_init: ``"default"`` or ``"small"`` (``GanConfig.output_init``).
     """
 
     def __init__(self, num_joints: int, rcfk: RCFK, encoder, decoder, noise_dim: int = 0, style_dim: int = 0,
                  dna_width: int = 0, form: str = "printed", upsampling: str = "transposed",
-                 output_init: str = "default"):
+                 output_init: str = "default", dna_norm: bool = False):
         super().__init__()
         self.num_joints = num_joints
         self.noise_dim, self.style_dim = noise_dim, style_dim
         if dna_width:
-            self.dna = DnaEncoder(3 * (num_joints - 1), dna_width, style_dim)
+            self.dna = DnaEncoder(3 * (num_joints - 1), dna_width, style_dim, dna_norm)
         self.encoder = _stack(6 * num_joints, encoder, ENCODER, ENCODER_RATIOS, form)
         self.decoder = _stack(encoder[-1] + noise_dim + style_dim, decoder, DECODER, DECODER_RATIOS, form, upsampling)
         k, s, p = DECODER_OUT

@@ -59,6 +59,8 @@ class ClipPool:
         groups: ``(C,)`` content group per clip (draws balanced by content), or None (every clip alike).
         quats: per clip ``(T_c, J, 4)`` float32 local rotations (for a spline base,
             :mod:`keyfill.learn.gan.spline_base`), or empty when not needed.
+        parents: ``(J,)`` the skeleton's parent indices (-1 at the root; for stretched sketch keys,
+            ``GanConfig.sketch_stretch``), or None.
     """
 
     relative: tuple[np.ndarray, ...]
@@ -69,6 +71,7 @@ class ClipPool:
     foot_joints: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     groups: np.ndarray | None = None
     quats: tuple[np.ndarray, ...] = ()
+    parents: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.root)
@@ -109,8 +112,9 @@ def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False)
     quats = tuple(np.asarray(corpus.quats[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float32)
                   for i in clips) if rotations else ()
     if not labels:
-        return ClipPool(rel, root, float(corpus.fps), s.up_axis, quats=quats)
+        return ClipPool(rel, root, float(corpus.fps), s.up_axis, quats=quats, parents=s.parents)
     from keyfill.learn.gan.labels import clip_contacts, content_groups
 
     contacts, joints = clip_contacts(corpus, clips)
-    return ClipPool(rel, root, float(corpus.fps), s.up_axis, contacts, joints, content_groups(corpus, clips), quats)
+    return ClipPool(rel, root, float(corpus.fps), s.up_axis, contacts, joints, content_groups(corpus, clips), quats,
+                    s.parents)

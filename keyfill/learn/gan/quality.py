@@ -11,7 +11,10 @@ networks' output before any exact-key correction:
 * ``key_errors`` (cm) per kind of key (the networks given the sequence's DNA, as ``complete`` always
   gives a DNA model one): ``full``, ``root`` (root positions only,
   5.1), ``half`` (each half of the body with the root, 5.2), ``plane`` (2-D
-  joint positions in the XY, XZ and YZ view planes, 5.3): the mean over keys and
+  joint positions in the XY, XZ and YZ view planes, 5.3), ``sketch`` (the same
+  planes, the keys drawn as a casual stick figure: every bone of every key
+  scaled by ``exp(U(-0.3, 0.3))``, :func:`~keyfill.learn.gan.sampling.sketch_poses`;
+  the error is to the true, unstretched pose): the mean over keys and
   keyed joints of the distance over the given coordinates, for the joints
   (root-relative) and for the root (after the path is moved onto the given key
   roots); the partial kinds need a ``partial_keys`` model;
@@ -36,11 +39,13 @@ from keyfill.learn.gan.dna import build_bank, dna_count, draw_dna
 from keyfill.learn.gan.features import centre_keys
 from keyfill.learn.gan.model import GanModel, generate
 from keyfill.learn.gan.poses import clip_pool, relative_positions
-from keyfill.learn.gan.sampling import body_halves, sample_keys
+from keyfill.learn.gan.sampling import body_halves, sample_keys, sketch_poses
 from keyfill.learn.representative import root_free_poses
 
 #: how many DNAs and seeds the variety figure compares
 VARIETY = 4
+#: the bone stretch of the ``sketch`` keys (each bone of each key scaled by ``exp(U(-s, s))``)
+SKETCH_STRETCH = 0.3
 
 
 def _key_kinds(model: GanModel, K: int) -> dict:
@@ -54,15 +59,20 @@ def _key_kinds(model: GanModel, K: int) -> dict:
         kinds["root"] = [root]
         kinds["half"] = [full & h[None, :, None] for h in body_halves(model.skeleton)]
         kinds["plane"] = [full & (np.arange(3) != a) for a in range(3)]
+        kinds["sketch"] = kinds["plane"]
     return kinds
 
 
-def _key_error(model: GanModel, frames, poses, coords, seed: int, dna=None, key_quats=None) -> tuple[float, float]:
+def _key_error(model: GanModel, frames, poses, coords, seed: int, dna=None, key_quats=None,
+               shown=None) -> tuple[float, float]:
     """``(joint error, root error)`` in metres of one generation through partial keys ``coords`` (with the Motion
-    DNA ``dna`` a DNA model is given, as ``complete`` always gives one; ``key_quats`` for a model with a base)."""
+    DNA ``dna`` a DNA model is given, as ``complete`` always gives one; ``key_quats`` for a model with a base).
+    ``shown``: the key poses the network is given instead of ``poses`` (a sketch of them); the error is to
+    ``poses``."""
     m = model.skeleton.meters_per_unit
     centred, _ = centre_keys(poses, model.skeleton.up_axis, coords)
-    q, root = generate(model, frames, centred, seed, dna=dna, coords=coords, key_quats=key_quats)
+    given = centred if shown is None else centre_keys(shown, model.skeleton.up_axis, coords)[0]
+    q, root = generate(model, frames, given, seed, dna=dna, coords=coords, key_quats=key_quats)
     rel = relative_positions(q[frames], model.skeleton.offsets * m, model.skeleton.parents)
     d = (rel[:, 1:] - centred[:, 1:]) ** 2 * coords[:, 1:]
     given = coords[:, 1:].any(-1)
@@ -142,9 +152,12 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
         k = lay.frames
         count = dna_count(k, pool.fps, cfg.dna_seconds)
         dnas = [draw_dna(bank, rng, count) for _ in range(VARIETY)] if cfg.dna else [None]
+        sketch = np.random.default_rng([seed, i])  # its own stream: the other figures stay as they were
         for kind, masks in _key_kinds(model, len(k)).items():
             for coords in masks:
-                key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i, dnas[0], lay.quats))
+                shown = sketch_poses(sketch, lay.poses, par, SKETCH_STRETCH) if kind == "sketch" else None
+                key_err.setdefault(kind, []).append(_key_error(model, k, lay.poses, coords, i, dnas[0], lay.quats,
+                                                               shown))
         between = np.setdiff1d(np.arange(k[-1] + 1), k)
 
         def world(q, root, between=between):

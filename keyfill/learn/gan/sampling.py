@@ -207,6 +207,44 @@ def partial_coords(rng: np.random.Generator, num_keys: int, num_joints: int, hal
     return coords
 
 
+#: the share of 2-D-keyed training sequences whose keys come from a stretched stick figure (``sketch_stretch``)
+SKETCH_SHARE = 0.5
+
+
+def sketch_poses(rng: np.random.Generator, poses: np.ndarray, parents, stretch: float) -> np.ndarray:
+    """Key poses ``(K, J, 3)`` (row 0 the root's position, rows 1.. root-relative, metres) as a casually drawn
+    stick figure: every bone of every key scaled by ``exp(U(-stretch, stretch))``, from the root outwards (the
+    root's position is kept; section 5.3's augmented 2-D poses)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    rel = poses.copy()
+    rel[:, 0] = 0.0
+    scale = np.exp(rng.uniform(-stretch, stretch, size=poses.shape[:2]))
+    out = rel.copy()
+    for j in range(1, poses.shape[1]):
+        p = int(parents[j])
+        out[:, j] = out[:, p] + scale[:, j, None] * (rel[:, j] - rel[:, p])
+    out[:, 0] = poses[:, 0]
+    return out
+
+
+def _partial_input(rng: np.random.Generator, pool: ClipPool, cfg, num_frames: int, key_frames, poses,
+                   coords) -> dict:
+    """``dense`` (the sparse format) of partial keys ``poses (K, J, 3)`` given where ``coords (K, J, 3)`` says, and
+    with ``cfg.sketch_stretch`` also ``key_truth (3 J, N)``: the true key positions where ``dense`` holds a
+    stretched sketch (:func:`sketch_poses`; for :data:`SKETCH_SHARE` of the 2-D-keyed sequences), which the
+    key losses then take."""
+    shown = poses
+    plane = (~coords).all(axis=(0, 1)).any()  # one axis given by no joint: keys in a view plane
+    if cfg.sketch_stretch and plane and rng.random() < SKETCH_SHARE:
+        shown = sketch_poses(rng, poses, pool.parents, cfg.sketch_stretch)
+    out = {"dense": sparse_input(num_frames, key_frames, shown, coords)}
+    if cfg.sketch_stretch:
+        J = poses.shape[1]
+        out["key_truth"] = out["dense"][: 3 * J] if shown is poses else \
+            sparse_input(num_frames, key_frames, poses, coords)[: 3 * J]
+    return out
+
+
 def _spline_arrays(ranges, base: str, num_frames: int, key_frames, key_quats, key_roots) -> dict:
     """``base (6 + 3 D, N)`` and ``spline_root (N, 3)``: the interpolation ``base`` (``GanConfig.base``) of the keys."""
     return {"base": spline_values(ranges, num_frames, key_frames, key_quats, base),
@@ -234,7 +272,7 @@ def training_sequence(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), 
     if cfg.partial_keys:
         coords = partial_coords(rng, len(lay.frames), lay.poses.shape[1], halves, cfg.partial_fraction)
         poses, _ = centre_keys(lay.poses, pool.up_axis, coords)
-        out["dense"] = sparse_input(N, lay.frames, poses, coords)
+        out.update(_partial_input(rng, pool, cfg, N, lay.frames, poses, coords))
     else:
         out["dense"] = dense_input(N, lay.frames, lay.poses, cfg.mask_scale, cfg.root_input, pool.up_axis)
     if ranges is not None:
@@ -313,15 +351,16 @@ def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=N
     contact = np.zeros((W, n_feet), dtype=bool)
     if n_feet:
         contact[:L] = pool.contacts[c][s : s + L]
-    dense = sparse_input(W, frames, truth[frames], coords) if coords is not None else \
-        dense_input(W, frames, truth[frames], cfg.mask_scale, cfg.root_input, pool.up_axis)
-    out = {"dense": dense, "key_mask": key_mask, "key_root": key_roots(W, frames, truth[frames]), "valid": np.arange(W) < L,
-           "truth": truth, "contact": contact}
+    out = _partial_input(rng, pool, cfg, W, frames, truth[frames], coords) if coords is not None else \
+        {"dense": dense_input(W, frames, truth[frames], cfg.mask_scale, cfg.root_input, pool.up_axis)}
+    out.update({"key_mask": key_mask, "key_root": key_roots(W, frames, truth[frames]), "valid": np.arange(W) < L,
+                "truth": truth, "contact": contact})
     if ranges is not None:
         key_quats = turned_rotations(pool.quats[c][s + frames], heading, pool.up_axis)
         out.update(_spline_arrays(ranges, cfg.base, W, frames, key_quats, truth[frames, 0]))
     if bank is not None:
-        out["dna"] = draw_dna(bank, rng, dna_count(frames, pool.fps, cfg.dna_seconds))
+        out["dna"] = draw_dna(bank, rng, dna_count(frames, pool.fps, cfg.dna_seconds),
+                              c if cfg.dna_source == "own" else None)
     return out
 
 

@@ -334,7 +334,8 @@ class GanTask(TrainingTask):
         bank = self.train_bank if pool is self.train_pool else self.val_bank
         wins = [clip_window(pool, rng, cfg, self.halves, bank, self.spline_ranges) for _ in range(count)]
         arrays = {k: np.stack([w[k] for w in wins]) for k in ("dense", "key_mask", "key_root", "valid", "truth",
-                                                               "contact", "base", "spline_root") if k in wins[0]}
+                                                               "contact", "base", "spline_root", "key_truth")
+                  if k in wins[0]}
         arrays["noise"] = rng.standard_normal((count, cfg.noise_dim, cfg.window_frames // 64)).astype(np.float32)
         if bank is not None:
             arrays["dna"], arrays["dna_valid"] = pad_dna([w["dna"] for w in wins])
@@ -345,8 +346,8 @@ class GanTask(TrainingTask):
         cfg = self.cfg
         bank = self.train_bank if pool is self.train_pool else self.val_bank
         seqs = [training_sequence(pool, rng, cfg, self.halves, bank, self.spline_ranges) for _ in range(count)]
-        arrays = {k: np.stack([q[k] for q in seqs]) for k in ("dense", "key_mask", "key_root", "base", "spline_root")
-                  if k in seqs[0]}
+        arrays = {k: np.stack([q[k] for q in seqs]) for k in ("dense", "key_mask", "key_root", "base", "spline_root",
+                                                              "key_truth") if k in seqs[0]}
         arrays["noise"] = rng.standard_normal((count, cfg.noise_dim, cfg.sequence_frames // 64)).astype(np.float32)
         if bank is not None:
             arrays["dna"], arrays["dna_valid"] = pad_dna([q["dna"] for q in seqs])
@@ -387,18 +388,20 @@ class GanTask(TrainingTask):
             root_path(self._frozen_path(t["dense"].device)(joint_channels(rel)))
         return v, quats, rel, root
 
-    def key_targets(self, dense, key_mask, key_root=None):
+    def key_targets(self, dense, key_mask, key_root=None, key_truth=None):
         """``(key poses (B, T, J, 3), their root-relative part, given coordinates (B, T, J, 3) bool)`` of the input.
 
         The dense format gives every coordinate at the keys; the sparse one (partial keys) those its mask marks.
         ``key_root (B, T, 3)`` (the batches' ``key_root``) replaces the root row: the dense input's root
-        channels are no root positions with ``root_input="key-relative"``.
+        channels are no root positions with ``root_input="key-relative"``. ``key_truth (B, 3 J, T)`` (the
+        batches' with ``sketch_stretch``) replaces the input's positions: the true poses of stretched sketches.
         """
         import torch
 
         B, _, N = dense.shape
         J = self.skeleton.num_joints
-        keypose = dense[:, : 3 * J].transpose(1, 2).reshape(B, N, J, 3)  # each frame's nearest key; the key at keys
+        shown = dense[:, : 3 * J] if key_truth is None else key_truth
+        keypose = shown.transpose(1, 2).reshape(B, N, J, 3)  # each frame's nearest key; the key at keys
         if key_root is not None and not self.cfg.partial_keys:
             keypose = torch.cat([key_root[:, :, None], keypose[:, :, 1:]], dim=2)
         key_rel = torch.cat([torch.zeros_like(keypose[:, :, :1]), keypose[:, :, 1:]], dim=2)
@@ -410,10 +413,10 @@ class GanTask(TrainingTask):
 
     def inputs(self, a: dict, dev) -> dict:
         """The generator's tensors of a batch's arrays: ``dense``, ``key_mask``, ``key_root``, ``noise``, ``dna``,
-        ``dna_valid``, ``base``, ``spline_root`` (None where the batch has none or the config uses none)."""
+        ``dna_valid``, ``base``, ``spline_root``, ``key_truth`` (None where the batch has none or the config uses none)."""
         import torch
 
-        names = ("dense", "key_mask", "key_root", "noise", "dna", "dna_valid", "base", "spline_root")
+        names = ("dense", "key_mask", "key_root", "noise", "dna", "dna_valid", "base", "spline_root", "key_truth")
         t = {k: torch.as_tensor(a[k], device=dev) if k in a else None for k in names}
         if not self.cfg.noise_dim:
             t["noise"] = None
@@ -432,7 +435,7 @@ class GanTask(TrainingTask):
         a = batch.arrays
         t = self.inputs(a, dev)
         key_mask, dna, dna_valid = t["key_mask"], t["dna"], t["dna_valid"]
-        keypose, key_rel, coords = self.key_targets(t["dense"], key_mask, t["key_root"])
+        keypose, key_rel, coords = self.key_targets(t["dense"], key_mask, t["key_root"], t["key_truth"])
 
         clear_statistics(G)
         _, quats, rel, root = self.generator_outputs(G, t)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import os
 
 from keyfill.errors import UsageError
@@ -12,14 +11,23 @@ from keyfill.learn.gan.task import STAGES, GanTask
 from keyfill.learn.training import Option, TrainingSpec
 
 
-def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int = 0) -> GanConfig:
+def read_config(path: str | os.PathLike | None, preset: str = "cpu", seed: int = 0, dna: bool = False,
+                partial_keys: bool = False) -> GanConfig:
     """The :class:`GanConfig` of preset ``preset`` with the settings of the JSON file ``path`` (if any) and ``seed``.
 
     The file is one object of :class:`GanConfig` fields; its ``"preset"`` (without
-    ``"widths"``) picks the widths of that preset instead.
+    ``"widths"``) picks the widths of that preset instead. ``dna`` (``--dna``) gives a config without a
+    Motion DNA encoder the preset's (``DNA_WIDTHS``); ``partial_keys`` (``--partial-keys``) turns partial keys
+    on, with ``max_gap`` at most the sparse format's receptive field. Both apply before the settings are
+    checked, so a file may hold settings that need them (``dna_norm``, ``sketch_stretch``).
     """
     data = {} if path is None else read_json_object(path)
     preset = data.pop("preset", preset) if "widths" not in data else data.get("preset", "custom")
+    if dna and not data.get("dna_width"):
+        width = DNA_WIDTHS.get(preset, DNA_WIDTHS["cpu"])
+        data.update(style_dim=data.get("style_dim") or width, dna_width=width)
+    if partial_keys and not data.get("partial_keys"):
+        data.update(partial_keys=True, max_gap=min(data.get("max_gap", GanConfig.max_gap), SPARSE_RECEPTIVE_FIELD))
     try:
         return GanConfig.from_preset(preset, **data, seed=seed) if "widths" not in data else \
             GanConfig.from_json({**data, "seed": seed})
@@ -31,12 +39,7 @@ def _make_task(common, options: dict, progress) -> GanTask:
     """The task of ``keyfill train gan``: the BVH clips in DATA, chosen by --include / --exclude."""
     from keyfill.learn.corpus import load_corpus
 
-    cfg = read_config(options["config"], options["preset"], common.seed)
-    if options["dna"] and not cfg.dna:
-        width = DNA_WIDTHS.get(cfg.preset, DNA_WIDTHS["cpu"])
-        cfg = dataclasses.replace(cfg, style_dim=cfg.style_dim or width, dna_width=width)
-    if options["partial_keys"] and not cfg.partial_keys:
-        cfg = dataclasses.replace(cfg, partial_keys=True, max_gap=min(cfg.max_gap, SPARSE_RECEPTIVE_FIELD))
+    cfg = read_config(options["config"], options["preset"], common.seed, options["dna"], options["partial_keys"])
     corpus = load_corpus(common.data, fold=options["fold_root"],
                          progress=lambda f: progress(f, desc="reading clips", unit="file"))
     corpus = corpus.select(options["include"], options["exclude"])

@@ -56,7 +56,7 @@ def validate_generator(task) -> dict:
             t = task.inputs(seq, dev)
             key_mask, dna, dna_valid = t["key_mask"], t["dna"], t["dna_valid"]
             _, quats, rel, root = task.generator_outputs(G, t)
-            keypose, _, coords = task.key_targets(t["dense"], key_mask, t["key_root"])
+            keypose, _, coords = task.key_targets(t["dense"], key_mask, t["key_root"], t["key_truth"])
             k = torch.nonzero(key_mask[0]).flatten()
             c = coords[0, k].cpu().numpy()
             d = (rel[0, k] - keypose[0, k]).cpu().numpy()

@@ -8,12 +8,12 @@ trained with ``--dna --partial-keys`` and the ``normal`` style held out::
 
 On the ``normal`` clips (:func:`keyfill.learn.gan.quality.quality_report`):
 the DNA errors of Eqs. 11-12 in cm (the paper: 8.4 and 6.5 cm), keyframe
-errors for whole, root-only, half-body and 2-D keys, and the variety (mean
+errors for whole, root-only, half-body, 2-D and sketched 2-D keys, and the variety (mean
 pairwise joint distance of the in-betweens) for 4 DNAs through the same keys
 against 4 noise seeds. Without the corpus the script says ``skipped`` and exits 0.
 The run is recorded in ``benchmarks/results/gan_dna-<model folder>.json`` (``results.py``; not
 with ``--no-record``): the quality report (``sequences``, ``frames``, ``clips``, ``key_errors``,
-``variety_cm``, ``dna_error_1_cm``, ``dna_error_2_cm``), ``model`` and ``paper``.
+``variety_cm``, ``dna_pull_cm``, ``dna_error_1_cm``, ``dna_error_2_cm``), ``model`` and ``paper``.
 """
 
 from __future__ import annotations
@@ -83,6 +83,9 @@ def main(argv=None) -> int:
         print(f"  {kind:<15} {cm(e['joints_cm']):>6} {cm(e['root_cm']):>6}")
     v = report["variety_cm"]
     print(f"variety (cm): 4 DNAs {cm(v.get('dnas'))}, 4 noise seeds {cm(v['seeds'])}")
+    if "dna_pull_cm" in report:
+        pull = report["dna_pull_cm"]
+        print(f"DNA pull (cm): Eq. 11 error to the DNA given {cm(pull['own'])}, to another {cm(pull['other'])}")
     results.print_goals(record)
     return 0
 

@@ -332,6 +332,10 @@ def _sampled_rows(s: dict, paper: dict) -> list[list[str]]:
     v = s["variety_cm"]
     rows.append(["variety through the same keys: 4 noise seeds / 4 DNAs (cm)",
                  f"{num(v['seeds'], 1)} / {num(v.get('dnas'), 2)}", ""])
+    if "dna_pull_cm" in s:  # records from before the figure existed have none
+        pull = s["dna_pull_cm"]
+        rows.append(["DNA pull: Eq. 11 error to the DNA given / to another DNA (cm)",
+                     f"{num(pull['own'], 2)} / {num(pull['other'], 2)}", ""])
     return rows
 
 

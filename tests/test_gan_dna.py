@@ -224,6 +224,7 @@ def test_quality_report_of_a_tiny_model(models):
     # a sketch's keys are the plane keys' with stretched bones, scored against the true poses
     assert report["key_errors"]["sketch"]["joints_cm"] != report["key_errors"]["plane"]["joints_cm"]
     assert report["dna_error_1_cm"] > 0 and report["variety_cm"]["dnas"] > 0 and report["variety_cm"]["seeds"] > 0
+    assert report["dna_pull_cm"]["own"] > 0 and report["dna_pull_cm"]["other"] > 0
 
 
 def test_benchmark_windows_of_a_dna_model_draw_their_dna_from_the_bank(models, motion):

@@ -21,7 +21,9 @@ networks' output before any exact-key correction:
 * ``variety`` (cm): through the keys of each sequence, the mean pairwise
   distance of the in-betweens' world joint positions (frames between keys) for
   4 DNAs of 4 held-out clips with one noise seed, and for 4 noise seeds with one
-  DNA (the paper's Fig. 10 in numbers).
+  DNA (the paper's Fig. 10 in numbers);
+* ``dna_pull_cm``: whether the DNA pulls: the Eq. 11 error of each of those 4 in-betweens to the DNA it was
+  given (``own``) and to the next of the 4 DNAs (``other``); ``own`` below ``other`` when it steers.
 
 :func:`path_errors` scores the global path predictor alone (Table 2): on each
 held-out clip, the root displacement it predicts over ``n`` frames from the
@@ -147,6 +149,7 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
     dna_err: dict = {1: [], 2: []}
     key_err: dict = {}
     variety: dict = {"dna": [], "seed": []}
+    pull: dict = {"own": [], "other": []}
     for i in range(sequences):
         lay = sample_keys(pool, rng, N, cfg.min_gap, cfg.max_gap, cfg.short_gap_seconds, cfg.jump_speed)
         k = lay.frames
@@ -165,16 +168,22 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
 
         if cfg.dna:
             outs = [generate(model, k, lay.poses, i, dna=d, key_quats=lay.quats) for d in dnas]
-            for q, _ in outs[:1]:
-                key_mask = np.zeros(len(q), dtype=bool)
-                key_mask[k] = True
-                e = dna_losses(torch.as_tensor(root_free_poses(q, off, par))[None],
-                               torch.as_tensor(dnas[0], dtype=torch.float64)[None],
-                               torch.ones(1, len(dnas[0]), dtype=torch.bool), torch.as_tensor(key_mask)[None],
-                               min_frames, squared=False)
-                dna_err[1].append(float(e[0]))
-                if np.any(np.diff(k) >= min_frames):  # Eq. 12 has terms only in gaps of 3 s or more
-                    dna_err[2].append(float(e[1]))
+            key_mask = np.zeros(len(outs[0][0]), dtype=bool)
+            key_mask[k] = True
+
+            def errors(q, dna, key_mask=key_mask):  # Eqs. 11-12 as errors (m) of motion q to the poses dna
+                return dna_losses(torch.as_tensor(root_free_poses(q, off, par))[None],
+                                  torch.as_tensor(dna, dtype=torch.float64)[None],
+                                  torch.ones(1, len(dna), dtype=torch.bool), torch.as_tensor(key_mask)[None],
+                                  min_frames, squared=False)
+
+            e = errors(outs[0][0], dnas[0])
+            dna_err[1].append(float(e[0]))
+            if np.any(np.diff(k) >= min_frames):  # Eq. 12 has terms only in gaps of 3 s or more
+                dna_err[2].append(float(e[1]))
+            for j, (q, _) in enumerate(outs):  # the pull: closer to the DNA it was given than to another?
+                pull["own"].append(float(errors(q, dnas[j])[0]))
+                pull["other"].append(float(errors(q, dnas[(j + 1) % VARIETY])[0]))
             variety["dna"].append(_pairwise([world(q, r) for q, r in outs]))
         seeds = [generate(model, k, lay.poses, i * VARIETY + s, dna=dnas[0], key_quats=lay.quats)
                  for s in range(VARIETY)]
@@ -187,4 +196,5 @@ def quality_report(model: GanModel, corpus, clips, sequences: int = 20, frames: 
         report["dna_error_1_cm"] = _cm(dna_err[1])
         report["dna_error_2_cm"] = _cm(dna_err[2])
         report["variety_cm"]["dnas"] = _cm(variety["dna"])
+        report["dna_pull_cm"] = {"own": _cm(pull["own"]), "other": _cm(pull["other"])}
     return report

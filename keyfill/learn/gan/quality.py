@@ -73,8 +73,8 @@ def _key_error(model: GanModel, frames, poses, coords, seed: int, dna=None, key_
     ``poses``."""
     m = model.skeleton.meters_per_unit
     centred, _ = centre_keys(poses, model.skeleton.up_axis, coords)
-    given = centred if shown is None else centre_keys(shown, model.skeleton.up_axis, coords)[0]
-    q, root = generate(model, frames, given, seed, dna=dna, coords=coords, key_quats=key_quats)
+    keys_in = centred if shown is None else centre_keys(shown, model.skeleton.up_axis, coords)[0]
+    q, root = generate(model, frames, keys_in, seed, dna=dna, coords=coords, key_quats=key_quats)
     rel = relative_positions(q[frames], model.skeleton.offsets * m, model.skeleton.parents)
     d = (rel[:, 1:] - centred[:, 1:]) ** 2 * coords[:, 1:]
     given = coords[:, 1:].any(-1)

@@ -48,7 +48,12 @@ share of the sequences key only part of each pose, the same part at every key,
 in equal shares: the root's position (a path of spots, section 5.1), one half
 of the body with the root (5.2; :func:`body_halves`), or every joint's
 position in one of the three view planes XY, XZ, YZ (5.3; the sequences are at
-random headings, so a plane is a camera at a random azimuth).
+random headings, so a plane is a camera at a random azimuth). With ``sketch_stretch``, half the 2-D-keyed
+sequences are given a stick figure with stretched bones (:func:`sketch_poses`) and carry ``key_truth``,
+the true key positions for the key losses.
+
+**Motion DNA** (a ``bank``): a sequence's DNA is drawn from one random clip of the bank; an in-clip
+window's from its own clip with ``dna_source`` ``"own"``.
 
 **Path predictor batches** (:func:`clip_batch`) are whole clips (crops of at
 most ``max_frames`` for long ones), turned to random headings and padded at

@@ -288,7 +288,7 @@ class GanConfig:
         if self.sketch_stretch and not self.partial_keys:
             raise UsageError("sketch_stretch stretches the 2-D keys of partial-key training; it needs partial_keys")
         if (self.dna_norm or self.dna_source != "any") and not self.dna:
-            raise UsageError("dna_norm and dna_source need a Motion DNA encoder (dna_width > 0, --dna)")
+            raise UsageError("dna_norm and dna_source need a Motion DNA encoder (dna_width > 0)")
         if self.base != "none" and self.partial_keys:
             raise UsageError(f"base {self.base!r} interpolates the keys' rotations, which partial keys do not give; "
                              "train a partial-key model with base \"none\"")

@@ -45,6 +45,7 @@ import numpy as np
 from keyfill import interpolate
 from keyfill.errors import DataError, ModelError, UsageError
 from keyfill.files import read_json_object
+from keyfill.learn.augment import perturb_posture, posture_joints, retime
 from keyfill.learn.corpus import Corpus, find_mirror
 from keyfill.learn.modelfile import load_state, torch_device
 from keyfill.learn.protocols import lafan1
@@ -64,7 +65,7 @@ GAP_SAMPLING = ("uniform", "log-uniform")
 #: that value they are left out of what --resume compares and of the settings a model records, so an older
 #: checkpoint still resumes and an older run retrains to the same files (as
 #: :data:`keyfill.learn.transformer.model.LATER_ARCHITECTURE` for the model's settings)
-LATER_TRAINING = {"gap_sampling": "uniform", "relative_loss": False}
+LATER_TRAINING = {"gap_sampling": "uniform", "relative_loss": False, "posture_angle": 0.0, "slowest_tempo": 1.0}
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,10 @@ class TrainConfig:
         grad_clip: clip the gradient norm (0: off).
         mirror: mirror half of the windows left-right, where the skeleton allows
             (:func:`keyfill.learn.corpus.find_mirror`).
+        posture_angle: style augmentation: turn each torso joint of every window by a constant random
+            rotation of up to this many radians (:func:`keyfill.learn.augment.perturb_posture`; 0: off).
+        slowest_tempo: style augmentation: play half of the windows slower, at a speed from this to 1
+            (:func:`keyfill.learn.augment.retime`; 1: off).
     """
 
     epochs: int = 40
@@ -107,6 +112,8 @@ class TrainConfig:
     val_lengths: tuple = (5, 15, 30, 45)
     grad_clip: float = 1.0
     mirror: bool = True
+    posture_angle: float = 0.0
+    slowest_tempo: float = 1.0
 
     def recorded(self) -> dict:
         """The settings a model file and a checkpoint record: all but later ones at their old value."""
@@ -143,7 +150,8 @@ _TRAIN_NUMBERS = {
     "window": (True, 2 * lafan1.N_PAST + 1, 100_000, True), "window_offset": (True, 1, 100_000, True),
     "lr": (False, 0, 10, True), "warmup_epochs": (False, 0, 1e6, True), "decay_every": (False, 0, 1e6, False),
     "decay": (False, 0, 1, False), "weight_decay": (False, 0, 1e3, True), "val_fraction": (False, 0, 0.9, True),
-    "grad_clip": (False, 0, 1e6, True),
+    "grad_clip": (False, 0, 1e6, True), "posture_angle": (False, 0, math.pi, True),
+    "slowest_tempo": (False, 0, 1, False),
 }
 
 
@@ -326,6 +334,7 @@ class TransformerTask(TrainingTask):
             sample = np.random.default_rng([seed, 104729]).choice(len(corpus.quats), min(len(corpus.quats), 20000),
                                                                   replace=False)
             self.mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
+        self.posture = posture_joints(corpus.skeleton) if cfg.posture_angle > 0 else None
         self.contact_swap = None  # the columns of a mirrored window's contact labels
         if self.mirror is not None and self.data.contacts is not None:
             self.contact_swap = column_swap(self.mirror, self.data.contact_joints)
@@ -385,7 +394,8 @@ class TransformerTask(TrainingTask):
 
     def batches(self, epoch):
         """``(inputs, targets, gt_quats, gt_root, kinds[, contacts])`` of each step: one key layout per batch
-        (``contacts (B, T, n)`` bool: the true windows' foot contacts, with ``foot_weight``)."""
+        (``contacts (B, T, n)`` bool: the true windows' foot contacts, with ``foot_weight``); windows mirrored,
+        then retimed and their postures turned where the settings ask (:mod:`keyfill.learn.augment`)."""
         import torch
 
         cfg = self.cfg
@@ -395,16 +405,20 @@ class TransformerTask(TrainingTask):
         for step in range(self.steps(epoch)):
             _, T, keys = sample_layout(rng, cfg.layouts, cfg.window, cfg.gap_sampling)
             idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
-            wq, wr = self.data.quats[idx, :T], self.data.root[idx, :T]
-            wc = None if self.data.contacts is None else self.data.contacts[idx, :T]
+            wq, wr = self.data.quats[idx], self.data.root[idx]  # whole windows: retiming may reach past T
+            wc = None if self.data.contacts is None else self.data.contacts[idx]
             if self.mirror is not None:
                 flip = rng.random(len(idx)) < 0.5
                 wq, wr = wq.astype(np.float64), wr.astype(np.float64)
                 wq[flip], wr[flip] = self.mirror(wq[flip], wr[flip])
                 if wc is not None:
                     wc[flip] = wc[flip][..., self.contact_swap]
+            if cfg.slowest_tempo < 1:
+                wq, wr, wc = retime(rng, wq, wr, cfg.slowest_tempo, wc)
+            if self.posture is not None:
+                wq = perturb_posture(rng, wq, self.posture, cfg.posture_angle)
             batch = make_batch(self.model, wq, wr, keys, T)
-            yield batch if wc is None else batch + (torch.as_tensor(wc, device=self.model.device),)
+            yield batch if wc is None else batch + (torch.as_tensor(wc[:, :T], device=self.model.device),)
 
     def shard(self, batch, rank, world):
         return tuple(t[rank::world] for t in batch)

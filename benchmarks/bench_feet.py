@@ -8,6 +8,7 @@ gan, each raw (``feet="free"``) and locked (``feet="lock"``, :func:`keyfill.char
 
     .venv/bin/python benchmarks/bench_feet.py                  # --clips 8 per style set
     .venv/bin/python benchmarks/bench_feet.py --clips 2 --no-record
+    .venv/bin/python benchmarks/bench_feet.py --transformer data/models/bandai-transformer-3   # a candidate
 
 Per style set, method, layout and raw/locked: foot skating (cm/s, :func:`keyfill.learn.protocols.metrics.foot_skating`:
 foot and toe joints within 2.5 cm of the ground truth's floor), jitter (m/s^3, the third difference of world
@@ -82,8 +83,9 @@ def bone_error(out: Motion, truth: Motion) -> float:
     return float(np.abs(a - b).max())
 
 
-def scores(sets: dict[str, list[Motion]]) -> dict:
-    """``{set: {gap: {method: {raw|locked: {...}}, "real": {...}}}}`` (see the module docstring)."""
+def scores(sets: dict[str, list[Motion]], transformer: str | None = None) -> dict:
+    """``{set: {gap: {method: {raw|locked: {...}}, "real": {...}}}}`` (see the module docstring); ``transformer``:
+    a model folder to score instead of the shipped transformer."""
     gan = load_cached(load, DEFAULT_MODEL, "cpu")
     out = {}
     for name, clips in sets.items():
@@ -101,7 +103,8 @@ def scores(sets: dict[str, list[Motion]]) -> dict:
                     skate, jit, err, exact, bones, outside = [], [], [], True, 0.0, []
                     for m, w in zip(clips, real):
                         keys = Keys(np.unique(np.r_[np.arange(0, m.num_frames, gap), m.num_frames - 1]))
-                        filled = registry.complete(m, keys, method, CompleteOptions(feet=variant)).motion
+                        options = CompleteOptions(feet=variant, model=transformer if method == "transformer" else None)
+                        filled = registry.complete(m, keys, method, options).motion
                         p = world(filled)
                         skate.append(foot_skating(p[None], feet, sk.up_axis, fps, mpu, reference=w[None]))
                         jit.append(jitter(p[None], fps, mpu))
@@ -181,6 +184,8 @@ def goals(f: dict) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--clips", type=int, default=8, help="clips per style set (default 8)")
+    ap.add_argument("--transformer", metavar="MODEL", help="score this transformer model folder instead of the "
+                    "shipped one (a candidate; not recorded: the records describe the shipped models)")
     results.add_option(ap)
     args = ap.parse_args(argv)
     bench = results.Run()
@@ -189,9 +194,9 @@ def main(argv: list[str] | None = None) -> int:
     except DataError as e:
         print(f"skipped: {e}")
         return 0
-    figures = {"clips": {k: len(v) for k, v in sets.items()}, "seconds": SECONDS, "scores": scores(sets),
+    figures = {"clips": {k: len(v) for k, v in sets.items()}, "seconds": SECONDS, "scores": scores(sets, args.transformer),
                "speed": speed(next(iter(sets.values()))[0])}
-    record = bench.record("feet", figures, goals(figures), write=not args.no_record)
+    record = bench.record("feet", figures, goals(figures), write=not args.no_record and args.transformer is None)
     print(f"speed: {figures['speed']}")
     results.print_goals(record)
     print(results.summary(record))

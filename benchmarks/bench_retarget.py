@@ -11,6 +11,7 @@ compare by their ratios)::
 
     .venv/bin/python benchmarks/bench_retarget.py                 # --clips 30 --max-frames 240
     .venv/bin/python benchmarks/bench_retarget.py --clips 6 --no-record   # a quick look
+    .venv/bin/python benchmarks/bench_retarget.py --transformer data/models/bandai-transformer-3   # a candidate
 
 Also: the round trip Bandai -> Mixamo -> Bandai (mapped joints' largest error, share of the height), and
 the time one completion of a 1,000-frame 120 fps Mixamo file takes with the transformer, split into the
@@ -88,8 +89,9 @@ def gap_error_cm(truth: Motion, filled: Motion, keys: Keys, joints: np.ndarray) 
     return float(np.linalg.norm(p1 - p0, axis=-1).mean() * truth.skeleton.meters_per_unit * 100)
 
 
-def quality(motions: list[Motion], fps_list: list[int]) -> dict:
-    """``{rig: {fps: {method: {every: gap error cm}}}}`` over ``motions`` (see the module docstring)."""
+def quality(motions: list[Motion], fps_list: list[int], transformer: str | None = None) -> dict:
+    """``{rig: {fps: {method: {every: gap error cm}}}}`` over ``motions`` (see the module docstring);
+    ``transformer``: a model folder to score instead of the shipped transformer."""
     home = make_rig(motions[0].skeleton)
     out: dict = {}
     for rig_name, path in RIGS.items():
@@ -103,8 +105,8 @@ def quality(motions: list[Motion], fps_list: list[int]) -> dict:
                 for method, spacings in SPACINGS.items():
                     for step in spacings:
                         keys = every(truth.num_frames, step * fps // 30)
-                        filled = registry.complete(truth.replace(keys=None), keys, method,
-                                                   CompleteOptions(seed=0)).motion
+                        options = CompleteOptions(seed=0, model=transformer if method == "transformer" else None)
+                        filled = registry.complete(truth.replace(keys=None), keys, method, options).motion
                         errors.setdefault(method, {}).setdefault(str(step), []).append(
                             gap_error_cm(truth, filled, keys, joints))
             out.setdefault(rig_name, {})[str(fps)] = {m: {s: float(np.mean(v)) for s, v in e.items()}
@@ -129,7 +131,7 @@ def round_trip(motions: list[Motion]) -> dict:
     return {"max_error_cm": worst, "max_share_of_height": share}
 
 
-def speed(motions: list[Motion], repeat: int = 3) -> dict:
+def speed(motions: list[Motion], repeat: int = 3, transformer: str | None = None) -> dict:
     """One transformer completion of a 1,000-frame 120 fps Mixamo file (keys every 60 frames): the whole
     call and the model's own completion inside it, in s (medians of ``repeat``)."""
     home, rig = make_rig(motions[0].skeleton), make_rig(io.load(RIGS["mixamo"]).skeleton)
@@ -140,7 +142,7 @@ def speed(motions: list[Motion], repeat: int = 3) -> dict:
                        np.concatenate([truth.positions, truth.positions]))
     truth = truth.frames(slice(0, 1000))
     keys = every(1000, 60)
-    options = CompleteOptions()
+    options = CompleteOptions(model=transformer)
     model = rig_bridge.served(registry.get("transformer").implementation().model_path(options, keys))
     totals, inners = [], []
     for _ in range(repeat + 1):  # the first call loads the model
@@ -185,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--clips", type=int, default=30, help="held-out clips (default 30)")
     ap.add_argument("--max-frames", type=int, default=240, help="frames of each clip at 30 fps (default 240)")
     ap.add_argument("--fps", default="30,60,120", help="frame rates (whole multiples of 30)")
+    ap.add_argument("--transformer", metavar="MODEL", help="score this transformer model folder instead of the "
+                    "shipped one (a candidate; not recorded: the records describe the shipped models)")
     results.add_option(ap)
     args = ap.parse_args(argv)
     bench = results.Run()
@@ -193,12 +197,12 @@ def main(argv: list[str] | None = None) -> int:
     except DataError as e:
         print(f"skipped: {e}")
         return 0
-    gap = quality(motions, [int(f) for f in args.fps.split(",")])
+    gap = quality(motions, [int(f) for f in args.fps.split(",")], args.transformer)
     ratio = {rig: {fps: {m: {s: v / by_fps["cubic"][s] for s, v in e.items()} for m, e in by_fps.items()}
                    for fps, by_fps in by_rig.items()} for rig, by_rig in gap.items()}
     figures = {"clips": len(motions), "max_frames": args.max_frames, "gap_error_cm": gap, "ratio_to_cubic": ratio,
-               "round_trip": round_trip(motions), "speed": speed(motions)}
-    record = bench.record("retarget", figures, goals(figures), write=not args.no_record)
+               "round_trip": round_trip(motions), "speed": speed(motions, transformer=args.transformer)}
+    record = bench.record("retarget", figures, goals(figures), write=not args.no_record and args.transformer is None)
     print(f"round trip: {figures['round_trip']}")
     print(f"speed: {figures['speed']}")
     results.print_goals(record)

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, shared_fixtures
+from conftest import BVH_FIXTURES, DATA, shared_fixtures
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -253,7 +253,8 @@ def _completed(src: Path, tmp_path: Path, keys: list[int]) -> tuple[np.ndarray, 
     return bvh.parse_values(src.read_bytes())[2], bvh.parse_values(out.read_bytes())[2]
 
 
-@pytest.mark.parametrize("path", LOCAL_FIXTURES + shared_fixtures(), ids=lambda p: p.name)
+# the shared fixtures where ../shared is beside the checkout (collected without it: a glob of an absent folder is empty)
+@pytest.mark.parametrize("path", LOCAL_FIXTURES + sorted(BVH_FIXTURES.glob("*.bvh")), ids=lambda p: p.name)
 def test_key_frames_of_a_completed_bvh_carry_the_inputs_own_channel_values(path, tmp_path):
     F = bvh.read(path).num_frames
     if F < 3:

@@ -33,7 +33,7 @@ def test_posture_joints_are_the_torso_above_the_hips():
     expected = [sk.names[j] for j in (*roles.spine, *roles.neck, roles.head, roles.limbs["clavicle_l"],
                                       roles.limbs["clavicle_r"])]
     assert names == expected and len(names) >= 5
-    with pytest.raises(DataError):  # no arms: no humanoid
+    with pytest.raises(DataError, match="posture_angle needs a humanoid skeleton"):  # no arms: no humanoid
         from synthetic_corpus import walker_skeleton
 
         A.posture_joints(walker_skeleton())

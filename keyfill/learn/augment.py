@@ -32,8 +32,12 @@ RETIME_SHARE = 0.5
 def posture_joints(skeleton: Skeleton) -> np.ndarray:
     """``(n,)`` int indices of the torso joints whose carriage :func:`perturb_posture` changes: the spine and
     neck chains, the head and the clavicles of :func:`keyfill.characters.humanoid.map_roles`, in that order.
-    A :class:`DataError` for a skeleton that is no humanoid."""
-    roles = map_roles(skeleton)
+    A :class:`DataError` naming ``posture_angle`` for a skeleton that is no humanoid."""
+    try:
+        roles = map_roles(skeleton, label="the training clips' skeleton")
+    except DataError as e:  # without its advice on rig maps: training takes none
+        raise DataError(f"posture_angle needs a humanoid skeleton: {str(e).split('; name them')[0]}; "
+                        "set posture_angle to 0 for this corpus") from None
     clavicles = [roles.limbs[c] for c in ("clavicle_l", "clavicle_r") if c in roles.limbs]
     joints = [*roles.spine, *roles.neck, roles.head, *clavicles]
     if not joints:

@@ -405,8 +405,9 @@ class TransformerTask(TrainingTask):
         for step in range(self.steps(epoch)):
             _, T, keys = sample_layout(rng, cfg.layouts, cfg.window, cfg.gap_sampling)
             idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
-            wq, wr = self.data.quats[idx], self.data.root[idx]  # whole windows: retiming may reach past T
-            wc = None if self.data.contacts is None else self.data.contacts[idx]
+            n = cfg.window if cfg.slowest_tempo < 1 else T  # retiming draws on the whole window
+            wq, wr = self.data.quats[idx, :n], self.data.root[idx, :n]
+            wc = None if self.data.contacts is None else self.data.contacts[idx, :n]
             if self.mirror is not None:
                 flip = rng.random(len(idx)) < 0.5
                 wq, wr = wq.astype(np.float64), wr.astype(np.float64)

@@ -32,8 +32,7 @@ from pathlib import Path
 import numpy as np
 import results
 
-from keyfill import io
-from keyfill import rotations as R
+from keyfill import interpolate, io
 from keyfill.characters.retarget import make_rig, retarget
 from keyfill.errors import DataError
 from keyfill.kinematics import fk
@@ -67,12 +66,7 @@ def upsample(motion: Motion, fps: float) -> Motion:
     """``motion`` at ``fps`` (a whole multiple of its own rate): slerp of rotations, lerp of translations."""
     n = round(fps / motion.fps)
     t = np.arange((motion.num_frames - 1) * n + 1) / n
-    a = np.minimum(np.floor(t).astype(int), motion.num_frames - 1)
-    b = np.minimum(a + 1, motion.num_frames - 1)
-    w = t - a
-    rot = R.quat_slerp(motion.rotations[a], motion.rotations[b], np.broadcast_to(w[:, None], (len(t), motion.num_joints)))
-    pos = motion.positions[a] + w[:, None, None] * (motion.positions[b] - motion.positions[a])
-    return Motion(motion.skeleton, fps, R.quat_normalize(rot), pos)
+    return Motion(motion.skeleton, fps, *interpolate.at_times(motion.rotations, motion.positions, t))
 
 
 def every(num_frames: int, step: int) -> Keys:

@@ -49,6 +49,28 @@ def segment_coordinates(num_frames: int, key_frames: np.ndarray) -> tuple[np.nda
     return s, u
 
 
+def at_times(rotations: np.ndarray, positions: np.ndarray, t) -> tuple[np.ndarray, np.ndarray]:
+    """Poses at fractional frame times: slerp of the rotations and lerp of the translations between the two
+    frames around each time (resampling, retiming).
+
+    Args:
+        rotations: ``(F, ..., 4)`` unit quaternions, signs continuous along the first axis.
+        positions: ``(F, ..., 3)`` translations.
+        t: ``(N,)`` frame times, clipped to ``[0, F - 1]``; a whole time gives its frame (the
+            rotations renormalised, so equal to rounding).
+
+    Returns:
+        ``(rotations (N, ..., 4), positions (N, ..., 3))``, float64.
+    """
+    t = np.clip(np.asarray(t, dtype=np.float64), 0, len(rotations) - 1)
+    a = np.floor(t).astype(np.int64)
+    b = np.minimum(a + 1, len(rotations) - 1)
+    w = t - a
+    rot = R.quat_slerp(rotations[a], rotations[b], w.reshape(w.shape + (1,) * (rotations.ndim - 2)))
+    w = w.reshape(w.shape + (1,) * (positions.ndim - 1))
+    return rot, positions[a] + w * (positions[b] - positions[a])
+
+
 def _tangents(slopes: np.ndarray, h: np.ndarray) -> np.ndarray:
     """Key tangents (K, ...) from segment slopes (K-1, ...) and segment lengths (K-1,)."""
     K = len(h) + 1

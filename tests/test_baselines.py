@@ -5,7 +5,7 @@ import pytest
 from conftest import DATA
 
 from keyfill import rotations as R
-from keyfill.interpolate import cubic, inverse_right_jacobian, linear, segment_coordinates
+from keyfill.interpolate import at_times, cubic, inverse_right_jacobian, linear, segment_coordinates
 from keyfill.io import bvh
 from keyfill.learn.exact_keys import snap_to_keys
 from keyfill.motion import Keys
@@ -89,6 +89,23 @@ def test_inverse_right_jacobian_against_finite_differences():
         q2 = R.quat_mul(q, R.quat_from_rotvec(omega * eps))  # body-frame step
         numeric = (R.quat_to_rotvec(q2) - phi) / eps
         np.testing.assert_allclose(inverse_right_jacobian(phi) @ omega, numeric, atol=1e-4)
+
+
+def test_at_times_is_the_linear_baseline_between_two_frames_and_exact_at_whole_times(walk):
+    ends = [0, 10]
+    rot, pos = at_times(walk.rotations[ends], walk.positions[ends], np.arange(11) / 10)
+    lin = linear(walk, Keys(ends))
+    np.testing.assert_allclose(rot, lin.rotations[:11], atol=1e-12)
+    np.testing.assert_allclose(pos, lin.positions[:11], atol=1e-12)
+    whole = np.array([0.0, 7.0, walk.num_frames - 1])
+    rot, pos = at_times(walk.rotations, walk.positions, whole)
+    assert np.array_equal(pos, walk.positions[[0, 7, -1]])
+    np.testing.assert_allclose(rot, walk.rotations[[0, 7, -1]], atol=1e-15)  # renormalised: to rounding
+    rot, pos = at_times(walk.rotations, walk.positions, [-2.0, walk.num_frames + 3.5])  # clipped to the ends
+    assert np.array_equal(pos, walk.positions[[0, -1]])
+    root_rot, root = at_times(walk.rotations[:, 0], walk.positions[:, 0], [2.25])  # one joint: (F, 4), (F, 3)
+    assert root_rot.shape == (1, 4) and root.shape == (1, 3)
+    np.testing.assert_allclose(root[0], 0.75 * walk.positions[2, 0] + 0.25 * walk.positions[3, 0], atol=1e-12)
 
 
 def test_segment_coordinates():

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from keyfill import interpolate
 from keyfill import rotations as R
 from keyfill.characters.humanoid import map_roles
 from keyfill.errors import DataError
@@ -80,14 +81,11 @@ def retime(rng: np.random.Generator, quats: np.ndarray, root: np.ndarray, low: f
     speed = rng.uniform(low, 1.0, size=len(slow))
     start = rng.random(len(slow)) * (T - 1) * (1.0 - speed)
     t = start[:, None] + np.arange(T) * speed[:, None]  # (S, T) original time of each new frame
-    i0 = np.minimum(np.floor(t).astype(np.int64), T - 2)
-    u = t - i0  # in [0, 1]
-    b = slow[:, None]
     q, r = np.array(quats, dtype=np.float64), np.array(root, dtype=np.float64)
-    q[slow] = R.quat_slerp(q[b, i0], q[b, i0 + 1], u[..., None])
-    r[slow] = r[b, i0] + (r[b, i0 + 1] - r[b, i0]) * u[..., None]
+    for i, window in enumerate(slow):
+        q[window], r[window] = interpolate.at_times(q[window], r[window], t[i])
     c = None
     if contacts is not None:
         c = np.array(contacts)
-        c[slow] = contacts[b, np.rint(t).astype(np.int64)]
+        c[slow] = contacts[slow[:, None], np.minimum(np.rint(t).astype(np.int64), T - 1)]
     return q, r, c

@@ -120,13 +120,7 @@ def resample(motion: Motion, model_keys: np.ndarray, keys: np.ndarray, num_frame
     t = np.clip(np.arange(num_frames), keys[0], keys[-1])
     s, u = interpolate.segment_coordinates(num_frames, keys)
     tau = model_keys[s] + np.where(t >= keys[-1], 1.0, u) * (model_keys[s + 1] - model_keys[s])
-    a = np.clip(np.floor(tau).astype(np.int64), 0, motion.num_frames - 1)
-    b = np.minimum(a + 1, motion.num_frames - 1)
-    w = tau - a
-    rot = R.quat_slerp(motion.rotations[a], motion.rotations[b], np.broadcast_to(w[:, None], (num_frames,
-                                                                                          motion.num_joints)))
-    pos = motion.positions[a] + w[:, None, None] * (motion.positions[b] - motion.positions[a])
-    return Motion(motion.skeleton, fps, R.quat_normalize(rot), pos)
+    return Motion(motion.skeleton, fps, *interpolate.at_times(motion.rotations, motion.positions, tau))
 
 
 def _model_keys(keys: Keys, frames: np.ndarray, source: Rig, target: Rig) -> Keys:

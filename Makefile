@@ -135,13 +135,14 @@ $(MODELS)/bandai2-transformer/weights.safetensors: $(MODELS)/base/bandai2-transf
 
 transformer-model: $(MODELS)/bandai2-transformer/weights.safetensors
 
-# Issue 30's retraining for unseen styles (docs/transformer.md "Retraining for unseen styles"; not yet run):
+# Issue 30's retraining for unseen styles (docs/transformer.md "Retraining for unseen styles"; trained and
+# scored there, not shipped):
 # Bandai-Namco dataset-2 and dataset-1 together, mirrored left-right, with two held-out styles never used
 # to choose settings, `normal` (both datasets) and dataset-2's `elderly` (and dataset-1's `old`, the same
 # idea, so that elderly stays unseen), and dataset-1's `sad` and `feminine` left out too, which the gan
 # holds out for its figures, so that both methods' feet benchmark sees them unseen. Two steps, one thread
-# each, as transformer-model: the base model with the benchmark's config (60 epochs of 6,528 windows, about
-# 2.4 h from the 2.9 h the first recipe measured for 7,880), then 24 epochs from it with
+# each, as transformer-model: the base model with the benchmark's config (60 epochs of 6,528 windows, 1.71 h
+# measured), then 24 epochs from it with
 # benchmarks/transformer_recipe2.json: the shipped model's fine-tune settings (the foot-sliding and excess-jerk
 # terms cost accuracy on the validation clips and are off; docs/transformer.md). Interrupted, each continues
 # from its checkpoint.

@@ -11,7 +11,10 @@ component on that axis), as Blender, MotionBuilder and bvhio read them.
 
 Writing keeps each joint's channel order, the hierarchy order and the End
 Sites, writes numbers with 12 significant digits (round trips to 1e-12
-relative; never ``%f``), and keeps Euler curves continuous: no 360-degree
+relative; never ``%f``; near gimbal lock, a middle angle of about +-90
+degrees, the first and third angles are only defined to about
+1e-16 / cos(middle) degrees, so rewriting a written file can move their
+last digit), and keeps Euler curves continuous: no 360-degree
 jumps and no flips between the two Euler solutions of a rotation. Given the
 BVH file the motion came from (``template``), frames whose rotations are
 unchanged keep that file's own channel values, and the frames between them

@@ -70,7 +70,7 @@ def quat_normalize(q):
 def quat_conjugate(q):
     """Conjugate ``(w, -x, -y, -z)``; the inverse of a unit quaternion."""
     xp = _xp(q)
-    return xp.concat([q[..., :1], -q[..., 1:]], axis=-1)
+    return xp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
 
 
 def quat_mul(a, b):
@@ -120,7 +120,7 @@ def quat_to_rotvec(q):
     # so torch gradients are finite at the identity too.
     small = s2 < 1e-16
     s = xp.sqrt(xp.where(small, 1 + 0 * s2, s2))
-    scale = xp.where(small, 2 / w, 2 * xp.atan2(s, w) / s)
+    scale = xp.where(small, 2 / w, 2 * xp.arctan2(s, w) / s)
     return v * scale
 
 
@@ -134,7 +134,7 @@ def quat_from_rotvec(r):
     # sin(theta/2)/theta, with its series near zero.
     k = xp.where(small, 0.5 - theta2 / 48, xp.sin(half) / theta)
     w = xp.where(small, 1 - theta2 / 8, xp.cos(half))
-    return xp.concat([w, r * k], axis=-1)
+    return xp.concatenate([w, r * k], axis=-1)
 
 
 def quat_angle(a, b):
@@ -142,7 +142,7 @@ def quat_angle(a, b):
     xp = _xp(a)
     d = quat_mul(quat_conjugate(a), b)
     s = xp.sqrt(xp.sum(d[..., 1:] ** 2, axis=-1))
-    return 2 * xp.atan2(s, xp.abs(d[..., 0]))
+    return 2 * xp.arctan2(s, xp.abs(d[..., 0]))
 
 
 def quat_slerp(q0, q1, t):
@@ -157,7 +157,7 @@ def quat_slerp(q0, q1, t):
     t = t[..., None] if hasattr(t, "shape") and t.shape != () else t
     q1 = xp.where(xp.sum(q0 * q1, axis=-1, keepdims=True) < 0, -q1, q1)  # the shorter way round
     d, s = q0 - q1, q0 + q1
-    theta = 2 * xp.atan2(xp.sqrt(xp.sum(d * d, axis=-1, keepdims=True)), xp.sqrt(xp.sum(s * s, axis=-1, keepdims=True)))
+    theta = 2 * xp.arctan2(xp.sqrt(xp.sum(d * d, axis=-1, keepdims=True)), xp.sqrt(xp.sum(s * s, axis=-1, keepdims=True)))
     sin = xp.sin(theta)
     small = sin < 1e-9
     safe = xp.where(small, 1.0, sin)
@@ -271,12 +271,12 @@ def _euler_from_entries(entry, order: str, xp):
     s = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of XYZ: +1
     m_ii, m_ij, m_ik = entry(i, i), entry(i, j), entry(i, k)
     cos_b = xp.sqrt(m_ii**2 + m_ij**2)
-    b = xp.atan2(s * m_ik, cos_b)
+    b = xp.arctan2(s * m_ik, cos_b)
     locked = cos_b < 1e-9
-    a = xp.atan2(-s * entry(j, k), entry(k, k))
-    c = xp.atan2(-s * m_ij, m_ii)
+    a = xp.arctan2(-s * entry(j, k), entry(k, k))
+    c = xp.arctan2(-s * m_ij, m_ii)
     # Gimbal lock: only a +- c is defined; put it all in a (c = 0).
-    a_locked = xp.atan2(s * entry(k, j), entry(j, j))
+    a_locked = xp.arctan2(s * entry(k, j), entry(j, j))
     a = xp.where(locked, a_locked, a)
     c = xp.where(locked, 0 * c, c)
     return xp.stack([a, b, c], axis=-1)

@@ -121,7 +121,7 @@ class Features:
         xp = R._xp(quats)
         off = self._like(self.offsets[1:], root)
         rest = xp.broadcast_to(off, root.shape[:-1] + off.shape) if xp is np else off.expand(root.shape[:-1] + off.shape)
-        pos = xp.concat([root[..., None, :], rest], axis=-2)
+        pos = xp.concatenate([root[..., None, :], rest], axis=-2)
         return fk(quats, pos, self.parents)
 
     def encode(self, quats, root):
@@ -131,8 +131,8 @@ class Features:
         mean, std = self._stats(root)
         if self.coordinates == "global":
             gq, gp = self.global_pose(quats, root)
-            return xp.concat([(gp.reshape(B, T, -1) - mean) / std, gq.reshape(B, T, -1)], axis=-1)
-        return xp.concat([(root - mean) / std, quats.reshape(B, T, -1)], axis=-1)
+            return xp.concatenate([(gp.reshape(B, T, -1) - mean) / std, gq.reshape(B, T, -1)], axis=-1)
+        return xp.concatenate([(root - mean) / std, quats.reshape(B, T, -1)], axis=-1)
 
     def split(self, x):
         """Features -> ``(positions or root (B, T, J*3 or 3), quats (B, T, J, 4) normalised)``."""

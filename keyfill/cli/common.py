@@ -177,9 +177,14 @@ def apply_partial_keys(motion: Motion, keys: Keys, joints_text: str | None, posi
 
 
 def output_format(path: str, fmt: str | None) -> str | None:
-    """``--format`` is required for ``-`` (stdout) and otherwise overrides the suffix."""
+    """``--format`` is required for ``-`` (stdout); a file's suffix must name a format and agree with ``--format``
+    (:func:`keyfill.io.format_of`). Called before any work, so a misnamed output costs nothing."""
+    if not path:
+        raise UsageError("the output path is empty: give a file name, or '-' and --format for standard output")
     if path == "-" and fmt is None:
         raise UsageError(f"writing to '-' needs --format ({io.listing(io.FORMATS)})")
+    if path != "-":
+        io.format_of(path, fmt)
     return fmt
 
 

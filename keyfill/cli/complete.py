@@ -157,12 +157,13 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     from keyfill.files import refuse_overwriting_input
 
     dna_files = [] if dna is None else [dna, dna.rpartition(":")[0]]  # FILE or FILE:FRAMES
+    fmt = output_format(dst, fmt)  # a misnamed output is refused before any work
     refuse_overwriting_input(dst, [src, *dna_files], force)
     motion = io.load(src, input_format(src, in_fmt))
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)
     result = run(motion, keys, method, options)
-    io.save(result.motion, dst, output_format(dst, fmt), source=src)
+    io.save(result.motion, dst, fmt, source=src)
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})
     elif dst != "-":

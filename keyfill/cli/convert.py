@@ -81,6 +81,8 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
     src, dst = paths
     from keyfill.files import refuse_overwriting_input
 
+    if not curves:  # a misnamed output is refused before any work (--curves checks its own below)
+        fmt = output_format(dst, fmt)
     refuse_overwriting_input(dst, [src], force)
 
     motion = io.load(src, input_format(src, in_fmt), meters_per_unit)
@@ -95,7 +97,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
     elif keys_text is not None or key_every is not None:
         raise UsageError("--keys and --key-every choose the keys of --curves; add --curves")
     else:
-        io.save(motion, dst, output_format(dst, fmt), source=src)
+        io.save(motion, dst, fmt, source=src)
     if as_json and dst != "-":
         emit_json({"input": src, "output": dst, "frames": motion.num_frames, "joints": motion.num_joints})
     elif dst != "-":

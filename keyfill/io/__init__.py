@@ -89,12 +89,18 @@ def format_of(path: str | os.PathLike, format: str | None = None, reading: bool 
     """The format name for ``path``: ``format`` when given, else from the suffix.
 
     ``-`` needs ``format``; ``reading`` says whether ``-`` is standard input
-    (for the error). Errors name the parameter ``format`` (in ``params``).
+    (for the error). An output (not ``reading``) whose suffix is another
+    format's than ``format`` is refused: the file would not read back as what
+    its name says. Errors name the parameter ``format`` (in ``params``).
     """
     if format is not None:
         fmt = format.lower().lstrip(".")
         if fmt not in FORMATS:
             raise UsageError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}")
+        named = SUFFIXES.get(Path(path).suffix.lower()) if str(path) != STDIO else None
+        if not reading and named is not None and named != fmt:
+            raise UsageError(f"{path}: format {fmt} contradicts the suffix {Path(path).suffix!r} (a {named} file); "
+                             f"a {fmt} output is named {listing(FORMATS[fmt].suffixes)}", params="format")
         return fmt
     if str(path) == STDIO:
         raise UsageError(f"{'reading' if reading else 'writing'} '-' needs format ({listing(FORMATS)})",

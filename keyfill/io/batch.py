@@ -3,8 +3,11 @@
 :func:`plan` turns the inputs of ``keyfill complete IN... -o OUTDIR/`` (files,
 folders, globs) into :class:`Item` s, one output per input under ``OUTDIR``
 with the same relative name (``--format`` changes the suffix). It refuses,
-before any work, an output folder that is a file and two inputs that map to
-the same output.
+before any work, an output folder that is a file (or named like one), a
+folder input with no motion files, and two inputs that map to the same
+output. A folder input never contributes the output folder, nor the output
+folders of earlier runs (those holding a record), so ``complete . -o out/``
+can be run again and again.
 
 :func:`run` hands the items to an executor (:mod:`keyfill.parallel`: this
 process, local processes or a Dask cluster) in *chunks*: a job function
@@ -47,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from keyfill.errors import FormatError, KeyfillError, UsageError
-from keyfill.io import FORMATS, SUFFIXES
+from keyfill.io import FORMATS, SUFFIXES, listing
 from keyfill.limits import CONNECT_SECONDS
 
 #: suffixes of motion files a folder input contributes (those of :data:`keyfill.io.FORMATS`)
@@ -72,7 +75,7 @@ def is_batch(inputs, output: str | None) -> bool:
     """Whether a command's inputs and ``-o`` ask for the many-in / folder-out form."""
     if output is None:
         return False
-    if len(inputs) != 1 or output.endswith(("/", os.sep)) or Path(output).is_dir():
+    if len(inputs) != 1 or output.endswith(("/", os.sep)) or (output and Path(output).is_dir()):
         return True
     src = inputs[0]
     return src != "-" and (Path(src).is_dir() or (not Path(src).exists() and glob.has_magic(src)))
@@ -92,9 +95,13 @@ def _expand(text: str, outdir: Path) -> list[tuple[Path, Path]]:
     if text == "-":
         raise UsageError("'-' (standard input) reads one file; give files, folders or globs for a batch")
     if p.is_dir():
+        made = [d for d in (r.parent for r in p.rglob(RECORD)) if d != p]  # output folders of earlier runs
         files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in MOTION_SUFFIXES
                        and not any(part.startswith(".") for part in f.relative_to(p).parts)
-                       and not _inside(f, outdir))
+                       and not _inside(f, outdir) and not any(f.is_relative_to(d) for d in made))
+        if not files:
+            besides = f" outside keyfill's output folders ({', '.join(map(str, made))})" if made else ""
+            raise UsageError(f"{text}: no motion files ({listing(SUFFIXES)}) in this folder{besides}")
         return [(f, f.relative_to(p)) for f in files]
     if p.exists() or not glob.has_magic(text):
         return [(p, Path(p.name))]  # a missing file is that input's failure, reported with the others
@@ -120,8 +127,10 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None, force: bo
     """The items of a batch, sorted by input; refuses what cannot work before any work is done.
 
     Args:
-        inputs: files, folders (their motion files, recursively) and globs.
-        outdir: the output folder (created later if missing).
+        inputs: files, folders (their motion files, recursively, but for hidden files and the output folders
+            of keyfill runs: folders holding a record, :data:`RECORD`) and globs.
+        outdir: the output folder (created later if missing); a name that does not exist yet and ends in a
+            motion file's suffix (``single.bvh``) is refused as a file name (``single.bvh/`` is a folder).
         format: output format (a name of :data:`keyfill.io.FORMATS`): the outputs' suffix; None keeps the
             input's.
         force: allow an output that is one of the inputs (the same file, through links too); refused otherwise.
@@ -129,8 +138,13 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None, force: bo
     Errors name the parameters ``outdir``, ``format`` and ``force`` (in ``params``).
     """
     out = Path(outdir)
+    if not str(outdir):
+        raise UsageError("outdir is empty: give the output folder (OUTDIR/)", params="outdir")
     if out.exists() and not out.is_dir():
         raise UsageError(f"outdir {outdir}: is a file; a batch writes into an output folder", params="outdir")
+    if not out.exists() and not str(outdir).endswith(("/", os.sep)) and out.suffix.lower() in SUFFIXES:
+        raise UsageError(f"outdir {outdir}: a batch writes into an output folder, and this names a file; give "
+                         f"{outdir}/ for a folder of that name, or one input for one output file", params="outdir")
     fmt = None
     if format is not None:
         fmt = format.lower().lstrip(".")
@@ -154,7 +168,7 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None, force: bo
             seen[key] = src
             items.append(Item(str(src), str(dst), root=str(out)))
     if not items:
-        raise UsageError("no input files")
+        raise UsageError("no inputs given")
     if not force:
         refuse_inputs_as_outputs(items)
     return sorted(items, key=lambda i: i.src)

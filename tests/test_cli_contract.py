@@ -1,0 +1,117 @@
+"""The CLI contract of issue 48: outputs named as what they hold, one exit code per kind of misuse in every
+command, and one line naming the user's path when an output cannot be written. Each case checks the exit code,
+the one ``keyfill: error:`` line and what the folder holds afterwards."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from conftest import DATA, run
+
+MIXAMO = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"
+
+
+def one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("keyfill: error: "), err
+    assert "internal error" not in lines[0] and "Traceback" not in err
+    return lines[0].removeprefix("keyfill: error: ")
+
+
+def listing(folder) -> list[str]:
+    """Every name under ``folder`` (hidden ones too), relative and sorted."""
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*"))
+
+
+@pytest.fixture()
+def walks(tmp_path, monkeypatch):
+    """``walk.bvh`` and ``b.bvh`` in an otherwise empty working folder."""
+    monkeypatch.chdir(tmp_path)
+    for name in ("walk.bvh", "b.bvh"):
+        shutil.copy(MIXAMO, tmp_path / name)
+    return tmp_path
+
+
+# --- output names -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("args", [
+    ("complete", "walk.bvh", "--key-every", "10", "--format", "usda", "-o", "out.bvh"),
+    ("convert", "walk.bvh", "out.bvh", "--format", "usda"),
+    ("convert", "walk.bvh", "out.usd", "--format", "usda"),  # .usd is written as crate: usda would be ignored
+    ("complete", "walk.bvh", "--key-every", "10", "--format", "glb", "-o", "out.gltf"),
+])
+def test_a_format_that_contradicts_the_output_suffix_is_refused(walks, capsys, args):
+    code, out, err = run(capsys, *args)
+    line = one_line(err)
+    fmt, dst = args[args.index("--format") + 1], next(a for a in args if a.startswith("out."))
+    assert code == 2 and out == ""
+    assert line.startswith(f"{dst}: --format {fmt} contradicts the suffix '{dst[3:]}'") and f".{fmt}" in line
+    assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+def test_a_format_that_agrees_or_an_unknown_suffix_and_a_format_still_write(walks, capsys):
+    code, _, err = run(capsys, "convert", "walk.bvh", "out.usda", "--format", "usda")
+    assert code == 0, err
+    code, _, err = run(capsys, "convert", "walk.bvh", "out.anim", "--format", "bvh")
+    assert code == 0, err
+    assert (walks / "out.anim").read_text().startswith("HIERARCHY")
+
+
+@pytest.mark.parametrize("args", [
+    ("complete", "walk.bvh", "b.bvh", "--key-every", "10", "-o", "single.bvh"),
+    ("complete", ".", "--key-every", "10", "-o", "d2.bvh"),
+    ("convert", "walk.bvh", "b.bvh", "-o", "single.usda"),
+])
+def test_a_file_name_for_several_outputs_is_refused(walks, capsys, args):
+    code, _, err = run(capsys, *args)
+    dst = args[-1]
+    assert code == 2 and one_line(err).startswith(f"-o {dst}: a batch writes into an output folder")
+    assert f"{dst}/" in err
+    assert listing(walks) == ["b.bvh", "walk.bvh"]
+    # the same name as a folder is a folder
+    code, _, err = run(capsys, *args[:-1], dst + "/")
+    assert code == 0, err
+    assert listing(walks / dst) == [".keyfill-outputs.json", "b.bvh", "walk.bvh"]  # the inputs' names
+
+
+def test_a_folder_input_never_takes_an_output_folder_as_input(walks, capsys):
+    for outdir in ("d1/", "d2/", "sub/d3/"):
+        code, out, err = run(capsys, "complete", ".", "--key-every", "10", "-o", outdir, "--json")
+        assert code == 0, err
+        assert sorted(json.loads(out)["input"]) == ["b.bvh", "walk.bvh"], outdir
+    assert listing(walks / "sub" / "d3") == [".keyfill-outputs.json", "b.bvh", "walk.bvh"]
+    # an output folder named as an input is an input
+    code, out, err = run(capsys, "convert", "d1", "-o", "u/", "--format", "usda")
+    assert code == 0, err
+    assert listing(walks / "u") == [".keyfill-outputs.json", "b.usda", "walk.usda"]
+
+
+def test_a_folder_with_no_motion_files_is_named(walks, capsys):
+    (walks / "adir").mkdir()
+    (walks / "adir" / "notes.txt").write_text("no motion here")
+    code, _, err = run(capsys, "complete", "adir", "--key-every", "3", "-o", "x/")
+    assert code == 2 and one_line(err).startswith("adir: no motion files (.bvh, ") and "in this folder" in err
+    code, _, err = run(capsys, "complete", "walk.bvh", "-o", "only/", "--key-every", "3")
+    assert code == 0, err
+    code, _, err = run(capsys, "complete", "only", "-o", "again/", "--key-every", "3")  # named: an input
+    assert code == 0, err
+    (walks / "holder").mkdir()
+    shutil.move(walks / "only", walks / "holder" / "only")
+    code, _, err = run(capsys, "complete", "holder", "-o", "x/", "--key-every", "3")
+    assert code == 2 and "outside keyfill's output folders (holder/only)" in one_line(err)
+    assert not (walks / "x").exists()
+
+
+@pytest.mark.parametrize("args,message", [
+    (("complete", "walk.bvh", "--key-every", "3", "-o", ""), "the output path is empty"),
+    (("complete", "walk.bvh", "b.bvh", "--key-every", "3", "-o", ""), "-o is empty"),
+    (("convert", "walk.bvh", ""), "the output path is empty"),
+    (("convert", "walk.bvh", "-o", ""), "-o is empty"),
+])
+def test_an_empty_output_is_named_as_such(walks, capsys, args, message):
+    code, _, err = run(capsys, *args)
+    assert code == 2 and one_line(err).startswith(message) and "is the input" not in err
+    assert listing(walks) == ["b.bvh", "walk.bvh"]

@@ -39,6 +39,16 @@ class UsageError(KeyfillError):
     exit_code = 2
 
 
+class NoSuchFile(UsageError):
+    """A path the caller names that is no file, or not the kind needed (exit code 2, as every usage error: in
+    every command a missing path is a usage error, found before any work). ``path`` leads the message."""
+
+    def __init__(self, path: object, what: str = "no such file", *, params: str | tuple[str, ...] = ()):
+        super().__init__(f"{path}: {what}", params=params)
+        self.path = path
+        self.line = None
+
+
 class FormatError(KeyfillError):
     """A file that cannot be read as what it claims to be.
 

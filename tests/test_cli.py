@@ -208,7 +208,7 @@ def test_unknown_suffix_and_missing_folder_and_missing_file(capsys, tmp_path):
     assert code == 2 and not (tmp_path / "nope").exists()
     assert_one_line_error(err, "the output folder", "does not exist")
     code, _, err = run(capsys, "info", tmp_path / "missing.bvh")
-    assert code == 1
+    assert code == 2  # a missing path is a usage error in every command (issue 48)
     assert_one_line_error(err, "missing.bvh", "no such file")
     code, _, err = run(capsys, "convert", MIXAMO, "-")
     assert code == 2
@@ -265,4 +265,4 @@ def test_debug_shows_the_traceback(tmp_path):
     )
     assert r.returncode == 1 and "Traceback" in r.stderr
     r = subprocess.run([sys.executable, "-m", "keyfill", "info", str(tmp_path / "missing.bvh")], capture_output=True, text=True, check=False)
-    assert r.returncode == 1 and "Traceback" not in r.stderr and r.stderr.startswith("keyfill: error:")
+    assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.startswith("keyfill: error:")

@@ -115,3 +115,81 @@ def test_an_empty_output_is_named_as_such(walks, capsys, args, message):
     code, _, err = run(capsys, *args)
     assert code == 2 and one_line(err).startswith(message) and "is the input" not in err
     assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+# --- one code for one kind of misuse ------------------------------------------------------------------
+
+ROOT = DATA.parents[1]
+CURVES = ROOT / "examples" / "edit" / "lamp_nod_curves.usda"
+EDIT = ROOT / "examples" / "edit" / "lamp_lift.toml"
+
+#: a missing path in every place a command takes one: exit 2 (a usage error, found before any work)
+MISSING = [
+    ("info", "nope.bvh"),
+    ("convert", "nope.bvh", "o.usda"),
+    ("convert", "nope.bvh", "walk.bvh", "-o", "od/"),
+    ("complete", "nope.bvh", "--key-every", "3", "-o", "o.bvh"),
+    ("complete", "nope.bvh", "walk.bvh", "--key-every", "3", "-o", "od/"),
+    ("complete", "walk.bvh", "--key-every", "3", "-o", "o.bvh", "--model", "nope"),
+    ("complete", "walk.bvh", "--key-every", "3", "-o", "o.bvh", "--rig-map", "nope.toml"),
+    ("complete", "walk.bvh", "--keys", "0,30,68", "-o", "o.bvh", "--method", "gan", "--dna", "nope.bvh"),
+    ("retarget", "nope.bvh", "--to", "walk.bvh", "-o", "o.bvh"),
+    ("retarget", "walk.bvh", "--to", "nope.bvh", "-o", "o.bvh"),
+    ("train", "arnn", "nope", "-o", "m"),
+    ("train", "transformer", "walk.bvh", "-o", "m", "--config", "nope.json"),
+    ("evaluate", "cubic", "nope"),
+    ("edit-tangents", "nope.usda", "--edit", EDIT, "-o", "o.usda"),
+    ("edit-tangents", CURVES, "--edit", "nope.toml", "-o", "o.usda"),
+    ("pose", "nope.usda", "--edit", EDIT, "--frame", "10", "-o", "o.usda"),
+    ("plot", "nope.bvh", "-o", "p.png"),
+    ("preview", "nope.bvh", "-o", "p.gif"),
+    ("export", "nope", "-o", "m.onnx"),
+]
+
+
+@pytest.mark.parametrize("args", MISSING, ids=lambda a: " ".join(map(str, a[:2])))
+def test_a_missing_path_is_exit_2_in_every_command(walks, capsys, args):
+    if "--dna" in args:
+        pytest.importorskip("torch")
+    code, _, err = run(capsys, *args)
+    assert code == 2 and "nope" in one_line(err), err
+    assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+@pytest.mark.parametrize("workers", ["0", "2000"])
+@pytest.mark.parametrize("inputs,dst", [(("walk.bvh",), "o.bvh"), (("walk.bvh", "b.bvh"), "od/")])
+def test_workers_out_of_range_are_refused_for_one_file_as_for_a_batch(walks, capsys, workers, inputs, dst):
+    convert_dst = ("-o", dst) if len(inputs) > 1 else (dst,)  # convert SRC DST, or SRC... -o OUTDIR/
+    for args in (("complete", *inputs, "--key-every", "3", "-o", dst), ("convert", *inputs, *convert_dst),
+                 ("retarget", *inputs, "--to", "b.bvh", "-o", dst)):
+        code, _, err = run(capsys, *args, "--workers", workers)
+        assert code == 2 and one_line(err) == f"--workers must be between 1 and 1,024, got {workers}"
+        assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+@pytest.mark.parametrize("args,line", [
+    (("complete", "walk.bvh", "--key-every", "3", "-o", "o.bvh", "--method", "cubc"), "Did you mean 'cubic'?"),
+    (("compelte", "walk.bvh"), "No such command 'compelte'. Did you mean 'complete'?"),
+    (("train", "transfomer", "x"), "No such command 'transfomer'. Did you mean 'transformer'?"),
+    (("convert", "walk.bvh", "o.usda", "--format", "usdx"), "(Did you mean one of: 'usd', 'usda', 'usdc'?)"),
+    (("complete", "walk.bvh", "--key-evry", "3", "-o", "o.bvh"), "Did you mean one of: '--key-every'"),
+])
+def test_a_mistyped_command_method_or_option_is_told_what_it_may_mean(walks, capsys, args, line):
+    code, _, err = run(capsys, *args)
+    assert code == 2 and line in one_line(err)
+    assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+@pytest.mark.parametrize("signal", [None, 15])
+def test_an_interrupt_is_one_line_without_a_blank_line_before_it(walks, capsys, monkeypatch, signal):
+    from keyfill import io
+    from keyfill.cli.main import Terminated
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt if signal is None else Terminated(signal)
+
+    monkeypatch.setattr(io, "_read", interrupted)
+    code, out, err = run(capsys, "convert", "walk.bvh", "o.usda")
+    assert (code, out) == ((130, "") if signal is None else (128 + signal, ""))
+    assert err == f"keyfill: error: {'interrupted' if signal is None else 'terminated'}\n"
+    assert listing(walks) == ["b.bvh", "walk.bvh"]

@@ -95,7 +95,7 @@ def test_global_options_after_the_subcommand(capsys, tmp_path):
     code, _, err = run(capsys, "convert", CMU, out, "-v", "-q", "-q")  # counts add up as before the subcommand
     assert code == 0 and err == ""
     code, _, err = run(capsys, "info", tmp_path / "missing.bvh", "-q")
-    assert code == 1 and err.startswith("keyfill: error:")
+    assert code == 2 and err.startswith("keyfill: error:")
     code, out, _ = run(capsys, "train", "arnn", "--help")
     assert code == 0 and "--quiet" not in out
 
@@ -103,7 +103,7 @@ def test_global_options_after_the_subcommand(capsys, tmp_path):
 def test_debug_after_the_subcommand_shows_the_traceback(tmp_path):
     p = subprocess.run([sys.executable, "-m", "keyfill", "info", str(tmp_path / "missing.bvh"), "--debug"],
                        check=False, capture_output=True, text=True)
-    assert p.returncode == 1 and "Traceback" in p.stderr and "FormatError" in p.stderr
+    assert p.returncode == 1 and "Traceback" in p.stderr and "NoSuchFile" in p.stderr
 
 
 def test_bvh_units_are_reported_as_assumed(capsys, files):

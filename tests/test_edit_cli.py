@@ -168,10 +168,10 @@ def test_curves_input_must_be_a_curves_file(tmp_path, capsys):
     io.save(character(), bvh)
     plain = tmp_path / "plain.usda"
     io.save(character(), plain)
-    for src, message in (
-        (bvh, "not a keyfill curves file (a .usda"),
-        (plain, "no Curves prim"),
-        (tmp_path / "missing.usda", "no such file"),
+    for src, message, exit_code in (
+        (bvh, "not a keyfill curves file (a .usda", 1),
+        (plain, "no Curves prim", 1),
+        (tmp_path / "missing.usda", "no such file", 2),  # a missing path is a usage error everywhere
     ):
         code, _, err = run(capsys, "edit-tangents", src, "--edit", edit, "-o", tmp_path / "o.usda")
-        assert code == 1 and message in err and len(err.strip().splitlines()) == 1
+        assert code == exit_code and message in err and len(err.strip().splitlines()) == 1

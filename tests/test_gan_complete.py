@@ -92,8 +92,9 @@ def test_sequence_longer_than_supported(models):
 def test_another_skeleton(models):
     other = walker_motion(walker_skeleton(leg_length=55.0), 100, np.random.default_rng(1))
     with pytest.raises(ModelError, match=r"another skeleton than the model \(\d+ joints, top joint '\w+'\): "
-                                         r"joint '\w+' has a different rest offset; train a gan model on your own "
-                                         r"clips with 'keyfill train gan CLIPS -o MODEL-path --stage path'"):
+                                         r"the model's vs the motion's: joint '\w+' has a different rest offset; "
+                                         r"train a gan model on your own clips with "
+                                         r"'keyfill train gan CLIPS -o MODEL-path --stage path'"):
         complete(other, Keys(np.array([0, 60, 99])), CompleteOptions(model=str(models[1])))
 
 

@@ -233,9 +233,9 @@ def test_train_evaluate_export_and_the_model_names_its_method(capsys, tmp_path, 
 
 def test_errors_are_a_json_object_on_stdout_too(capsys, tmp_path):
     code, d = run_json(capsys, "info", tmp_path / "missing.bvh", "--json")
-    assert code == 1 and set(d) == {"error"}
+    assert code == 2 and set(d) == {"error"}
     e = d["error"]
-    assert set(e) == {"message", "file", "line", "exit_code"} and e["exit_code"] == 1
+    assert set(e) == {"message", "file", "line", "exit_code"} and e["exit_code"] == 2
     assert e["file"] == str(tmp_path / "missing.bvh") and e["line"] is None and "no such file" in e["message"]
 
     bad = tmp_path / "bad.bvh"
@@ -253,7 +253,7 @@ def test_errors_are_a_json_object_on_stdout_too(capsys, tmp_path):
 
 
 def test_without_json_nothing_reaches_stdout_on_failure(capsys, tmp_path):
-    assert main(["info", str(tmp_path / "missing.bvh")]) == 1
+    assert main(["info", str(tmp_path / "missing.bvh")]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.startswith("keyfill: error: ")
 

@@ -135,7 +135,7 @@ def test_retarget_bad_inputs(capsys, tmp_path):
     line = one_error(err)
     assert code == 1 and line.startswith(f"{LAMP}: found no joint") and "--to-rig-map" in line
     code, _, err = run(capsys, "retarget", MIXAMO, "--to", tmp_path / "none.bvh", "-o", out)
-    assert code == 1 and one_error(err) == f"{tmp_path / 'none.bvh'}: no such file"
+    assert code == 2 and one_error(err) == f"{tmp_path / 'none.bvh'}: no such file"
     bad = toml(tmp_path, 'hand_l = "mixamorig:NoSuchHand"\n')
     code, _, err = run(capsys, "retarget", CMU, "--to", MIXAMO, "--to-rig-map", bad, "-o", out)
     line = one_error(err)

@@ -89,7 +89,8 @@ def test_a_skeleton_that_is_no_humanoid_names_the_model_skeleton_and_the_trainin
     err = capsys.readouterr().err.strip()
     assert code == 1 and not out.exists() and len(err.splitlines()) == 1
     assert err.startswith("keyfill: error: the motion has another skeleton than the model (22 joints, top joint "
-                          "'joint_Root'): 22 joints vs 4; the first that differs is joint 0, 'joint_Root' vs ")
+                          "'joint_Root'): the model's vs the motion's: 22 joints vs 4; the first that differs is "
+                          "joint 0, 'joint_Root' vs ")
     assert hint in err
     assert "; nor can it be retargeted: the skeleton: found no joint for the humanoid roles" in err
     assert "--rig-map" in err

@@ -14,8 +14,18 @@ from keyfill.errors import UsageError
 from keyfill.limits import CONNECT_SECONDS
 from keyfill.motion import Keys, Motion
 
+
+class Choice(click.Choice):
+    """click's choice, whose refusal ends with the close choices, as a mistyped option's does."""
+
+    def get_invalid_choice_message(self, value, ctx) -> str:
+        from keyfill.cli.main import did_you_mean
+
+        return super().get_invalid_choice_message(value, ctx) + did_you_mean(str(value), map(str, self.choices))
+
+
 #: ``--format`` / ``--in-format`` choices: the names of the one table of formats
-FORMAT_CHOICE = click.Choice(list(io.FORMATS), case_sensitive=False)
+FORMAT_CHOICE = Choice(list(io.FORMATS), case_sensitive=False)
 
 
 #: library parameters whose flag is not ``--`` + the name with dashes
@@ -219,6 +229,17 @@ def load_labelled(files, labels: str | None, in_fmt: str | None, keys_text: str 
     return motions, names
 
 
+def _executor_option(ctx, param, value):
+    """``--workers`` and ``--connect-timeout`` checked as they are parsed: one file refuses what a batch does."""
+    from keyfill.parallel import check_options
+
+    if param.name == "workers":
+        check_options(value)
+    else:
+        check_options(None, value)
+    return value
+
+
 def batch_options(f):
     """``--workers``, ``--scheduler``, ``--connect-timeout``, ``--force`` and ``--batch-size`` of a batch command."""
     f = click.option("--batch-size", default=64, show_default=True, type=int, metavar="N",
@@ -227,10 +248,10 @@ def batch_options(f):
                      help="Redo every output, also those the output folder's record says were made the same way "
                           "(docs/batch.md), and allow an output that is one of the inputs.")(f)
     f = click.option("--connect-timeout", default=CONNECT_SECONDS, show_default=True, type=float, metavar="SECONDS",
-                     help="Give up reaching the --scheduler after this long.")(f)
+                     callback=_executor_option, help="Give up reaching the --scheduler after this long.")(f)
     f = click.option("--scheduler", metavar="ADDRESS",
                      help="Run the batch on a Dask distributed cluster, e.g. tcp://host:8786.")(f)
-    f = click.option("--workers", type=int, metavar="N",
+    f = click.option("--workers", type=int, metavar="N", callback=_executor_option,
                      help="Local worker processes for a batch [default: one per core when there is more than "
                           "one job]; with --scheduler, jobs kept in flight.")(f)
     return f

@@ -7,6 +7,7 @@ import click
 from keyfill import io
 from keyfill.cli.common import (
     FORMAT_CHOICE,
+    Choice,
     apply_partial_keys,
     batch_options,
     emit_json,
@@ -30,7 +31,7 @@ from keyfill.learn.registry import ALIASES, METHODS
                    "(OUTDIR/).")
 @keys_options
 @partial_keys_options
-@click.option("--method", type=click.Choice(sorted([*METHODS, *ALIASES])),
+@click.option("--method", type=Choice(sorted([*METHODS, *ALIASES])),
               help="In-betweening method [default: the kind of the --model folder or graph, else cubic].")
 @click.option("--model", type=click.Path(exists=True),
               help="Model folder for a learned method (default: the model shipped for it, if any), or a graph file "

@@ -31,7 +31,7 @@ def export(model, dst, as_json):
     """
     from pathlib import Path
 
-    from keyfill.errors import UsageError
+    from keyfill.errors import NoSuchFile, UsageError
     from keyfill.learn.modelfile import model_folder
     from keyfill.learn.onnx import GRAPH
     from keyfill.learn.registry import METHODS, exportable, load_model
@@ -40,6 +40,8 @@ def export(model, dst, as_json):
         folder = METHODS[model].default_model()
         if dst is None and folder is not None:
             raise UsageError(f"the built-in {model} model's folder is part of keyfill; give -o FILE.onnx")
+    elif not Path(model).exists():  # a missing path is a usage error, as in every command
+        raise NoSuchFile(model, f"no such model folder, nor a method's name ({', '.join(METHODS)})")
     else:
         folder = model_folder(model)
     label, method, loaded = load_model(model)

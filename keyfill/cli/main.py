@@ -44,7 +44,32 @@ COMMANDS = {
 }
 
 
-class LazyGroup(click.Group):
+def did_you_mean(word: str, names) -> str:
+    """The hint click adds to a mistyped option (its close matches by :mod:`difflib`, in its words), for a
+    mistyped command or choice: ``" Did you mean 'complete'?"``, or ``""`` when no name is close."""
+    from difflib import get_close_matches
+
+    close = sorted(get_close_matches(word, list(names)))
+    if len(close) > 1:
+        return f" (Did you mean one of: {', '.join(map(repr, close))}?)"
+    return f" Did you mean {close[0]!r}?" if close else ""
+
+
+class SuggestingGroup(click.Group):
+    """A group whose unknown command suggests the close names of :meth:`list_commands` (click suggests only
+    among the commands added to a group; ours are found on first use)."""
+
+    def resolve_command(self, ctx, args):
+        try:
+            return super().resolve_command(ctx, args)
+        except click.UsageError as e:
+            hint = did_you_mean(click.utils.make_str(args[0]), self.list_commands(ctx))
+            if not hint or not e.message.startswith("No such command"):
+                raise
+            raise click.UsageError(e.message + hint, ctx) from None
+
+
+class LazyGroup(SuggestingGroup):
     """A click group whose subcommands live in modules imported on first use."""
 
     def __init__(self, *args, lazy: dict[str, str] | None = None, **kwargs):
@@ -56,6 +81,12 @@ class LazyGroup(click.Group):
 
     def list_commands(self, ctx):
         return sorted(set(super().list_commands(ctx)) | set(self._available()))
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as e:  # as click's Abort, which prints no blank line before ours, "interrupted"
+            raise click.exceptions.Abort() from e
 
     def get_command(self, ctx, name):
         from keyfill.cli.common import with_global_options

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from keyfill.cli.common import emit_json, progress, say
+from keyfill.cli.main import SuggestingGroup
 from keyfill.learn import registry
 from keyfill.limits import MAX_WORKERS, check_count
 
@@ -92,7 +93,7 @@ def _command(method: registry.Method) -> click.Command:
     return click.Command(method.name, callback=run, params=params, help=spec.help, short_help=method.summary)
 
 
-class TrainGroup(click.Group):
+class TrainGroup(SuggestingGroup):
     """The trainable methods of the registry as subcommands, each built on first use."""
 
     def list_commands(self, ctx):

@@ -55,7 +55,7 @@ import numpy as np
 from keyfill import limits
 from keyfill.curves import Curves
 from keyfill.edit.rig import Point
-from keyfill.errors import FormatError, KeyfillError
+from keyfill.errors import FormatError, KeyfillError, NoSuchFile
 
 
 @dataclass(frozen=True, eq=False)
@@ -443,13 +443,13 @@ def load(path: str | Path, curves: Curves, mode: str = "tangents", frame: float 
 
     ``mode`` is ``"tangents"`` (edit frames between keys) or ``"pose"`` (edit
     key poses; ``frame`` is the key for edits that give none). Raises
-    :class:`FormatError` naming the file and line.
+    :class:`FormatError` naming the file and line (:class:`NoSuchFile` when there is no file).
     """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise FormatError("no such file", path) from None
+        raise NoSuchFile(path) from None
     except (OSError, UnicodeDecodeError) as e:
         raise FormatError(f"cannot read the edit file ({e})", path) from None
     try:

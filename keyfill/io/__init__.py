@@ -23,7 +23,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from keyfill.errors import FormatError, UsageError
+from keyfill.errors import FormatError, NoSuchFile, UsageError
 from keyfill.files import atomic_output
 from keyfill.motion import Motion
 
@@ -182,7 +182,7 @@ def _read(path, format):
     read = _function(FORMATS[fmt].reader)
     p = Path(path)
     if not p.is_file():
-        raise FormatError("no such file" if not p.exists() else "not a file", p)
+        raise NoSuchFile(p, "no such file" if not p.exists() else "not a file")
     return fmt, read(p)
 
 

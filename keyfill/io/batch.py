@@ -3,9 +3,9 @@
 :func:`plan` turns the inputs of ``keyfill complete IN... -o OUTDIR/`` (files,
 folders, globs) into :class:`Item` s, one output per input under ``OUTDIR``
 with the same relative name (``--format`` changes the suffix). It refuses,
-before any work, an output folder that is a file (or named like one), a
-folder input with no motion files, and two inputs that map to the same
-output. A folder input never contributes the output folder, nor the output
+before any work, an output folder that is a file (or named like one), an
+input that does not exist, a folder input with no motion files, and two
+inputs that map to the same output. A folder input never contributes the output folder, nor the output
 folders of earlier runs (those holding a record), so ``complete . -o out/``
 can be run again and again.
 
@@ -49,7 +49,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from keyfill.errors import FormatError, KeyfillError, UsageError
+from keyfill.errors import FormatError, KeyfillError, NoSuchFile, UsageError
 from keyfill.io import FORMATS, SUFFIXES, listing
 from keyfill.limits import CONNECT_SECONDS
 
@@ -103,8 +103,10 @@ def _expand(text: str, outdir: Path) -> list[tuple[Path, Path]]:
             besides = f" outside keyfill's output folders ({', '.join(map(str, made))})" if made else ""
             raise UsageError(f"{text}: no motion files ({listing(SUFFIXES)}) in this folder{besides}")
         return [(f, f.relative_to(p)) for f in files]
-    if p.exists() or not glob.has_magic(text):
-        return [(p, Path(p.name))]  # a missing file is that input's failure, reported with the others
+    if p.exists():
+        return [(p, Path(p.name))]  # a file that cannot be read is that input's failure, reported with the others
+    if not glob.has_magic(text):
+        raise NoSuchFile(text, "no such file or folder")
     base = Path(*_prefix(p.parts)) if _prefix(p.parts) else Path(".")
     files = sorted(Path(f) for f in glob.glob(text, recursive=True))
     files = [f for f in files if f.is_file() and not _inside(f, outdir)]

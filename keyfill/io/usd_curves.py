@@ -42,7 +42,7 @@ import numpy as np
 
 from keyfill import io
 from keyfill.curves import Control, Curves
-from keyfill.errors import DataError, FormatError
+from keyfill.errors import DataError, FormatError, NoSuchFile
 from keyfill.files import quiet_stderr
 from keyfill.io import usd
 from keyfill.io.usd_custom import CURVE, CURVES, KNOT, checked
@@ -251,7 +251,7 @@ def read(path: str | Path, label=None) -> Curves:
     if Path(path).suffix.lower() not in io.suffixes("usd"):
         raise FormatError(f"not a keyfill curves file (a {io.listing(io.suffixes('usd'))} file); {hint}", label)
     if not Path(path).is_file():
-        raise FormatError("no such file", label)
+        raise NoSuchFile(label, "no such file" if not Path(path).exists() else "not a file")
     stage = usd.open_stage(path, label)
     return from_stage(stage, usd.read_stage(stage, label), label)
 

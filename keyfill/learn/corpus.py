@@ -398,12 +398,13 @@ def model_hierarchy(model_skeleton: Skeleton, folded: bool, skeleton: Skeleton, 
     offsets at ``frame`` must then match ``model_skeleton`` (:func:`bone_difference`).
 
     Raises:
-        ModelError: ``"{what} has another skeleton than the model: {first difference}{hint}"``;
-        ``hint`` (e.g. the command that trains a model for the user's clips) ends the line.
+        ModelError: ``"{what} has another skeleton than the model (...): the model's vs {what}'s: {first
+        difference}{hint}"`` (the difference names the model's side first); ``hint`` (e.g. the command that trains
+        a model for the user's clips) ends the line.
     """
     def mismatch(diff):
         return ModelError(f"{what} has another skeleton than the model ({model_skeleton.num_joints} joints, "
-                          f"top joint {model_skeleton.names[0]!r}): {diff}{hint}")
+                          f"top joint {model_skeleton.names[0]!r}): the model's vs {what}'s: {diff}{hint}")
 
     if folded:
         if len(skeleton.children(0)) != 1:

@@ -49,6 +49,16 @@ class NoSuchFile(UsageError):
         self.line = None
 
 
+class OutputError(KeyfillError):
+    """An output that cannot be written: a read-only folder, a full disk, a file-size limit (exit code 1).
+    ``path`` is the output's own name, never the temporary file keyfill wrote first; it leads the message."""
+
+    def __init__(self, path: object, reason: str):
+        super().__init__(f"{path}: cannot write the output ({reason})")
+        self.path = path
+        self.line = None
+
+
 class FormatError(KeyfillError):
     """A file that cannot be read as what it claims to be.
 

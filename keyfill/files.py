@@ -21,7 +21,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from keyfill.errors import UsageError
+from keyfill.errors import KeyfillError, OutputError, UsageError
 
 #: temporary files are ``.<stem>.k<pid>.<random>.part<suffix>``; a USD export adds its own
 #: ``.<stem>.k<pid>.<random>.part.XXXXXX`` beside it. The pid tells a live writer from a dead one.
@@ -30,6 +30,8 @@ _PART = re.compile(r"\.(?P<stem>.*)\.k(?P<pid>[0-9]+)\.[A-Za-z0-9_]+\.part(?:\..
 _LEGACY_PART = re.compile(r"\.(?P<stem>.*)\.[a-z0-9_]{8}\.part(?:\..*)?")
 #: a temporary file of the old naming is taken as abandoned after this many seconds
 LEGACY_STALE_S = 3600.0
+#: how USD's C++ writer reports an OS error (a full disk, a file-size limit) in the Tf.ErrorException it raises
+_WRITER_FAILED = re.compile(r"Error occurred writing file: ([^'\n]+)")
 
 
 def _alive(pid: int) -> bool:
@@ -90,7 +92,10 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     The temporary file keeps ``path``'s suffix (writers such as USD pick their
     format from it). On any error it is removed, so no partial output remains;
     temporary files of ``path`` left by a killed run are removed first (see
-    :func:`remove_stale`).
+    :func:`remove_stale`). An :class:`OSError` of the writing (a read-only
+    folder, a full disk, a file-size limit) becomes an :class:`OutputError`
+    naming ``path``, not the temporary file, and so does the error USD's writer
+    raises for one (its text holds the OS's reason).
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
@@ -99,7 +104,11 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     if path.is_dir():
         raise UsageError(f"{path}: is a folder, not a file")
     remove_stale(folder, path.stem)
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.k{os.getpid()}.", suffix=f".part{path.suffix}", dir=folder)
+    try:
+        fd, name = tempfile.mkstemp(prefix=f".{path.stem}.k{os.getpid()}.", suffix=f".part{path.suffix}",
+                                    dir=folder)
+    except OSError as e:
+        raise OutputError(path, e.strerror or str(e)) from None
     os.close(fd)
     tmp = Path(name)
     try:
@@ -108,10 +117,15 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         tmp.unlink(missing_ok=True)
         for extra in folder.glob(glob.escape(tmp.name.removesuffix(path.suffix)) + ".*"):
             extra.unlink(missing_ok=True)  # a USD export's own temporary file
+        if isinstance(e, OSError) and not isinstance(e, BrokenPipeError):
+            raise OutputError(path, e.strerror or str(e)) from None
+        failed = _WRITER_FAILED.search(str(e)) if not isinstance(e, KeyfillError) else None
+        if failed is not None:
+            raise OutputError(path, failed.group(1)) from None
         raise
 
 

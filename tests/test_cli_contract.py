@@ -5,7 +5,11 @@ the one ``keyfill: error:`` line and what the folder holds afterwards."""
 from __future__ import annotations
 
 import json
+import os
+import resource
 import shutil
+import subprocess
+import sys
 
 import pytest
 from conftest import DATA, run
@@ -193,3 +197,75 @@ def test_an_interrupt_is_one_line_without_a_blank_line_before_it(walks, capsys, 
     assert (code, out) == ((130, "") if signal is None else (128 + signal, ""))
     assert err == f"keyfill: error: {'interrupted' if signal is None else 'terminated'}\n"
     assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+# --- outputs that cannot be written -------------------------------------------------------------------
+
+
+def keyfill(*args, limit: int | None = None, stdout=subprocess.PIPE, cwd=None) -> tuple[int, str]:
+    """``python -m keyfill ARGS`` in a subprocess (under a file-size limit of ``limit`` bytes): ``(code, stderr)``."""
+    def limited():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    proc = subprocess.run([sys.executable, "-m", "keyfill", *map(str, args)], stdout=stdout, stderr=subprocess.PIPE,
+                          text=True, cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)}, check=False,
+                          preexec_fn=None if limit is None else limited, timeout=120)
+    return proc.returncode, proc.stderr
+
+
+@pytest.mark.parametrize("suffix", [".bvh", ".usda", ".usdc", ".usd", ".glb", ".gltf"])
+def test_a_file_size_limit_is_one_line_naming_the_output_and_leaves_nothing(walks, suffix):
+    """A full disk as the writer meets it: each write past the limit fails with EFBIG (Python ignores SIGXFSZ);
+    USD's C++ writer reports it inside its own exception."""
+    (walks / "out").mkdir()
+    dst = walks / "out" / f"walk{suffix}"
+    code, err = keyfill("convert", "walk.bvh", dst, limit=8192, cwd=walks)
+    named = dst.with_suffix(".bin") if suffix == ".gltf" else dst  # the glTF's buffer is written first
+    assert code == 1 and one_line(err) == f"{named}: cannot write the output (File too large)"
+    assert listing(walks / "out") == []
+
+
+@pytest.mark.parametrize("args,named", [
+    (("complete", "walk.bvh", "--key-every", "3", "-o", "/sys/x.bvh"), "/sys/x.bvh"),
+    (("convert", "walk.bvh", "/sys/x.usda"), "/sys/x.usda"),
+    (("complete", "walk.bvh", "b.bvh", "--key-every", "3", "-o", "/sys/kernel/"), "/sys/kernel"),
+    (("convert", "walk.bvh", "b.bvh", "-o", "/sys/new/"), "/sys/new"),
+])
+def test_an_unwritable_place_is_one_line_naming_it(walks, capsys, args, named):
+    code, _, err = run(capsys, *args)
+    line = one_line(err)
+    assert code == 1 and line.startswith(f"{named}: cannot write the output (") and ".part" not in line
+    assert listing(walks) == ["b.bvh", "walk.bvh"]
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder")
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_read_only_folder_is_one_line_naming_it(walks, capsys, batch):
+    (walks / "ro").mkdir()
+    (walks / "ro").chmod(0o555)
+    try:
+        args = ("walk.bvh", "b.bvh", "-o", "ro/") if batch else ("walk.bvh", "-o", "ro/o.bvh")
+        code, _, err = run(capsys, "complete", *args, "--key-every", "3")
+        assert code == 1 and one_line(err) == f"{'ro' if batch else 'ro/o.bvh'}: cannot write the output " \
+                                              "(Permission denied)"
+        assert listing(walks / "ro") == []
+    finally:
+        (walks / "ro").chmod(0o755)
+
+
+def test_a_batch_past_the_file_size_limit_names_each_output_and_leaves_no_part_file(walks):
+    code, err = keyfill("complete", "walk.bvh", "b.bvh", "--key-every", "3", "-o", "out/", "--format", "usda",
+                        limit=8192, cwd=walks)
+    lines = err.strip().splitlines()
+    assert code == 1 and "Traceback" not in err and "internal error" not in err
+    assert lines[:2] == [f"keyfill: error: {n}.bvh: out/{n}.usda: cannot write the output (File too large)"
+                         for n in ("b", "walk")]
+    assert not [p for p in listing(walks / "out") if ".part" in p or p.endswith(".usda")]
+
+
+@pytest.mark.parametrize("args", [("convert", "walk.bvh", "-", "--format", "bvh"), ("info", "walk.bvh", "--json"),
+                                  ("info", "walk.bvh")])
+def test_a_full_standard_output_is_one_line(walks, args):
+    with open("/dev/full", "w") as full:
+        code, err = keyfill(*args, stdout=full, cwd=walks)
+    assert code == 1 and one_line(err) == "cannot write standard output (No space left on device)"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import importlib
 import importlib.util
 import os
@@ -143,7 +144,24 @@ def _error(message: str, exit_code: int = 1, file=None, line: int | None = None)
 
         error = {"message": message, "file": None if file is None else str(file), "line": line,
                  "exit_code": exit_code}
-        click.echo(json.dumps({"error": error}, indent=2, sort_keys=True))
+        try:
+            click.echo(json.dumps({"error": error}, indent=2, sort_keys=True))
+        except OSError:  # standard output is what failed (a full disk): the line on stderr says so
+            _drop_stdout()
+
+
+def _drop_stdout() -> None:
+    """Point standard output at the null device, so that Python's flush at exit does not fail a second time."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError):  # no real file behind sys.stdout (a test's capture)
+        pass
+
+
+#: errors of a write that the disk refused (full, over a quota or the file-size limit, failing)
+_DISK_FULL = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EIO}
 
 
 class Terminated(KeyboardInterrupt):
@@ -257,6 +275,11 @@ def _main(args: list[str], debug: bool) -> int:
     except Exception as e:  # a bug: say so in one line unless --debug
         if debug:
             raise
+        if isinstance(e, OSError) and e.filename is None and e.errno in _DISK_FULL:
+            # a write to standard output (files are written through atomic_output, which names them)
+            _drop_stdout()
+            _error(f"cannot write standard output ({e.strerror})")
+            return 1
         _error(f"internal error: {type(e).__name__}: {e} (run with --debug for the traceback)")
         return 1
 

@@ -49,7 +49,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from keyfill.errors import FormatError, KeyfillError, NoSuchFile, UsageError
+from keyfill.errors import FormatError, KeyfillError, NoSuchFile, OutputError, UsageError
 from keyfill.io import FORMATS, SUFFIXES, listing
 from keyfill.limits import CONNECT_SECONDS
 
@@ -408,7 +408,8 @@ class Summary:
 
 
 def prepare_outputs(items: list[Item]) -> None:
-    """Create the output folders of ``items`` and remove what a killed run left of their outputs.
+    """Create the output folders of ``items``, check that they take files (an :class:`OutputError` naming the
+    folder), and remove what a killed run left of their outputs.
 
     An interrupted write (Ctrl-C) removes its temporary file itself; a run
     killed outright (SIGKILL, a lost node) cannot, and leaves
@@ -419,7 +420,12 @@ def prepare_outputs(items: list[Item]) -> None:
         dst = Path(it.dst)
         folders.setdefault(dst.parent, set()).add(dst.stem + "\0" + dst.suffix)
     for folder, names in folders.items():
-        folder.mkdir(parents=True, exist_ok=True)
+        try:  # a folder that cannot take files is one error before any work, not one per output
+            folder.mkdir(parents=True, exist_ok=True)
+            os.close(os.open(probe := folder / f".keyfill-probe.k{os.getpid()}", os.O_CREAT | os.O_WRONLY, 0o600))
+            os.unlink(probe)
+        except OSError as e:
+            raise OutputError(folder, e.strerror or str(e)) from None
         for entry in os.scandir(folder):
             name = entry.name
             if not (name.startswith(".") and ".part" in name and entry.is_file()):

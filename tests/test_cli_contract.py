@@ -269,3 +269,77 @@ def test_a_full_standard_output_is_one_line(walks, args):
     with open("/dev/full", "w") as full:
         code, err = keyfill(*args, stdout=full, cwd=walks)
     assert code == 1 and one_line(err) == "cannot write standard output (No space left on device)"
+
+
+# --- the exit-code table of docs/robustness.md, as run ------------------------------------------------
+
+BAD = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 x\n"  # a BVH file cut short: bad data, exit 1
+
+#: (command, misuse, args, exit code): each row is a cell of the table in docs/robustness.md
+TABLE = [
+    ("info", "unknown option", ("info", "walk.bvh", "--bogus"), 2),
+    ("info", "bad data", ("info", "bad.bvh"), 1),
+    ("convert", "format against suffix", ("convert", "walk.bvh", "o.bvh", "--format", "usda"), 2),
+    ("convert", "bad data", ("convert", "bad.bvh", "o.usda"), 1),
+    ("convert", "unwritable output", ("convert", "walk.bvh", "/sys/o.usda"), 1),
+    ("retarget", "unknown option", ("retarget", "walk.bvh", "--to", "b.bvh", "-o", "o.bvh", "--bogus"), 2),
+    ("retarget", "bad data", ("retarget", "bad.bvh", "--to", "walk.bvh", "-o", "o.bvh"), 1),
+    ("retarget", "unwritable output", ("retarget", "walk.bvh", "--to", "b.bvh", "-o", "/sys/o.bvh"), 1),
+    ("complete", "option out of range", ("complete", "walk.bvh", "--key-every", "0", "-o", "o.bvh"), 2),
+    ("complete", "bad data", ("complete", "bad.bvh", "--key-every", "3", "-o", "o.bvh"), 1),
+    ("complete", "unwritable output", ("complete", "walk.bvh", "--key-every", "3", "-o", "/sys/o.bvh"), 1),
+    ("simulate", "option out of range", ("simulate", "-o", "sim", "--count", "0"), 2),
+    ("simulate", "unwritable output", ("simulate", "-o", "/sys/sim", "--count", "1"), 1),
+    ("train", "unknown method", ("train", "arnnn", "data", "-o", "m"), 2),
+    ("train", "bad data", ("train", "arnn", "bad.bvh", "-o", "m"), 1),
+    ("evaluate", "option out of range", ("evaluate", "cubic", "walk.bvh", "--lengths", "x"), 2),
+    ("evaluate", "bad data", ("evaluate", "cubic", "bad.bvh"), 1),
+    ("edit-tangents", "unknown option", ("edit-tangents", CURVES, "--edit", EDIT, "-o", "o.usda", "--bogus"), 2),
+    ("edit-tangents", "bad data", ("edit-tangents", "bad.bvh", "--edit", EDIT, "-o", "o.usda"), 1),
+    ("edit-tangents", "unwritable output", ("edit-tangents", CURVES, "--edit", EDIT, "-o", "/sys/o.usda"), 1),
+    ("pose", "unknown option", ("pose", CURVES, "--edit", EDIT, "--frame", "10", "-o", "o.usda", "--bogus"), 2),
+    ("pose", "bad data", ("pose", "bad.bvh", "--edit", EDIT, "--frame", "10", "-o", "o.usda"), 1),
+    ("plot", "unknown option", ("plot", "walk.bvh", "-o", "p.png", "--bogus"), 2),
+    ("plot", "bad data", ("plot", "bad.bvh", "-o", "p.png"), 1),
+    ("plot", "unwritable output", ("plot", "walk.bvh", "-o", "/sys/p.png"), 1),
+    ("preview", "option out of range", ("preview", "walk.bvh", "-o", "p.gif", "--step", "0"), 2),
+    ("preview", "bad data", ("preview", "bad.bvh", "-o", "p.gif"), 1),
+    ("preview", "unwritable output", ("preview", "walk.bvh", "-o", "/sys/p.gif"), 1),
+    ("export", "unknown option", ("export", "arnn", "--bogus"), 2),
+    ("export", "bad data", ("export", "adir"), 1),
+    ("export", "unwritable output", ("export", "arnn", "-o", "/sys/x.onnx"), 1),
+    ("keyfill", "unknown command", ("compelte", "walk.bvh"), 2),
+]
+
+
+@pytest.mark.parametrize("command,misuse,args,code", TABLE, ids=[f"{c} {m}" for c, m, _, _ in TABLE])
+def test_every_command_s_misuse_has_the_documented_exit_code(walks, capsys, command, misuse, args, code):
+    if command == "simulate":
+        pytest.importorskip("pybullet")
+    if command == "export":
+        pytest.importorskip("torch")
+    (walks / "bad.bvh").write_text(BAD)
+    (walks / "adir").mkdir()
+    before = listing(walks)
+    got, _, err = run(capsys, *args)
+    line = one_line(err)
+    assert got == code, (got, line)
+    assert listing(walks) == before and ".part" not in line
+    if misuse == "unwritable output":
+        assert line.startswith(args[args.index("-o") + 1 if "-o" in args else 2].rstrip("/")) and \
+            "cannot write the output" in line
+
+
+def test_the_table_in_the_docs_is_the_table_run():
+    """docs/robustness.md's exit-code table lists each cell of TABLE and MISSING with its code."""
+    text = (ROOT / "docs" / "robustness.md").read_text()
+    rows = {line.split("|")[1].strip().strip("`"): line for line in text.splitlines()
+            if line.startswith("| `") and line.count("|") == 7}
+    columns = ["usage", "missing path", "bad data", "unwritable output", "interrupted"]
+    for command, misuse, _, code in TABLE:
+        if command == "keyfill":
+            continue
+        cell = {"bad data": 2, "unwritable output": 3}.get(misuse, 0)
+        assert rows[command].split("|")[2 + cell].strip() == str(code), (command, misuse, columns[cell])
+    for args in MISSING:
+        assert rows[args[0]].split("|")[3].strip() == "2", args[0]

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from keyfill.errors import DataError, UsageError
+from keyfill.errors import DataError, OutputError, UsageError
 from keyfill.io import hops as ds
 from keyfill.limits import CONNECT_SECONDS, check_seed
 from keyfill.motion import Motion
@@ -152,7 +152,10 @@ def prepare_folder(folder: Path, config: dict, force: bool) -> None:
         for p in folder.iterdir():
             if p.is_file() and _ours(p.name):
                 p.unlink()
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(folder, e.strerror or str(e)) from None
     from keyfill.files import atomic_output
 
     with atomic_output(cfg_path) as tmp:

@@ -184,7 +184,8 @@ def test_info_rig_mixamo(capsys):
     assert "  clavicle_l: mixamorig:LeftShoulder" in roles and "  shin_r: mixamorig:RightLeg" in roles
     models = lines[lines.index("shipped human models:") + 1:]
     assert models == ["  transformer (bandai2-transformer, 30 fps): through retargeting",
-                      "  gan (bandai2-gan, 30 fps): through retargeting"]
+                      "  gan (bandai2-gan, 30 fps): through retargeting",
+                      "  match (bandai2-library, 30 fps): through retargeting"]
     code, out, _ = run(capsys, "info", MIXAMO, "--rig", "--json")
     d = json.loads(out)
     assert d["rig"]["hand_l"] == "mixamorig:LeftHand" and d["rig"]["neck"] == ["mixamorig:Neck"]

@@ -57,6 +57,14 @@ from keyfill.learn.registry import ALIASES, METHODS
 @click.option("--ground", type=float, metavar="HEIGHT",
               help="Height of the ground along the up axis, in IN's units, for --feet (default: the lowest foot "
                    "at the keys).")
+@click.option("--library", type=click.Path(exists=True, file_okay=False), metavar="LIB",
+              help="Motion library for --method match (keyfill library build) [default: the shipped library of "
+                   "the Bandai-Namco skeleton, models/bandai, CC BY-NC 4.0].")
+@click.option("--guard", type=click.Choice(["fallback", "warn", "off"]),
+              help="What the human methods (transformer, gan, match) do with gaps whose keys or output are unlike "
+                   "anything their model or library knows (docs/match.md): fallback (the default) fills them with "
+                   "cubic and says so on stderr, warn only says so, off does not check. --json lists each gap's "
+                   "score.")
 @click.option("--runtime", type=click.Choice(["auto", "torch", "onnx"]), default="auto", show_default=True,
               help="Run a learned model with torch or its exported ONNX graph (onnxruntime, no torch import; see "
                    "'keyfill export'); auto: the graph when onnxruntime is installed and the model folder holds "
@@ -66,7 +74,7 @@ from keyfill.learn.registry import ALIASES, METHODS
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
-             device, dna, dna_count, rig_map, feet, ground, runtime, fmt, in_fmt, workers, scheduler, connect_timeout,
+             device, dna, dna_count, rig_map, feet, ground, library, guard, runtime, fmt, in_fmt, workers, scheduler, connect_timeout,
              force, batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
@@ -123,6 +131,9 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete walk.bvh --keys 0,300,600 --method gan --dna salsa.bvh --dna-count 4 -o salsa_walk.bvh
       keyfill complete mixamo.bvh --key-every 10 --method transformer -o out.bvh     (retargeted to the model)
       keyfill complete robot.bvh --key-every 10 --method transformer --rig-map robot.toml -o out.bvh
+      keyfill complete walk.bvh --key-every 60 --method match -o walk_matched.bvh   (real steps, shipped library)
+      keyfill complete take.bvh --key-every 60 --method match --library mylib --seed 2 -o take_2.bvh
+      keyfill complete sit.bvh --key-every 15 --method transformer --guard warn -o sit.bvh
       keyfill complete walk.bvh --key-every 30 --method cubic --feet lock -o walk_planted.bvh
       keyfill complete walk.bvh --key-every 30 --method transformer --feet free -o walk_raw.bvh
     """
@@ -135,7 +146,8 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
         method = kind_of(model) if model is not None else "cubic"
 
     options = CompleteOptions(model=model, exact_keys=exact_keys, seed=seed, device=device, runtime=runtime, dna=dna,
-                              dna_count=dna_count, rig_map=rig_map, feet=feet, ground=ground)
+                              dna_count=dna_count, rig_map=rig_map, feet=feet, ground=ground,
+                              library=library, guard=guard)
     if rig_map is not None:  # a damaged rig map is refused before any file is read
         from keyfill.characters.humanoid import read_rig_map
 
@@ -165,10 +177,20 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
                               key_plane)
     result = run(motion, keys, method, options)
     io.save(result.motion, dst, fmt, source=src)
+    say_guard(src, result.info)
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})
     elif dst != "-":
         say(f"wrote {dst}: {motion.num_frames} frames completed from {len(keys)} keys with {method}")
+
+
+def say_guard(src: str, info: dict) -> None:
+    """One stderr line when the guard found gaps unlike anything the model knows (docs/match.md)."""
+    block = info.get("guard")
+    if block and block["unfamiliar"]:
+        what = "filled by cubic" if block["mode"] == "fallback" else "kept (--guard warn)"
+        say(f"keyfill: {src}: {block['unfamiliar']} of {block['gaps_scored']} gaps unlike anything "
+            f"{block['index']} knows: {what}")
 
 
 def check_method(spec) -> None:

@@ -42,6 +42,7 @@ COMMANDS = {
     "plot": "keyfill.cli.plot:plot",
     "preview": "keyfill.cli.preview:preview",
     "export": "keyfill.cli.export:export",
+    "library": "keyfill.cli.library:library",
 }
 
 

@@ -34,8 +34,14 @@ class CompleteOptions:
             (:mod:`keyfill.learn.rig_bridge`); None maps the roles from the skeleton's names and hierarchy.
         feet: ``"lock"`` holds the feet still where they touch the ground
             (:func:`keyfill.characters.feet.lock_feet`), ``"free"`` leaves the method's output as it is;
-            None: ``"free"`` (docs/feet.md says why locking is not the default yet).
+            None: the method's own default (``"lock"`` for ``match``, whose real steps locking keeps planted;
+            ``"free"`` for the others: docs/feet.md and docs/match.md say why).
         ground: the ground's height along the up axis (skeleton units) for ``feet``; None: from the keys.
+        library: a motion library folder (``keyfill library build``) for the methods that take one
+            (``match``); None: the shipped library.
+        guard: what human methods do with gaps unlike anything their model or library knows
+            (:mod:`keyfill.learn.library.guard`): ``"fallback"`` fills them with the cubic spline and reports
+            them, ``"warn"`` reports them only, ``"off"`` does not score them; None: ``"fallback"``.
     """
 
     model: str | None = None
@@ -48,11 +54,15 @@ class CompleteOptions:
     rig_map: str | None = None
     feet: str | None = None
     ground: float | None = None
+    library: str | None = None
+    guard: str | None = None
 
     def __post_init__(self):
         check_seed(self.seed)
         if self.feet not in (None, "lock", "free"):
             raise UsageError(f"feet is lock or free, not {self.feet!r}", params="feet")
+        if self.guard not in (None, "fallback", "warn", "off"):
+            raise UsageError(f"guard is fallback, warn or off, not {self.guard!r}", params="guard")
         if self.ground is not None and not (isinstance(self.ground, (int, float)) and math.isfinite(self.ground)):
             raise UsageError(f"ground must be a finite number, not {self.ground!r}", params="ground")
 

@@ -55,7 +55,11 @@ class Method:
         dna: whether it takes a Motion DNA (``CompleteOptions.dna`` / ``dna_count``).
         aliases: other names it answers to (``interpolation``: the LaFAN1 benchmark's word for ``linear``).
         humanoid: its models serve one human skeleton and frame rate, and any humanoid rig at any frame rate
-            through :mod:`keyfill.learn.rig_bridge` (the module's ``model_path(options, keys)`` names the model).
+            through :mod:`keyfill.learn.rig_bridge` (the module's ``model_path(options, keys)`` names the model,
+            its ``served(options, keys)``, where it has one, what the model serves). Its gaps are scored by
+            the guard (:mod:`keyfill.learn.library.guard`) against the model's pose index.
+        library: it takes a motion library (``CompleteOptions.library``) as its model.
+        feet: its ``feet`` when the options give none (``"free"`` or ``"lock"``).
     """
 
     name: str
@@ -70,6 +74,8 @@ class Method:
     dna: bool = False
     aliases: tuple[str, ...] = ()
     humanoid: bool = False
+    library: bool = False
+    feet: str = "free"
 
     @property
     def learned(self) -> bool:
@@ -129,6 +135,9 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
            training="keyfill.learn.gan.train_command", export="keyfill.learn.gan.onnx:export_onnx",
            onnx="keyfill.learn.gan.onnx", partial_keys=True, dna=True, humanoid=True),
+    Method("match", "in-betweens matched from a library of real motion (motion matching through the keys)",
+           "keyfill.learn.match.model:complete", module="keyfill.learn.match.model", humanoid=True, library=True,
+           feet="lock"),
 )}
 
 
@@ -195,6 +204,12 @@ def load_model(name_or_path: str, device: str = "cpu") -> tuple[str, Method, obj
 def _no_model(m: Method, option: bool = True) -> KeyfillError:
     """The error of using ``m``'s shipped model when it has none here: the human models' distribution is not
     installed (they are CC BY-NC 4.0, apart from keyfill), or no model ships for ``m``."""
+    if m.library:
+        from keyfill.learn.installed_models import HOW_TO_GET
+
+        return ModelError(f"the shipped motion library is not installed: {HOW_TO_GET}; or give library LIB, one of "
+                          f"your own (build one with 'keyfill library build CLIPS -o LIB')",
+                          params="library" if option else ())
     if m.humanoid:
         from keyfill.learn.installed_models import missing
 
@@ -223,6 +238,16 @@ def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
                          params=("dna", "dna_count"))
     if not m.learned and options.model is not None:
         raise UsageError(f"model applies to learned methods, not to {m.name!r}", params="model")
+    if options.library is not None and not m.library:
+        raise UsageError(f"library applies to methods that match from a motion library "
+                         f"({', '.join(n.name for n in METHODS.values() if n.library)}), not to {m.name!r}",
+                         params="library")
+    if options.model is not None and m.library:
+        raise UsageError(f"{m.name} takes a motion library (library), not a model", params=("model", "library"))
+    if options.guard is not None and not m.humanoid:
+        raise UsageError(f"guard applies to the human methods "
+                         f"({', '.join(n.name for n in METHODS.values() if n.humanoid)}), not to {m.name!r}",
+                         params="guard")
     if options.rig_map is not None and not m.humanoid and options.feet != "lock":
         raise UsageError(f"rig_map applies to methods whose models serve any humanoid rig "
                          f"({', '.join(n.name for n in METHODS.values() if n.humanoid)}) and to feet lock, "
@@ -244,7 +269,7 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     m = get(method)
     keys = checked_keys(m, motion, keys)
     options = checked_options(m, options)
-    if m.learned and options.model is None and m.default_model() is None:
+    if m.learned and (options.library if m.library else options.model) is None and m.default_model() is None:
         raise _no_model(m)
     graph = _graph(m, options)
     bridged = _on_model_rig(m, motion, keys, options)
@@ -256,9 +281,70 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
             raise result
     else:
         result = m.function()(motion, keys, options)
+    result = guarded(m, motion, keys, options, result)
     result = with_feet(m, result, keys, options)
     result.info = reported(m, motion, keys, options, result)
     return result
+
+
+def guarded(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, result: Completion) -> Completion:
+    """``result`` with its gaps scored by the guard (:mod:`keyfill.learn.library.guard`) against what ``m``'s
+    model or library knows, and, with ``guard`` ``"fallback"`` (the default), the unfamiliar ones filled by
+    the cubic spline; ``info["guard"]`` reports it (None where the model has no pose index). A completion
+    through the rig bridge was scored on the model's skeleton (its inner completion only warns); the
+    fallback is then made here, on the motion's own skeleton."""
+    mode = options.guard or "fallback"
+    if not m.humanoid or mode == "off" or keys.partial:
+        return result
+    import numpy as np
+
+    from keyfill.learn.library import guard
+
+    block = result.info.get("guard")
+    if block is None and "guard" not in result.info:
+        index = _pose_index(m, options, keys)
+        if index is None:
+            result.info["guard"] = None
+            return result
+        from keyfill.learn.library.store import frames_of
+
+        frames = frames_of(model_served(m, options, keys).skeleton)
+        block = guard.report(index, mode, keys, guard.scores(index, frames, motion, keys, result.motion))
+    if block is None:
+        return result
+    block = {**block, "mode": mode, "filled_by_cubic": block["unfamiliar"] if mode == "fallback" else 0}
+    result.info["guard"] = block
+    if mode == "fallback" and block["unfamiliar"]:
+        unfamiliar = np.array([g["unfamiliar"] for g in block["gaps"]], dtype=bool)
+        return Completion(guard.fall_back(result.motion, motion, keys, unfamiliar), result.info)
+    return result
+
+
+def model_served(m: Method, options: CompleteOptions, keys: Keys | None = None):
+    """What the model (or library) of the ``humanoid`` method ``m`` serves under ``options``
+    (:class:`keyfill.learn.rig_bridge.Served`), for ``keys`` (a method may choose its model by them; None:
+    the default model); reads a model's config, no weights."""
+    served_by = getattr(m.implementation(), "served", None)
+    if served_by is not None:
+        return served_by(options, keys)
+    from keyfill.learn import installed_models, rig_bridge
+
+    path = m.implementation().model_path(options, keys) if keys is not None else options.model or m.default_model()
+    return rig_bridge.served(installed_models.require(path, m.name))
+
+
+def _pose_index(m: Method, options: CompleteOptions, keys: Keys):
+    """The :class:`~keyfill.learn.library.index.PoseIndex` of ``m``'s model or library, or None when the model
+    folder has none (an exported graph alone, a model trained before pose indexes)."""
+    from keyfill.learn.library.index import library_index, load_pose_index
+    from keyfill.learn.onnx import is_graph
+
+    if is_graph(options.model):
+        return None
+    path = m.implementation().model_path(options, keys)
+    if m.library:
+        return library_index(m.implementation().load(path).library)
+    return load_pose_index(path, Path(path).name)
 
 
 def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, result: Completion) -> dict:
@@ -301,10 +387,11 @@ def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, re
 
 def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOptions) -> Completion:
     """``result`` with its feet locked (:func:`keyfill.characters.feet.lock_feet`) when ``options.feet`` is
-    ``"lock"``; ``info`` then gives the foot skating (cm/s) before and after. The default (None) is ``"free"``
-    for every method: measured on held-out styles, locking lowers foot skating by 5-15 % only and can raise
-    the gap error by up to 19 % (docs/feet.md), so it is asked for, not imposed."""
-    if options.feet != "lock":
+    ``"lock"``, or is None and the method's default (:attr:`Method.feet`) is; ``info`` then gives the foot
+    skating (cm/s) before and after. The default is ``"free"`` for the learned methods and splines: measured
+    on held-out styles, locking lowers their foot skating by 5-15 % only and can raise the gap error by up to
+    19 % (docs/feet.md); ``"lock"`` for ``match``, whose real steps it keeps planted (docs/match.md)."""
+    if (options.feet or m.feet) != "lock":
         return result
     from keyfill.characters.feet import lock_feet
     from keyfill.characters.humanoid import read_rig_map
@@ -331,12 +418,13 @@ def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOption
 
     if not m.humanoid or is_graph(options.model):
         return None
-    from keyfill.learn import installed_models, rig_bridge
+    from keyfill.learn import rig_bridge
 
-    model = rig_bridge.served(installed_models.require(m.implementation().model_path(options, keys), m.name))
+    model = model_served(m, options, keys)
     if not rig_bridge.needed(model, motion, keys):
         return None
-    inner = replace(options, feet="free")  # the feet are locked once, on the motion's own rig
+    # the feet are locked once, and unfamiliar gaps filled once, on the motion's own rig
+    inner = replace(options, feet="free", guard="off" if options.guard == "off" else "warn")
     return rig_bridge.complete_on_model_rig(motion, keys, lambda mm, kk: complete(mm, kk, m.name, inner),
                                             model, options, hint=getattr(m.implementation(), "TRAIN_HINT", ""))
 
@@ -380,7 +468,7 @@ def humanoid_fit(motion: Motion, rig_map: dict | None = None, label: str = "the 
             models[m.name] = {"model": None, "fits": "no", "reason": f"its shipped models are not installed: {HOW_TO_GET}"}
             continue
         try:
-            served = rig_bridge.served(path)
+            served = model_served(m, CompleteOptions())
         except ModelError as e:
             models[m.name] = {"model": path.name, "fits": "no", "reason": str(e)}
             continue
@@ -413,7 +501,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
     options = options or CompleteOptions()
     m = get(method)
     options = checked_options(m, options)
-    if m.learned and options.model is None and m.default_model() is None:
+    if m.learned and (options.library if m.library else options.model) is None and m.default_model() is None:
         raise _no_model(m)
     results: list = [None] * len(jobs)
     ready = []
@@ -428,7 +516,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
             try:
                 bridged = _on_model_rig(m, motion, keys, options)
                 if bridged is not None:
-                    bridged = with_feet(m, bridged, keys, options)
+                    bridged = with_feet(m, guarded(m, motion, keys, options, bridged), keys, options)
                     bridged.info = reported(m, motion, keys, options, bridged)
             except KeyfillError as e:
                 bridged = e
@@ -449,7 +537,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
     for (i, motion, keys), out in zip(ready, outs):
         if isinstance(out, Completion):
             try:
-                out = with_feet(m, out, keys, options)
+                out = with_feet(m, guarded(m, motion, keys, options, out), keys, options)
             except KeyfillError as e:
                 results[i] = e
                 continue

@@ -1,0 +1,220 @@
+"""Nearest poses: the search tree of a library and the pose index that says how familiar a pose is.
+
+Both work on pose features (:mod:`keyfill.learn.library.features`: joint positions in the pose's own ground
+frame, meters). Distances between poses are root-mean-square joint distances (the Euclidean distance of the
+features divided by ``sqrt(J)``), in meters.
+
+* :func:`principal_axes` and :class:`Tree`: scipy's ``cKDTree`` over the features projected on their first
+  principal axes (16 of 66 for a 22-joint body keep about 99 % of the variance), for the library search's
+  candidates; each candidate's full cost is computed afterwards from the full features.
+* :func:`spread`: a library's own density, the median distance from a sample of its poses to the nearest
+  pose of *another* clip. A pose is unfamiliar when it lies many spreads from every known pose.
+* :class:`PoseIndex`: the poses a model or library knows (a model folder's ``pose_index.npz``, or a
+  library's features), with :meth:`PoseIndex.familiarity`: distance to the nearest known pose in spreads.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from keyfill.errors import ModelError
+
+#: poses sampled for :func:`spread`
+SPREAD_SAMPLE = 2000
+#: the file of a model folder's pose index
+POSE_INDEX = "pose_index.npz"
+#: principal axes of a tree (16 of 66 for a 22-joint body keep about 99 % of the variance)
+TREE_DIMS = 16
+#: nearest poses on the principal axes among which :meth:`PoseIndex.familiarity` takes the nearest in full
+CANDIDATES = 16
+#: at most this many poses in a pose index (evenly spaced frames of its corpus or library)
+MAX_INDEX_POSES = 30_000
+
+
+def principal_axes(features: np.ndarray, dims: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(mean (D,), basis (D, d))`` of ``features (N, D)``: the first ``d = min(dims, D)`` principal axes
+    (computed on at most 50,000 evenly spaced rows)."""
+    x = np.asarray(features[:: max(1, len(features) // 50_000)], dtype=np.float64)
+    mean = x.mean(axis=0)
+    _, _, vt = np.linalg.svd(x - mean, full_matrices=False)
+    return mean.astype(np.float32), np.ascontiguousarray(vt[: min(dims, x.shape[1])].T, dtype=np.float32)
+
+
+def spread(features: np.ndarray, clip_of: np.ndarray, sample: int = SPREAD_SAMPLE) -> float:
+    """The median RMS joint distance (m) from ``sample`` evenly spaced poses of ``features (N, D)`` to the
+    nearest pose of another clip (``clip_of (N,)``); with one clip, to the nearest pose at least one second
+    (30 frames) away."""
+    from scipy.spatial import cKDTree
+
+    f = np.asarray(features, dtype=np.float32)
+    J = f.shape[1] // 3
+    pick = np.unique(np.linspace(0, len(f) - 1, min(sample, len(f))).round().astype(np.int64))
+    tree = cKDTree(f)
+    k = min(len(f), 64)
+    dist, idx = tree.query(f[pick], k=k)
+    dist, idx = dist.reshape(len(pick), k), idx.reshape(len(pick), k)
+    one_clip = len(np.unique(clip_of)) == 1
+    other = (np.abs(idx - pick[:, None]) >= 30) if one_clip else (clip_of[idx] != clip_of[pick][:, None])
+    best = np.where(other, dist, np.inf).min(axis=1)
+    best = best[np.isfinite(best)]
+    if len(best) == 0:  # every sampled pose's 64 nearest are its own clip's: a sparse library
+        best = dist[:, -1]
+    return float(max(np.median(best) / np.sqrt(J), 1e-4))
+
+
+class Tree:
+    """A ``cKDTree`` over features projected on principal axes (``mean``, ``basis``); :meth:`query` gives
+    the ``k`` nearest rows of the projected features for each of ``queries (Q, D)``."""
+
+    def __init__(self, features: np.ndarray, mean: np.ndarray, basis: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        self.mean, self.basis = np.asarray(mean, np.float32), np.asarray(basis, np.float32)
+        self.points = self.project(features)
+        self.tree = cKDTree(self.points, balanced_tree=False)  # median splits: 10x slower to build, no faster
+
+    def project(self, features: np.ndarray) -> np.ndarray:
+        """``(Q, d)`` float32 coordinates of ``features (Q, D)`` on the principal axes (in chunks)."""
+        out = np.empty((len(features), self.basis.shape[1]), dtype=np.float32)
+        for a in range(0, len(features), 65_536):
+            chunk = np.asarray(features[a: a + 65_536], dtype=np.float32)
+            out[a: a + 65_536] = (chunk - self.mean) @ self.basis
+        return out
+
+    def query(self, queries: np.ndarray, k: int) -> np.ndarray:
+        """``(Q, k')`` int64 rows nearest to each query, nearest first (``k' = min(k, N)``)."""
+        k = min(k, len(self.points))
+        _, idx = self.tree.query(self.project(queries), k=k)
+        return np.asarray(idx, dtype=np.int64).reshape(len(queries), k)
+
+
+@dataclass(frozen=True, eq=False)
+class PoseIndex:
+    """Poses a model or library knows: ``features (M, D)`` (meters), the corpus's ``spread`` (m) and the
+    ``threshold`` (in spreads) beyond which a pose is unfamiliar; ``name`` says whose poses they are."""
+
+    features: np.ndarray
+    spread: float
+    threshold: float
+    name: str
+
+    def _tree(self) -> Tree:
+        tree = self.__dict__.get("_cached_tree")
+        if tree is None:
+            mean, basis = principal_axes(self.features, TREE_DIMS)
+            tree = Tree(self.features, mean, basis)
+            object.__setattr__(self, "_cached_tree", tree)
+        return tree
+
+    def familiarity(self, features: np.ndarray) -> np.ndarray:
+        """``(Q,)`` distance of each of ``features (Q, D)`` to the nearest known pose, in spreads (RMS joint
+        distance over :attr:`spread`): about 1 for a pose like the corpus's own, large for one it lacks.
+
+        The nearest pose is searched among the :data:`CANDIDATES` nearest on the principal axes (the tree's),
+        by the full distance: a pose far from every known one stays far; a familiar one may score a little
+        high when its true nearest pose is not among them."""
+        q = np.asarray(features, dtype=np.float32)
+        J = self.features.shape[1] // 3
+        near = self._tree().query(q, CANDIDATES)  # (Q, k)
+        d2 = ((self.features[near] - q[:, None, :]) ** 2).sum(-1)
+        return np.sqrt(d2.min(axis=1).astype(np.float64)) / np.sqrt(J) / self.spread
+
+    def save(self, folder: str | os.PathLike) -> Path:
+        """Write ``pose_index.npz`` into a model folder (float16 features; no pickles)."""
+        path = Path(folder) / POSE_INDEX
+        np.savez_compressed(path, features=np.asarray(self.features, dtype=np.float16),
+                            spread=np.float64(self.spread), threshold=np.float64(self.threshold))
+        return path
+
+
+def load_pose_index(folder: str | os.PathLike, name: str) -> PoseIndex | None:
+    """The pose index of the model folder ``folder`` (None when it has none); a :class:`ModelError` when the
+    file is damaged or not of the expected fields, shapes and types (read without pickles)."""
+    path = Path(folder) / POSE_INDEX
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if set(z.files) != {"features", "spread", "threshold"}:
+                raise ValueError(f"fields {sorted(z.files)}")
+            feats, spread_m, threshold = z["features"], float(z["spread"]), float(z["threshold"])
+    except (OSError, ValueError, EOFError, KeyError) as e:
+        raise ModelError(f"{path}: damaged pose index ({' '.join(str(e).split())[:200]})") from None
+    if feats.dtype != np.float16 or feats.ndim != 2 or feats.shape[1] % 3 or not len(feats):
+        raise ModelError(f"{path}: damaged pose index (features {feats.dtype} {feats.shape})")
+    if not (np.isfinite(spread_m) and spread_m > 0 and np.isfinite(threshold) and threshold > 0):
+        raise ModelError(f"{path}: damaged pose index (spread {spread_m}, threshold {threshold})")
+    if not np.isfinite(feats).all():
+        raise ModelError(f"{path}: damaged pose index (features that are not finite)")
+    return PoseIndex(feats.astype(np.float32), spread_m, threshold, name)
+
+
+def library_index(library) -> PoseIndex:
+    """The pose index of a loaded library (:mod:`keyfill.learn.library.store`): the poses :func:`subsampled`
+    keeps, with the spread the build measured among them; built once per library and process."""
+    from keyfill.learn.library.guard import THRESHOLD
+
+    cached = library.__dict__.get("_pose_index")
+    if cached is None:
+        cached = PoseIndex(np.asarray(library.features[::index_step(library.num_frames)], dtype=np.float32),
+                           library.spread, THRESHOLD, library.name)
+        object.__setattr__(library, "_pose_index", cached)
+    return cached
+
+
+def index_step(frames: int) -> int:
+    """Every how many frames a pose index of ``frames`` frames keeps one (at most :data:`MAX_INDEX_POSES`)."""
+    return max(1, int(np.ceil(frames / MAX_INDEX_POSES)))
+
+
+def subsampled(features: np.ndarray, clip_of: np.ndarray, name: str) -> PoseIndex:
+    """The pose index of ``features (N, D)`` of clips ``clip_of (N,)``: evenly spaced frames, at most
+    :data:`MAX_INDEX_POSES`, their spread measured among themselves (so that an index of every 10th frame and
+    one of every frame score a pose alike), the guard's threshold."""
+    from keyfill.learn.library.guard import THRESHOLD
+
+    step = index_step(len(features))
+    feats = np.asarray(features[::step], dtype=np.float32)
+    clips = np.asarray(clip_of[::step])
+    return PoseIndex(feats, spread(feats, clips), THRESHOLD, name)
+
+
+def corpus_pose_index(corpus, name: str) -> PoseIndex:
+    """The pose index of a training corpus (:class:`keyfill.learn.corpus.Corpus`; :func:`subsampled`). A
+    :class:`~keyfill.errors.DataError` when its skeleton is no humanoid."""
+    from keyfill.kinematics import fk
+    from keyfill.learn.library.features import describe
+    from keyfill.learn.library.store import frames_of
+
+    sk = corpus.skeleton
+    frames = frames_of(sk)
+    rows = np.arange(0, len(corpus.quats), index_step(len(corpus.quats)))
+    pos = np.broadcast_to(sk.offsets, (len(rows),) + sk.offsets.shape).copy()
+    pos[:, 0] = corpus.root[rows]
+    feats = describe(fk(np.asarray(corpus.quats[rows]), pos, sk.parents)[1], frames)[0]
+    return subsampled(feats, np.searchsorted(corpus.starts, rows, side="right") - 1, name)
+
+
+def model_pose_index(model, clips, include=(), exclude=()) -> dict:
+    """Write the pose index of ``clips`` (the clips a model was trained on) into the model folder ``model``:
+    ``{"path", "poses", "spread_m"}``. Clips of other humanoid rigs are retargeted onto the model's skeleton."""
+    from keyfill.learn.library.store import clip_files, frames_of, served_by
+    from keyfill.learn.rig_bridge import on_model_skeleton, served
+
+    model_skeleton = served(model).skeleton
+    frames = frames_of(model_skeleton)
+    target = served_by(model_skeleton, 30.0)
+    feats, clip_of = [], []
+    from keyfill import io
+    from keyfill.learn.library.features import describe
+
+    for c, f in enumerate(clip_files(clips, include, exclude)):
+        motion = on_model_skeleton(io.load(f).replace(keys=None), target, what=f.name)
+        feats.append(describe(motion.world_positions(), frames)[0].astype(np.float32))
+        clip_of.append(np.full(len(feats[-1]), c, dtype=np.int32))
+    index = subsampled(np.concatenate(feats), np.concatenate(clip_of), Path(model).name)
+    return {"path": index.save(model), "poses": len(index.features), "spread_m": index.spread}

@@ -46,12 +46,14 @@ def test_the_bandai_distribution_names_each_model_folder_with_its_licence_and_ca
     assert project["license"] == "CC-BY-NC-4.0" and not project["dependencies"]
     assert "Attribution-NonCommercial 4.0 International" in (BANDAI / "LICENSE").read_text()
     entries = project["entry-points"][installed_models.GROUP]
-    assert set(entries) == {"bandai2-transformer", "bandai2-gan", "bandai2-gan-partial"}
+    assert set(entries) == {"bandai2-transformer", "bandai2-gan", "bandai2-gan-partial", "bandai2-library"}
     for name, target in entries.items():
         folder = BANDAI / target.split(":")[0] / name
-        assert {"config.json", "weights.safetensors", "LICENSE", "MODEL_CARD.md"} <= {p.name for p in folder.iterdir()}
+        # a model's weights and its corpus's pose index (the guard's); a library's manifest
+        own = {"library.json"} if name.endswith("-library") else {"config.json", "weights.safetensors", "pose_index.npz"}
+        assert own | {"LICENSE", "MODEL_CARD.md"} <= {p.name for p in folder.iterdir()}
         card = folder / "MODEL_CARD.md"
-        for link in ("../../../../docs/transformer.md", "../../../../docs/gan.md"):  # the cards' links resolve
+        for link in ("../../../../docs/transformer.md", "../../../../docs/gan.md", "../../../../docs/match.md"):
             if link in card.read_text():
                 assert (folder / link).resolve().is_file()
 

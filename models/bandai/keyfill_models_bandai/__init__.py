@@ -13,3 +13,5 @@ BANDAI2_TRANSFORMER = _HERE / "bandai2-transformer"
 BANDAI2_GAN = _HERE / "bandai2-gan"
 #: the gan for partial keys (``--key-joints``, ``--key-positions``, ``--key-plane``)
 BANDAI2_GAN_PARTIAL = _HERE / "bandai2-gan-partial"
+#: the motion library ``--method match`` uses without --library (and the guard's index for it)
+BANDAI2_LIBRARY = _HERE / "bandai2-library"

@@ -32,7 +32,6 @@ Without the corpora it says ``skipped`` and exits 0. The run is recorded in ``be
 from __future__ import annotations
 
 import argparse
-import resource
 import statistics
 import subprocess
 import sys
@@ -211,10 +210,7 @@ def speed(clip: Motion, repeat: int = 5) -> dict:
     from keyfill.learn.library.search import candidates
     from keyfill.learn.match.model import DEFAULT_MODEL, load
 
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     matcher = load(DEFAULT_MODEL)
-    _ = matcher.tree
-    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     long = Motion(clip.skeleton, clip.fps, np.concatenate([clip.rotations] * 12)[:2048],
                   np.concatenate([clip.positions] * 12)[:2048])
     keys = keys_every(long, 60)
@@ -243,7 +239,28 @@ def speed(clip: Motion, repeat: int = 5) -> dict:
                               "gaps": len(per_gap)},
             "frames": 2048, "complete_warm_s": {"median": statistics.median(warm), "runs": warm},
             "complete_cold_s": {"median": statistics.median(cold), "runs": cold},
-            "library_resident_mib": (rss1 - rss0) / 1024.0, "library_frames": matcher.library.num_frames}
+            "library_resident_mib": _resident_mib(), "library_frames": matcher.library.num_frames}
+
+
+#: run in a fresh process: resident memory before and after loading the shipped library, its tree and its
+#: pose index, with every array touched (a memory map counts once read)
+_RESIDENT = """
+import psutil, numpy as np
+from keyfill.learn.library.index import library_index
+from keyfill.learn.match.model import DEFAULT_MODEL, load
+p = psutil.Process()
+before = p.memory_info().rss
+m = load(DEFAULT_MODEL)
+lib = m.library
+_ = m.tree, library_index(lib)._tree()
+touched = sum(float(np.asarray(getattr(lib, k)).sum()) for k in ("rotations", "hips", "features", "ground"))
+print((p.memory_info().rss - before) / 2**20)
+"""
+
+
+def _resident_mib() -> float:
+    out = subprocess.run([sys.executable, "-c", _RESIDENT], check=True, capture_output=True, text=True)
+    return float(out.stdout.strip().splitlines()[-1])
 
 
 def build_time() -> dict:
@@ -257,43 +274,40 @@ def build_time() -> dict:
 
 
 def goals(f: dict) -> list[dict]:
+    """Issue 42's goals, one line per goal and set (both key spacings in it)."""
     g = []
+    q = f["quality"]
     for name in ("normal (dataset-2)", "sad, feminine (dataset-1)"):
-        real = f["quality"][name]["real"]
-        for gap in map(str, GAPS):
-            row = f["quality"][name][gap]
-            m, c, t = row["match"], row["cubic"], row["transformer"]
-            g.append(results.goal(42, f"{name}, keys every {gap}: foot skating at most 1.5x real",
-                                  f"{m['foot_skating_cm_s'] / real['foot_skating_cm_s']:.2f}x",
-                                  m["foot_skating_cm_s"] <= 1.5 * real["foot_skating_cm_s"]))
-            jr = m["jitter_m_s3"] / real["jitter_m_s3"]
-            g.append(results.goal(42, f"{name}, keys every {gap}: jitter 0.67x-1.5x real", f"{jr:.2f}x",
-                                  0.67 <= jr <= 1.5))
-            g.append(results.goal(42, f"{name}, keys every {gap}: gap error at most 0.6x cubic's and below the "
-                                  "transformer's", f"{m['gap_error_cm'] / c['gap_error_cm']:.2f}x cubic, "
-                                  f"{m['gap_error_cm']:.2f} against {t['gap_error_cm']:.2f} cm",
-                                  m["gap_error_cm"] <= 0.6 * c["gap_error_cm"]
-                                  and m["gap_error_cm"] < t["gap_error_cm"]))
-            g.append(results.goal(42, f"{name}, keys every {gap}: keys exact", str(m["keys_exact"]), m["keys_exact"]))
-    for gap in map(str, GAPS):
-        row = f["quality"]["gestures (dataset-2)"][gap]
-        r = row["match"]["gap_error_cm"] / row["cubic"]["gap_error_cm"]
-        g.append(results.goal(42, f"gestures, keys every {gap}: gap error at most 1.05x cubic's", f"{r:.3f}x",
-                              r <= 1.05))
-    for name, v in f["variety"].items():
-        g.append(results.goal(42, f"{name}, keys every 60: 5 seeds at least 5 cm apart", f"{v['pairwise_cm']:.1f} cm",
-                              v["pairwise_cm"] >= 5))
-    for gap, row in f["guard"]["unknown"].items():
-        for method, v in row.items():
-            r = v["guard_gap_error_cm"] / v["cubic_gap_error_cm"]
-            g.append(results.goal(42, f"unknown actions, keys every {gap}: {method} with the guard at most 1.1x "
-                                  "cubic's gap error", f"{r:.2f}x", r <= 1.1))
-    for gap, row in f["guard"]["known"].items():
-        for method, v in row.items():
-            g.append(results.goal(42, f"known actions (held out), keys every {gap}: the guard changes at most 2 % "
-                                  f"of {method}'s gaps and its error by at most 1 %",
-                                  f"{v['changed_pct']:.1f} % of gaps, {v['gap_error_change_pct']:+.1f} %",
-                                  v["changed_pct"] <= 2 and abs(v["gap_error_change_pct"]) <= 1))
+        real, rows = q[name]["real"], [q[name][str(gap)] for gap in GAPS]
+        sk = [r["match"]["foot_skating_cm_s"] / real["foot_skating_cm_s"] for r in rows]
+        ji = [r["match"]["jitter_m_s3"] / real["jitter_m_s3"] for r in rows]
+        er = [r["match"]["gap_error_cm"] / r["cubic"]["gap_error_cm"] for r in rows]
+        below = [r["match"]["gap_error_cm"] < r["transformer"]["gap_error_cm"] for r in rows]
+        g.append(results.goal(42, f"{name}, keys every 30 / 60: foot skating at most 1.5x real",
+                              " / ".join(f"{x:.2f}x" for x in sk), max(sk) <= 1.5))
+        g.append(results.goal(42, f"{name}, keys every 30 / 60: jitter 0.67x-1.5x real",
+                              " / ".join(f"{x:.2f}x" for x in ji), min(ji) >= 0.67 and max(ji) <= 1.5))
+        g.append(results.goal(42, f"{name}, keys every 30 / 60: gap error at most 0.6x cubic's and below the "
+                              "transformer's", " / ".join(f"{x:.2f}x" for x in er) + ", below the transformer: "
+                              + " / ".join(map(str, below)), max(er) <= 0.6 and all(below)))
+        g.append(results.goal(42, f"{name}: keys exact", str(all(r["match"]["keys_exact"] for r in rows)),
+                              all(r["match"]["keys_exact"] for r in rows)))
+    ge = [q["gestures (dataset-2)"][str(gap)] for gap in GAPS]
+    r = [row["match"]["gap_error_cm"] / row["cubic"]["gap_error_cm"] for row in ge]
+    g.append(results.goal(42, "gestures, keys every 30 / 60: gap error at most 1.05x cubic's",
+                          " / ".join(f"{x:.3f}x" for x in r), max(r) <= 1.05))
+    v = {name: x["pairwise_cm"] for name, x in f["variety"].items()}
+    g.append(results.goal(42, "keys every 60: 5 seeds at least 5 cm apart",
+                          ", ".join(f"{k}: {x:.1f} cm" for k, x in v.items()), min(v.values()) >= 5))
+    worst = max((u["guard_gap_error_cm"] / u["cubic_gap_error_cm"], f"{m} at {gap}")
+                for gap, row in f["guard"]["unknown"].items() for m, u in row.items())
+    g.append(results.goal(42, "unknown actions: every human method with the guard at most 1.1x cubic's gap error",
+                          f"at most {worst[0]:.2f}x ({worst[1]})", worst[0] <= 1.1))
+    known = [(k["changed_pct"], abs(k["gap_error_change_pct"])) for row in f["guard"]["known"].values()
+             for k in row.values()]
+    g.append(results.goal(42, "known actions (held out): the guard changes at most 2 % of gaps, 1 % of gap error",
+                          f"at most {max(c for c, _ in known):.1f} % of gaps, {max(e for _, e in known):.1f} %",
+                          all(c <= 2 and e <= 1 for c, e in known)))
     sp = f["speed"]
     g.append(results.goal(42, "a gap's search at most 10 ms (median)", f"{sp['gap_search_ms']['median']:.1f} ms",
                           sp["gap_search_ms"]["median"] <= 10))

@@ -100,6 +100,9 @@ SECTIONS = {
         "The human models on other rigs and frame rates", "Held-out Bandai-Namco dataset-2 clips retargeted onto the "
         "Mixamo and CMU fixture rigs, completed on each rig by cubic and by the shipped transformer and gan through "
         "retargeting (docs/retarget.md).", S.retarget),
+    "match": Section(
+        "In-betweens matched from real motion", "`--method match` against cubic and the shipped models on held-out "
+        "clips, its variety over seeds, the guard, and the library's speed (docs/match.md).", S.match),
     "feet": Section(
         "Feet on the ground: raw and locked", "Every method with its feet free and locked (`keyfill complete --feet "
         "lock`), on held-out clips of styles no shipped model saw (docs/feet.md).", S.feet),

@@ -464,6 +464,49 @@ def feet(f: dict) -> list[str]:
         ["held-out style", "keys every", "real"] + list(methods), rows)
 
 
+def match(f: dict) -> list[str]:
+    """``--method match`` against the spline and the shipped models; variety; the guard; speed."""
+    methods = ("cubic", "transformer", "gan", "match raw", "match")
+    rows = []
+    for name, by_gap in f["quality"].items():
+        real = by_gap["real"]
+        for gap in (g for g in by_gap if g != "real"):
+            cells = [f"{num(real['foot_skating_cm_s'], 1)}, {num(real['jitter_m_s3'], 0)}"]
+            for m in methods:
+                r = by_gap[gap][m]
+                cells.append(f"{num(r['foot_skating_cm_s'], 1)}, {num(r['jitter_m_s3'], 0)}, {num(r['gap_error_cm'])}")
+            rows.append([name, gap] + cells)
+    out = [(f"Each cell: foot skating (cm/s), jitter (m/s^3), gap error (cm); real clips: skating, jitter. "
+            f"{', '.join(f'{k}: {v}' for k, v in f['clips'].items())} clips. `match raw`: `--feet free`; "
+            "`match`: its default (feet locked)."), ""]
+    out += table(["held-out clips", "keys every", "real"] + list(methods), rows) + [""]
+    var = [[name, num(v["pairwise_cm"], 1), num(v["best_of_5_gap_error_cm"]),
+            "; ".join(f"{num(s['foot_skating_cm_s'], 1)}, {num(s['jitter_m_s3'], 0)}, {num(s['gap_error_cm'])}"
+                      for s in v["seeds"].values())] for name, v in f["variety"].items()]
+    out += ["Variety at keys every 60 (seeds 0-4):", ""] + table(
+        ["held-out clips", "mean pairwise distance (cm)", "best-of-5 gap error (cm)", "per seed: skating, jitter, error"],
+        var) + [""]
+    guard = []
+    for gap, row in f["guard"]["unknown"].items():
+        for m, v in row.items():
+            k = f["guard"]["known"][gap][m]
+            guard.append([gap, m, num(v["cubic_gap_error_cm"]), num(v["off_gap_error_cm"]), num(v["guard_gap_error_cm"]),
+                          num(v["flagged_pct"], 0), num(k["changed_pct"], 1), num(k["gap_error_change_pct"], 1)])
+    out += [("The guard: unknown actions (dataset-1 call, dance, kick, punch, respond, slash) and the known held-out "
+             "clips (normal, dataset-2):"), ""] + table(
+        ["keys every", "method", "cubic (cm)", "guard off (cm)", "guard on (cm)", "unknown gaps flagged (%)",
+         "known gaps changed (%)", "known error change (%)"], guard) + [""]
+    sp = f["speed"]
+    text = (f"Speed: a gap's search {num(sp['gap_search_ms']['median'], 1)} ms (median of {sp['gap_search_ms']['gaps']}); "
+            f"{sp['frames']:,} frames with keys every 60: {num(sp['complete_warm_s']['median'])} s in process, "
+            f"{num(sp['complete_cold_s']['median'])} s as a fresh `keyfill complete`; the shipped library "
+            f"({sp['library_frames']:,} frames) {num(sp['library_resident_mib'], 0)} MiB resident")
+    if "build" in f:
+        b = f["build"]
+        text += f"; building the library of dataset-2 ({b['clips']:,} clips) {num(b['seconds'], 1)} s on {b['workers']} workers"
+    return out + [text + "."]
+
+
 def formats(f: dict) -> list[str]:
     """Write and read seconds and file size per format."""
     rows = [[suffix, num(r["write_s"], 3), num(r["read_s"], 3), num(r["bytes"] / 1e6, 1)]

@@ -46,8 +46,9 @@ def test_the_page_is_what_the_records_give():
 
 
 def test_the_page_stays_short():
-    # 450 since issue 31 (each gan model is measured on two held-out sets; the realism tables are one row per method)
-    assert len(make_page.PAGE.read_text().splitlines()) <= 450
+    # 450 since issue 31 (each gan model is measured on two held-out sets; the realism tables are one row per method);
+    # 500 since issue 42 (match: its quality, variety, guard and speed tables)
+    assert len(make_page.PAGE.read_text().splitlines()) <= 500
 
 
 def test_a_changed_figure_is_caught(copy):

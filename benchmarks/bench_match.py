@@ -210,7 +210,7 @@ def speed(clip: Motion, repeat: int = 5) -> dict:
     from keyfill.learn.library.search import candidates
     from keyfill.learn.match.model import DEFAULT_MODEL, load
 
-    matcher = load(DEFAULT_MODEL)
+    matcher = load(DEFAULT_MODEL).matcher
     long = Motion(clip.skeleton, clip.fps, np.concatenate([clip.rotations] * 12)[:2048],
                   np.concatenate([clip.positions] * 12)[:2048])
     keys = keys_every(long, 60)
@@ -252,7 +252,7 @@ p = psutil.Process()
 before = p.memory_info().rss
 m = load(DEFAULT_MODEL)
 lib = m.library
-_ = m.tree, library_index(lib)._tree()
+_ = m.matcher.tree, library_index(lib)._tree()
 touched = sum(float(np.asarray(getattr(lib, k)).sum()) for k in ("rotations", "hips", "features", "ground"))
 print((p.memory_info().rss - before) / 2**20)
 """

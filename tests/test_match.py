@@ -239,3 +239,16 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(library, clips, tmp_path, 
     code, _, err = run(capsys, "library", "build", lamp, "-o", tmp_path / "lamp-lib")
     assert code == 1 and "library's skeleton" in one_error_line(err)
     assert not out.exists() and not (tmp_path / "lamp-lib").exists()
+
+
+def test_the_lafan1_protocol_scores_match_and_a_library_clip_comes_back_exactly(library, clips):
+    from keyfill.learn.match.model import load
+    from keyfill.learn.protocols import lafan1
+
+    proto = lafan1.lafan1([c for c in clips], ["a_walk*"], None, fold=False)
+    method = load(library).benchmark_method()
+    assert method.folded is False  # the Mixamo hips are the root
+    scores = lafan1.evaluate({"match": method, "linear": lafan1.resolve_method("linear")[1]}, proto.test,
+                             proto.stats, lengths=(15, 30))
+    for n in (15, 30):
+        assert scores["match"][n]["L2P"] < 1e-4 < scores["linear"][n]["L2P"]

@@ -136,8 +136,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            training="keyfill.learn.gan.train_command", export="keyfill.learn.gan.onnx:export_onnx",
            onnx="keyfill.learn.gan.onnx", partial_keys=True, dna=True, humanoid=True),
     Method("match", "in-betweens matched from a library of real motion (motion matching through the keys)",
-           "keyfill.learn.match.model:complete", module="keyfill.learn.match.model", humanoid=True, library=True,
-           feet="lock"),
+           "keyfill.learn.match.model:complete", module="keyfill.learn.match.model", protocol="lafan1",
+           humanoid=True, library=True, feet="lock"),
 )}
 
 

@@ -16,8 +16,10 @@ import glob
 import json
 import os
 import re
+import signal
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -104,29 +106,47 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     if path.is_dir():
         raise UsageError(f"{path}: is a folder, not a file")
     remove_stale(folder, path.stem)
-    try:
-        fd, name = tempfile.mkstemp(prefix=f".{path.stem}.k{os.getpid()}.", suffix=f".part{path.suffix}",
-                                    dir=folder)
-    except OSError as e:
-        raise OutputError(path, e.strerror or str(e)) from None
-    os.close(fd)
-    tmp = Path(name)
-    try:
+    prefix = f".{path.stem}.k{os.getpid()}."
+    try:  # from before the temporary file exists: an interrupt at any moment finds it below
+        try:
+            fd, name = tempfile.mkstemp(prefix=prefix, suffix=f".part{path.suffix}", dir=folder)
+        except OSError as e:
+            raise OutputError(path, e.strerror or str(e)) from None
+        os.close(fd)
+        tmp = Path(name)
         yield tmp
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException as e:
-        tmp.unlink(missing_ok=True)
-        for extra in folder.glob(glob.escape(tmp.name.removesuffix(path.suffix)) + ".*"):
-            extra.unlink(missing_ok=True)  # a USD export's own temporary file
+        for extra in folder.glob(glob.escape(prefix) + "*.part*"):
+            extra.unlink(missing_ok=True)  # this one's temporary file, and a USD export's own beside it
         if isinstance(e, OSError) and not isinstance(e, BrokenPipeError):
             raise OutputError(path, e.strerror or str(e)) from None
         failed = _WRITER_FAILED.search(str(e)) if not isinstance(e, KeyfillError) else None
         if failed is not None:
             raise OutputError(path, failed.group(1)) from None
         raise
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP that arrive inside the block (a clean-up that must not be cut short) are
+    delivered, the first of them, when it ends; in the main thread only (elsewhere nothing changes)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    old = {sig: signal.signal(sig, lambda signum, frame: caught.append(signum)) for sig in signals}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        if caught:
+            signal.raise_signal(caught[0])
 
 
 @contextlib.contextmanager

@@ -187,10 +187,10 @@ def test_a_mistyped_command_method_or_option_is_told_what_it_may_mean(walks, cap
 @pytest.mark.parametrize("signal", [None, 15])
 def test_an_interrupt_is_one_line_without_a_blank_line_before_it(walks, capsys, monkeypatch, signal):
     from keyfill import io
-    from keyfill.cli.main import Terminated
+    from keyfill.cli.signals import Interrupted
 
     def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt if signal is None else Terminated(signal)
+        raise KeyboardInterrupt if signal is None else Interrupted(signal)
 
     monkeypatch.setattr(io, "_read", interrupted)
     code, out, err = run(capsys, "convert", "walk.bvh", "o.usda")

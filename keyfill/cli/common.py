@@ -270,9 +270,19 @@ def run_batch(inputs, outdir, fmt, job, spec, workers, scheduler, connect_timeou
         check()
     module, attr = job.split(":")
     fn = getattr(importlib.import_module(module), attr)
+    finished = set()
+
+    def on_chunk(outcomes):
+        bar.update(len(outcomes))
+        finished.update(f["input"] for f in outcomes if f["status"] != "failed")
+
     with progress(total=len(items), unit="file", desc="files") as bar:
-        summary = run(items, fn, spec, workers=workers, scheduler=scheduler, force=force, chunk=batch_size,
-                      connect_timeout=connect_timeout, on_chunk=lambda done: bar.update(len(done)))
+        try:
+            summary = run(items, fn, spec, workers=workers, scheduler=scheduler, force=force, chunk=batch_size,
+                          connect_timeout=connect_timeout, on_chunk=on_chunk)
+        except KeyboardInterrupt as e:  # the line says what is done (the record keeps it) and how to go on
+            e.detail = f"{len(finished)} of {len(items)} done; run the same command again to finish"
+            raise
     summary.output = str(outdir)
     for f in summary.failed:  # the library's words as flags, on the error lines and in --json alike
         f["error"] = flag_words(f["error"], f.pop("params", ()))

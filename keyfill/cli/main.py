@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import importlib
 import importlib.util
 import os
 import signal
 import sys
-import threading
+
+from keyfill.cli import signals
+
+signals.catch_early()  # first, so that a signal while the rest loads is noted, not a traceback (signals.py)
 
 # Set before numpy is first imported. The commands do single-threaded numpy
 # work on small matrices (torch keeps its own threads); an OpenBLAS thread pool
@@ -165,30 +167,14 @@ def _drop_stdout() -> None:
 _DISK_FULL = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EIO}
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (or SIGHUP), raised like Ctrl-C so that every cleanup runs (temporary files, workers)."""
-
-    def __init__(self, signum: int):
-        super().__init__(signum)
-        self.signum = signum
-
-
-def _terminate(signum, frame):
-    raise Terminated(signum)
-
-
-@contextlib.contextmanager
-def _signals_as_interrupts():
-    """SIGTERM and SIGHUP end a command the way SIGINT does (only in the main thread)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = {sig: signal.signal(sig, _terminate) for sig in (signal.SIGTERM, signal.SIGHUP)}
-    try:
-        yield
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+def _interrupted(error: BaseException | None) -> int:
+    """The line and exit code (128 + the signal) of an interrupted command; ``error`` the interrupt raised, if
+    any (its ``detail`` completes the line)."""
+    signum = getattr(error, "signum", None) or (signals.received[0] if signals.received else signal.SIGINT)
+    word = "interrupted" if signum == signal.SIGINT else "terminated"
+    detail = getattr(error, "detail", None)
+    _error(f"{word}: {detail}" if detail else word, 128 + signum)
+    return 128 + signum
 
 
 def _progress_bar(description: str, total: int, unit: str):
@@ -219,8 +205,12 @@ def main(argv: list[str] | None = None) -> int:
     progress.listen(_progress_bar)
     progress.listen_notes(_note)
     try:
-        with _signals_as_interrupts():
-            return _main(args, debug)
+        with signals.catching():
+            code = _main(args, debug)
+            late = signals.ending()  # a signal that something swallowed, or that came after the work
+            if late is not None and code not in {128 + s for s in signals.SIGNALS}:
+                code = _interrupted(signals.Interrupted(late))
+            return code
     finally:
         progress.listen(None)
         progress.listen_notes(None)
@@ -228,18 +218,13 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(args: list[str], debug: bool) -> int:
     try:
+        signals.check()
         cli.main(args=args, prog_name="keyfill", standalone_mode=False)
         return 0
     except click.exceptions.Exit as e:
         return e.exit_code
-    except (Terminated, click.exceptions.Abort) as e:
-        # click turns Ctrl-C (and our SIGTERM) into Abort; the signal is its cause
-        cause = e if isinstance(e, Terminated) else e.__cause__
-        if isinstance(cause, Terminated):
-            _error("terminated", 128 + cause.signum)
-            return 128 + cause.signum
-        _error("interrupted", 130)
-        return 130
+    except click.exceptions.Abort as e:  # click turns Ctrl-C (and our other signals) into Abort: its cause
+        return _interrupted(e.__cause__)
     except click.UsageError as e:
         if debug:
             raise
@@ -259,9 +244,8 @@ def _main(args: list[str], debug: bool) -> int:
             _error(flag_words(str(e), getattr(e, "params", ())), e.exit_code, getattr(e, "path", None),
                    getattr(e, "line", None))
         return e.exit_code
-    except KeyboardInterrupt:
-        _error("interrupted", 130)
-        return 130
+    except KeyboardInterrupt as e:
+        return _interrupted(e)
     except BrokenPipeError:
         return 1
     except ModuleNotFoundError as e:  # an extra the base install leaves out (pyproject.toml)

@@ -264,6 +264,20 @@ def _output_stamp(path: str) -> list[int] | None:
     return [st.st_size, st.st_mtime_ns]
 
 
+def output_files(dst: str) -> list[str]:
+    """The files the output ``dst`` consists of: itself, then the file its format writes beside it (a
+    ``.gltf``'s ``.bin``, :attr:`keyfill.io.Format.sidecar`)."""
+    fmt = SUFFIXES.get(Path(dst).suffix.lower())
+    sidecar = FORMATS[fmt].sidecar if fmt is not None else None
+    return [dst] if sidecar is None else [dst, str(Path(dst).with_suffix(sidecar))]
+
+
+def _written(dst: str, before: list) -> bool:
+    """Whether every file of the output ``dst`` exists and changed since ``before`` (their stamps then)."""
+    now = [_output_stamp(f) for f in output_files(dst)]
+    return all(s is not None and s != b for s, b in zip(now, before))
+
+
 def _entry_ok(entry) -> bool:
     """Whether ``entry`` has the shape :meth:`Record.put` writes (one of another shape: a damaged record)."""
     stamp = entry.get("output") if isinstance(entry, dict) else None
@@ -415,6 +429,8 @@ def prepare_outputs(items: list[Item]) -> None:
     killed outright (SIGKILL, a lost node) cannot, and leaves
     ``.NAME.XXXX.partSUFFIX`` beside the output (:func:`keyfill.files.atomic_output`).
     """
+    from keyfill.files import interrupts_deferred
+
     folders: dict[Path, set[str]] = {}
     for it in items:
         dst = Path(it.dst)
@@ -422,8 +438,10 @@ def prepare_outputs(items: list[Item]) -> None:
     for folder, names in folders.items():
         try:  # a folder that cannot take files is one error before any work, not one per output
             folder.mkdir(parents=True, exist_ok=True)
-            os.close(os.open(probe := folder / f".keyfill-probe.k{os.getpid()}", os.O_CREAT | os.O_WRONLY, 0o600))
-            os.unlink(probe)
+            with interrupts_deferred():  # the probe goes whenever a signal comes
+                os.close(os.open(probe := folder / f".keyfill-probe.k{os.getpid()}", os.O_CREAT | os.O_WRONLY,
+                                 0o600))
+                os.unlink(probe)
         except OSError as e:
             raise OutputError(folder, e.strerror or str(e)) from None
         for entry in os.scandir(folder):
@@ -461,10 +479,14 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
 
     The executor is started only when there is work; a Dask scheduler that
     cannot be reached is one :class:`KeyfillError` before any file is written.
+    When the run is interrupted (or fails), the workers are stopped, what
+    they had finished is recorded (an output whose files were all written by
+    this run), their temporary files are removed, and the exception goes on.
     """
     import dataclasses
 
     from keyfill import __version__
+    from keyfill.files import interrupts_deferred, remove_stale
     from keyfill.parallel import check_options
     from keyfill.parallel import executor as make_executor
 
@@ -482,6 +504,7 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
     outcomes: dict[str, dict] = {}
     shas: dict[str, str | None] = {}
     why: dict[str, list[str]] = {}  # input -> why its existing output is replaced
+    before: dict[str, list] = {}  # output -> the stamps of its files before the run
     jobs = []
     for i in range(0, len(items), chunk):
         part = items[i: i + chunk]
@@ -489,8 +512,9 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
         for it in part:
             record = records.get(it.root)
             shas[it.src] = sha = input_sha256(it.src) if record is not None else None
+            before[it.dst] = [_output_stamp(f) for f in output_files(it.dst)]
             reasons = []
-            if _output_stamp(it.dst) is not None:
+            if before[it.dst][0] is not None:
                 if force:
                     reasons = ["force"]
                 elif record is None:
@@ -522,10 +546,25 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
         pace["last"] = time.perf_counter()
         pace["cost"] = pace["last"] - now
 
+    def settle(it: Item, res: dict) -> dict:
+        record = records.get(it.root)
+        if res.get("status") == "done":
+            if it.src in why:
+                res = {**res, "status": "redone", "stale": why[it.src]}
+            if record is not None:
+                record.put(it, shas[it.src], digest, recipe)
+        elif record is not None:
+            record.drop(it)
+        if record is not None:
+            dirty.add(it.root)
+        outcomes[it.src] = res
+        return res
+
     if jobs:
         # Reach the cluster before touching the output folder: an unreachable scheduler leaves nothing behind.
         executor, window = make_executor(workers if workers is not None else (1 if len(jobs) == 1 else None),
                                          scheduler, connect_timeout)
+        sent = []
         try:
             prepare_outputs([it for job in jobs for it in job if it.write])
             in_flight: dict = {}
@@ -533,6 +572,7 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
             while pending or in_flight:
                 while pending and len(in_flight) < window:
                     job = pending.pop(0)
+                    sent.append(job)
                     in_flight[executor.submit(fn, job, spec)] = job
                 for fut in executor.wait(list(in_flight)):
                     job = in_flight.pop(fut)
@@ -542,30 +582,25 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
                         raise
                     except Exception as e:  # noqa: BLE001 (a worker that died: its inputs failed, the others go on)
                         results = [failure(it, e) for it in job]
-                    reported = []
-                    for it, res in zip(job, results):
-                        if not it.write:
-                            continue
-                        record = records.get(it.root)
-                        if res.get("status") == "done":
-                            if it.src in why:
-                                res = {**res, "status": "redone", "stale": why[it.src]}
-                            if record is not None:
-                                record.put(it, shas[it.src], digest, recipe)
-                        elif record is not None:
-                            record.drop(it)
-                        if record is not None:
-                            dirty.add(it.root)
-                        outcomes[it.src] = res
-                        reported.append(res)
+                    reported = [settle(it, res) for it, res in zip(job, results) if it.write]
                     save_records()
                     if on_chunk is not None:
                         on_chunk(reported)
         except BaseException:
-            executor.close(cancel=True)
+            with interrupts_deferred():  # a second Ctrl-C does not cut the clean-up short
+                executor.close(cancel=True)
+                # what the stopped jobs finished: outputs whose files were all written by this run
+                finished = [settle(it, {"input": it.src, "output": it.dst, "status": "done"})
+                            for job in sent for it in job
+                            if it.write and outcomes.get(it.src, {}).get("status") not in ("done", "redone")
+                            and _written(it.dst, before[it.dst])]
+                for folder in sorted({Path(it.dst).parent for job in sent for it in job}):
+                    remove_stale(folder)  # of the stopped workers (their processes are gone)
+                save_records(always=True)
+            if finished and on_chunk is not None:
+                on_chunk(finished)
             raise
-        finally:
-            save_records(always=True)  # what is done stays done, also when the run is interrupted
+        save_records(always=True)
         executor.close()
     summary.files = [outcomes[it.src] for it in items]
     summary.seconds = time.perf_counter() - start

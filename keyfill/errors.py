@@ -53,8 +53,8 @@ class OutputError(KeyfillError):
     """An output that cannot be written: a read-only folder, a full disk, a file-size limit (exit code 1).
     ``path`` is the output's own name, never the temporary file keyfill wrote first; it leads the message."""
 
-    def __init__(self, path: object, reason: str):
-        super().__init__(f"{path}: cannot write the output ({reason})")
+    def __init__(self, path: object, reason: str, *, params: str | tuple[str, ...] = ()):
+        super().__init__(f"{path}: cannot write the output ({reason})", params=params)
         self.path = path
         self.line = None
 

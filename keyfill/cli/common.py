@@ -246,7 +246,7 @@ def batch_options(f):
                      help="Files per job (and per batch through a learned model).")(f)
     f = click.option("--force", is_flag=True,
                      help="Redo every output, also those the output folder's record says were made the same way "
-                          "(docs/batch.md), and allow an output that is one of the inputs.")(f)
+                          "(docs/batch.md), and allow an output that is one of the inputs or a read-only file.")(f)
     f = click.option("--connect-timeout", default=CONNECT_SECONDS, show_default=True, type=float, metavar="SECONDS",
                      callback=_executor_option, help="Give up reaching the --scheduler after this long.")(f)
     f = click.option("--scheduler", metavar="ADDRESS",

@@ -168,10 +168,12 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
     from keyfill.files import refuse_overwriting_input
+    from keyfill.io.batch import refuse_read_only
 
     dna_files = [] if dna is None else [dna, dna.rpartition(":")[0]]  # FILE or FILE:FRAMES
     fmt = output_format(dst, fmt)  # a misnamed output is refused before any work
     refuse_overwriting_input(dst, [src, *dna_files], force)
+    refuse_read_only(dst, force)
     motion = io.load(src, input_format(src, in_fmt))
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)

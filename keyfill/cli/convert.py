@@ -80,10 +80,12 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
         raise click.UsageError(f"got {len(paths)} paths: give SRC DST, or SRC... -o OUTDIR/")
     src, dst = paths
     from keyfill.files import refuse_overwriting_input
+    from keyfill.io.batch import refuse_read_only
 
     if not curves:  # a misnamed output is refused before any work (--curves checks its own below)
         fmt = output_format(dst, fmt)
     refuse_overwriting_input(dst, [src], force)
+    refuse_read_only(dst, force)
 
     motion = io.load(src, input_format(src, in_fmt), meters_per_unit)
     if curves:

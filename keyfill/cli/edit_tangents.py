@@ -40,7 +40,7 @@ def output_options(f):
         is_flag=True,
         help="Keep the closest result of an edit that cannot reach its target instead of failing.",
     )(f)
-    f = click.option("--force", is_flag=True, help="Allow -o to be CURVES itself (overwrite the input).")(f)
+    f = click.option("--force", is_flag=True, help="Allow -o to be CURVES itself (overwrite the input), or a read-only file.")(f)
     f = click.option(
         "--solver",
         default="daqp",
@@ -61,8 +61,10 @@ def output_options(f):
 def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, frame=None, force=False) -> None:
     """Read the curves, apply the edit file (``mode`` "tangents" or "pose"), write and report."""
     from keyfill.files import refuse_overwriting_input
+    from keyfill.io.batch import refuse_read_only
 
     refuse_overwriting_input(dst, [curves_path, edit_path], force)
+    refuse_read_only(dst, force)
     from keyfill.edit import edits, solve
     from keyfill.edit.qp import check_solver
     from keyfill.errors import InfeasibleError

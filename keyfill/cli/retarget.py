@@ -97,8 +97,10 @@ def retarget(inputs, rig, dst, rig_map, to_rig_map, fmt, in_fmt, workers, schedu
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
     from keyfill.files import refuse_overwriting_input
+    from keyfill.io.batch import refuse_read_only
 
     refuse_overwriting_input(dst, [src, rig], force)
+    refuse_read_only(dst, force)
     report = retarget_file(src, rig, dst, rig_map, to_rig_map, input_format(src, in_fmt), output_format(dst, fmt))
     if as_json:
         emit_json(report)

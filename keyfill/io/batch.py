@@ -40,12 +40,13 @@ not stop the others.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import hashlib
 import json
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -272,18 +273,90 @@ def output_files(dst: str) -> list[str]:
     return [dst] if sidecar is None else [dst, str(Path(dst).with_suffix(sidecar))]
 
 
+def _read_only(path: str) -> bool:
+    """Whether the existing file ``path`` may not be written (no write permission bit: so also for root)."""
+    try:
+        return Path(path).is_file() and (not os.stat(path).st_mode & 0o222 or not os.access(path, os.W_OK))
+    except OSError:
+        return False
+
+
+def refuse_read_only(output: str | os.PathLike | None, force: bool = False) -> None:
+    """An :class:`OutputError` (exit 1) when a file of the existing output ``output`` (:func:`output_files`) is
+    read-only, unless ``force``: replacing it would make it writable again. Checked before anything is
+    written; names the parameter ``force``."""
+    if force or output is None or str(output) == "-":
+        return
+    for path in output_files(str(output)):
+        if _read_only(path):
+            raise OutputError(path, "a read-only file; give force to replace it", params="force")
+
+
 def _written(dst: str, before: list) -> bool:
     """Whether every file of the output ``dst`` exists and changed since ``before`` (their stamps then)."""
     now = [_output_stamp(f) for f in output_files(dst)]
     return all(s is not None and s != b for s, b in zip(now, before))
 
 
+def _file_stamp(path: str) -> list[int] | None:
+    """A companion file's stamp: its size, modification time and inode (a file moved in from elsewhere keeps
+    its time, not its inode)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return [st.st_size, st.st_mtime_ns, st.st_ino]
+
+
+def _is_stamp(stamp, length: int = 2) -> bool:
+    return isinstance(stamp, list) and len(stamp) == length and all(type(v) is int for v in stamp)
+
+
 def _entry_ok(entry) -> bool:
     """Whether ``entry`` has the shape :meth:`Record.put` writes (one of another shape: a damaged record)."""
-    stamp = entry.get("output") if isinstance(entry, dict) else None
+    files = entry.get("files", {}) if isinstance(entry, dict) else None
     return (isinstance(entry, dict) and isinstance(entry.get("input"), str)
             and isinstance(entry.get("input_sha256"), str) and isinstance(entry.get("recipe"), str)
-            and isinstance(stamp, list) and len(stamp) == 2 and all(type(v) is int for v in stamp))
+            and _is_stamp(entry.get("output")) and isinstance(files, dict)
+            and all(isinstance(k, str) and _is_stamp(v, 3) for k, v in files.items()))
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | os.PathLike) -> Iterator[None]:
+    """Hold the output folder ``folder`` for one batch (an exclusive ``flock`` of the folder itself: nothing
+    is written for it): a second run into it waits until the first ends, saying so in a note, and then reads
+    the record the first left. The folder is created if missing, and removed again, if still empty, when the
+    block fails. On a file system without ``flock`` (some network file systems) runs are not serialised.
+    """
+    import fcntl
+
+    from keyfill import progress
+
+    folder = Path(folder)
+    made = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(folder, e.strerror or str(e)) from None
+    fd = None
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            progress.note(f"{folder}: another keyfill run is writing into this folder; waiting for it to end")
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:  # no flock here
+            pass
+        yield
+    except BaseException:
+        if made:
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only if empty: what this run made and did not fill
+        raise
+    finally:
+        if fd is not None:
+            os.close(fd)
 
 
 class Record:
@@ -292,7 +365,9 @@ class Record:
     ``{"format": "keyfill-outputs", "version": 1, "recipes": {digest: recipe}, "outputs": {name: entry}}``
     where ``name`` is the output's path relative to the folder (``/``-separated) and ``entry`` is
     ``{"input": path, "input_sha256": hex, "recipe": digest, "output": [size, mtime_ns]}``
-    (``input_sha256``: :func:`input_sha256`).
+    (``input_sha256``: :func:`input_sha256`), with ``"files": {name: [size, mtime_ns, inode]}`` for the other
+    files of an output (:func:`output_files`: a ``.gltf``'s ``.bin``), so that a changed, truncated or swapped
+    one makes it stale too.
     Entries of outputs a run does not touch are kept.
     """
 
@@ -357,18 +432,22 @@ class Record:
             old = self.recipes.get(entry.get("recipe"), {})
             changed = sorted(k for k in set(old) | set(recipe) if old.get(k) != recipe.get(k))
             why.append("made with other " + (", ".join(changed) if changed and old else "options"))
-        if entry.get("output") != _output_stamp(item.dst):
+        if entry.get("output") != _output_stamp(item.dst) or entry.get("files", {}) != self._companions(item):
             why.append("output changed since it was written")
         return why
 
+    def _companions(self, item: Item) -> dict[str, list[int] | None]:
+        """The stamps of the files beside ``item``'s output that are part of it (a ``.gltf``'s ``.bin``)."""
+        return {Path(os.path.relpath(f, self.folder)).as_posix(): _file_stamp(f) for f in output_files(item.dst)[1:]}
+
     def put(self, item: Item, input_sha: str | None, digest: str, recipe: dict) -> None:
-        stamp = _output_stamp(item.dst)
-        if input_sha is None or stamp is None:
+        stamp, files = _output_stamp(item.dst), self._companions(item)
+        if input_sha is None or stamp is None or None in files.values():
             self.outputs.pop(self.name(item), None)
             return
         self.recipes[digest] = recipe
         self.outputs[self.name(item)] = {"input": item.src, "input_sha256": input_sha, "recipe": digest,
-                                         "output": stamp}
+                                         "output": stamp, **({"files": files} if files else {})}
 
     def drop(self, item: Item) -> None:
         self.outputs.pop(self.name(item), None)
@@ -479,20 +558,32 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
 
     The executor is started only when there is work; a Dask scheduler that
     cannot be reached is one :class:`KeyfillError` before any file is written.
-    When the run is interrupted (or fails), the workers are stopped, what
-    they had finished is recorded (an output whose files were all written by
-    this run), their temporary files are removed, and the exception goes on.
+    One run at a time writes into an output folder (:func:`folder_lock`: a
+    second waits). An existing output that must be redone but is read-only
+    fails (that input's error names ``force``) unless ``force``. When the run
+    is interrupted (or fails), the workers are stopped, what they had finished
+    is recorded (an output whose files were all written by this run), their
+    temporary files are removed, and the exception goes on.
     """
+    from keyfill.parallel import check_options
+
+    check_options(workers, connect_timeout)  # before an output folder is made
+    if chunk < 1:
+        raise UsageError(f"chunk must be at least 1, got {chunk}", params="chunk")
+    with contextlib.ExitStack() as locks:
+        for root in sorted({it.root for it in items if it.root is not None}):
+            locks.enter_context(folder_lock(root))
+        return _run(items, fn, spec, workers, scheduler, force, chunk, connect_timeout, on_chunk, recipe)
+
+
+def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: str | None, force: bool, chunk: int,
+         connect_timeout: float, on_chunk: Callable[[list[dict]], None] | None, recipe: dict | None) -> Summary:
     import dataclasses
 
     from keyfill import __version__
     from keyfill.files import interrupts_deferred, remove_stale
-    from keyfill.parallel import check_options
     from keyfill.parallel import executor as make_executor
 
-    check_options(workers, connect_timeout)
-    if chunk < 1:
-        raise UsageError(f"chunk must be at least 1, got {chunk}", params="chunk")
     start = time.perf_counter()
     if recipe is None:
         recipe = (spec.recipe() if hasattr(spec, "recipe")
@@ -523,15 +614,21 @@ def run(items: list[Item], fn: Callable, spec, workers: int | None = None, sched
                     reasons = record.stale(it, sha, digest, recipe)
                 if not reasons:
                     outcomes[it.src] = {"input": it.src, "output": it.dst, "status": "skipped"}
+                else:
+                    try:
+                        refuse_read_only(it.dst, force)
+                    except OutputError as e:
+                        outcomes[it.src] = failure(it, e)
+                if it.src in outcomes:
                     todo.append(False)
                     continue
                 why[it.src] = reasons
             todo.append(True)
         if any(todo):
             jobs.append([dataclasses.replace(it, write=t) for it, t in zip(part, todo)])
-    skipped = [outcomes[it.src] for it in items if it.src in outcomes]
-    if skipped and on_chunk is not None:
-        on_chunk(skipped)
+    settled = [outcomes[it.src] for it in items if it.src in outcomes]
+    if settled and on_chunk is not None:
+        on_chunk(settled)
     dirty: set[str] = set()
     pace = {"last": time.perf_counter(), "cost": 0.0}
 

@@ -12,7 +12,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop fuzz gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 gltf-validator clean
+.PHONY: demo test test-slow test-interop test-floors fuzz gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 gltf-validator clean
 
 $(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -51,6 +51,28 @@ gltf-validator: $(GLTF_VALIDATOR)/node_modules/gltf-validator/package.json
 
 $(GLTF_VALIDATOR)/node_modules/gltf-validator/package.json:
 	npm install --prefix $(GLTF_VALIDATOR) --no-save --no-audit --no-fund --silent gltf-validator@2.0.0-dev.3.10
+
+# The declared floors: a venv of its own with every base dependency at the lowest version pyproject.toml
+# allows (each `>=X` installed as `==X`) and the test extra's pytest and hypothesis at theirs, no torch; keyfill
+# goes on top as a wheel without dependencies (so its package data is checked too), then the CLI smoke tests
+# (marker floors, tests/test_floors_smoke.py) run on it. Blender's Python pins numpy 1.26.4, the floor's series.
+FLOORS_VENV := .venv-floors
+FLOORS_STAMP := $(FLOORS_VENV)/.floors-installed
+FLOOR_PINS = $(PYTHON) -c "import re, tomllib; p = tomllib.load(open('pyproject.toml', 'rb'))['project']; \
+    tools = [r for r in p['optional-dependencies']['test'] if re.match('(pytest|hypothesis)>=', r)]; \
+    print('\n'.join(r.replace('>=', '==') for r in p['dependencies'] + tools))"
+
+$(FLOORS_STAMP): pyproject.toml
+	rm -rf $(FLOORS_VENV)
+	$(PYTHON) -m venv $(FLOORS_VENV)
+	$(FLOOR_PINS) > $(FLOORS_VENV)/floors.txt
+	$(FLOORS_VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r $(FLOORS_VENV)/floors.txt
+	@touch $(FLOORS_STAMP)
+
+test-floors: $(FLOORS_STAMP)
+	$(FLOORS_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall .
+	$(FLOORS_VENV)/bin/python -m pip freeze --exclude keyfill | tr '\n' ' '; echo
+	$(FLOORS_VENV)/bin/pytest -q -p no:cacheprovider -m floors tests/test_floors_smoke.py
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
@@ -190,4 +212,4 @@ test-interop: $(STAMP) $(BLENDER_STAMP)
 	$(BIN)/python -m pytest -q -m interop
 
 clean:
-	rm -rf $(VENV) $(BLENDER_VENV) $(GLTF_VALIDATOR) out .pytest_cache
+	rm -rf $(VENV) $(BLENDER_VENV) $(FLOORS_VENV) $(GLTF_VALIDATOR) out .pytest_cache

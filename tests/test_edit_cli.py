@@ -75,9 +75,10 @@ def test_convert_edit_and_back(tmp_path, capsys, curves_file):
 def test_same_inputs_give_the_same_bytes(tmp_path, capsys, curves_file):
     edit = tmp_path / "reach.toml"
     edit.write_text(REACH)
-    for name in ("a.usda", "b.usda"):
-        assert run(capsys, "edit-tangents", curves_file, "--edit", edit, "-o", tmp_path / name)[0] == 0
-    assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
+    for name in ("a", "b"):  # one file name: the animation is named after the output's stem
+        (tmp_path / name).mkdir()
+        assert run(capsys, "edit-tangents", curves_file, "--edit", edit, "-o", tmp_path / name / "out.usda")[0] == 0
+    assert (tmp_path / "a" / "out.usda").read_bytes() == (tmp_path / "b" / "out.usda").read_bytes()
 
 
 BAD = {

@@ -145,9 +145,10 @@ def test_results_are_deterministic(curves, guarded, tmp_path):
     again, _ = solve.edit_tangents(curves, ef)
     for name in ("in_tan", "out_tan", "broken"):
         np.testing.assert_array_equal(getattr(again, name), getattr(out, name))
-    usd_curves.save(out, tmp_path / "a.usda")
-    usd_curves.save(again, tmp_path / "b.usda")
-    assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
+    for name, result in (("a", out), ("b", again)):  # one file name: the animation takes the output's stem
+        (tmp_path / name).mkdir()
+        usd_curves.save(result, tmp_path / name / "out.usda")
+    assert (tmp_path / "a" / "out.usda").read_bytes() == (tmp_path / "b" / "out.usda").read_bytes()
 
 
 def test_output_curves_evaluate_the_same_in_pxr(guarded, tmp_path):

@@ -337,6 +337,68 @@ def test_complete_keeps_the_mesh_of_a_character(capsys, tmp_path):
     assert np.abs(filled.world_positions()[[0, 4]] - source.world_positions()[[0, 4]]).max() < 1e-4
 
 
+#: two joints without channels (a rigid prop), two frames: nothing to animate
+NO_CHANNELS = """HIERARCHY
+ROOT Base
+{
+  OFFSET 0 0 0
+  CHANNELS 0
+  JOINT Tip
+  {
+    OFFSET 0 10 0
+    CHANNELS 0
+    End Site
+    {
+      OFFSET 0 5 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+
+
+"""
+
+
+def no_channels(tmp_path: Path) -> Path:
+    (tmp_path / "prop.bvh").write_text(NO_CHANNELS)
+    return tmp_path / "prop.bvh"
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_a_skeleton_without_channels_writes_a_static_animation(tmp_path, suffix):
+    """glTF has no empty animation (no channels, no samplers): the first joint's rotation is held instead."""
+    motion = io.load(no_channels(tmp_path))
+    assert motion.num_frames == 2 and motion.skeleton.num_channels == 0
+    out = tmp_path / f"prop{suffix}"
+    io.save(motion, out)
+    doc = unglb(out.read_bytes())[0] if suffix == ".glb" else json.loads(out.read_text())
+    (anim,) = doc["animations"]
+    assert anim["channels"] == [{"sampler": 0, "target": {"node": 0, "path": "rotation"}}]
+    assert len(anim["samplers"]) == 1 and doc["accessors"][anim["samplers"][0]["input"]]["count"] == 2
+    back = io.load(out)
+    assert back.num_frames == 2 and back.keys is None and back.skeleton.channels == ((), ())
+    np.testing.assert_allclose(back.world_positions(), motion.world_positions(), atol=1e-6)
+    io.save(back, tmp_path / "back.bvh")
+    io.save(motion, tmp_path / "direct.bvh")
+    assert (tmp_path / "back.bvh").read_text() == (tmp_path / "direct.bvh").read_text()
+
+
+def test_animations_are_named_after_the_output(capsys, tmp_path):
+    """Blender renames clips that share a name (`keyfill.001`): each output's animation is called by its stem."""
+    io.save(io.load(MIXAMO), tmp_path / "walk_filled.glb")
+    assert unglb((tmp_path / "walk_filled.glb").read_bytes())[0]["animations"][0]["name"] == "walk_filled"
+    doc, binary, _ = character()  # a character's clip ("Walk") takes the output's name too
+    code, _, err = run(capsys, "complete", write_glb(tmp_path / "char.glb", doc, binary), "--keys", "0,4",
+                       "-o", tmp_path / "char_cubic.glb")
+    assert code == 0, err
+    assert [a["name"] for a in unglb((tmp_path / "char_cubic.glb").read_bytes())[0]["animations"]] == ["char_cubic"]
+    exe = [sys.executable, "-m", "keyfill", "convert", str(MIXAMO), "-", "--format", "gltf"]
+    assert json.loads(subprocess.run(exe, capture_output=True, check=True).stdout)["animations"][0]["name"] == (
+        MIXAMO.stem)  # standard output: the source's stem
+
+
 def test_stdout_and_stdin(tmp_path):
     exe = [sys.executable, "-m", "keyfill"]
     data = subprocess.run(exe + ["convert", str(MIXAMO), "-", "--format", "glb"], capture_output=True,
@@ -530,6 +592,9 @@ def test_the_khronos_validator_finds_no_error_in_what_keyfill_writes(capsys, tmp
     code, _, err = run(capsys, "convert", write_glb(tmp_path / "char.glb", doc, binary), tmp_path / "kept.glb")
     assert code == 0, err
     files.append(tmp_path / "kept.glb")
+    for suffix in (".glb", ".gltf"):  # a skeleton without channels: a static animation, not an empty one
+        files.append(tmp_path / f"prop{suffix}")
+        io.save(io.load(no_channels(tmp_path)), files[-1])
     report = validate(files)
     for file, r in report.items():
         assert r["errors"] == 0 and r["warnings"] == 0, (file, r["messages"])

@@ -66,6 +66,21 @@ def test_written_files_pass_usd_validation(tmp_path, suffix):
     assert UsdSkel.Topology(skel.GetJointsAttr().Get()).Validate()[0]
 
 
+@pytest.mark.parametrize(("stem", "prim"), [("walk_filled", "walk_filled"), ("3 walk-fast.v2", "_3_walk_fast_v2")])
+def test_the_skel_animation_is_named_after_the_output(tmp_path, stem, prim):
+    """Several clips imported into one scene keep their names; a stem that is no identifier is made one."""
+    m = bvh.read(DATA / "cmu_02_03_cgspeed_first4frames.bvh")
+    out = tmp_path / f"{stem}.usda"
+    io.save(m, out)
+    stage = Usd.Stage.Open(str(out))
+    skel = stage.GetPrimAtPath("/Root/Skeleton")
+    assert [str(t) for t in UsdSkel.BindingAPI(skel).GetAnimationSourceRel().GetTargets()] == [
+        f"/Root/Skeleton/{prim}"]
+    assert io.load(out).num_frames == 4
+    usd.write(m, tmp_path / "plain.usda")  # the writer alone, with no name: "Animation"
+    assert Usd.Stage.Open(str(tmp_path / "plain.usda")).GetPrimAtPath("/Root/Skeleton/Animation").IsValid()
+
+
 def test_validation_catches_a_broken_file(tmp_path):
     """The validator used above does find errors (so an empty list means something)."""
     stage = Usd.Stage.CreateNew(str(tmp_path / "bad.usda"))

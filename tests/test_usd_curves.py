@@ -79,9 +79,11 @@ def test_loading_a_curves_file_bakes_the_curves(tmp_path):
 
 def test_writing_is_deterministic(tmp_path):
     c = random_curves(7)
-    usd_curves.save(c, tmp_path / "a.usda")
-    usd_curves.save(c, tmp_path / "b.usda")
-    assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
+    a, b = tmp_path / "a" / "walk.usda", tmp_path / "b" / "walk.usda"  # one name: the animation takes the stem
+    for out in (a, b):
+        out.parent.mkdir()
+        usd_curves.save(c, out)
+    assert a.read_bytes() == b.read_bytes()
 
 
 def _edit_spline(path, name, change):

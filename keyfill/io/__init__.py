@@ -47,6 +47,8 @@ class Format:
     magic: bytes | None = None
     #: the file records its units (USD ``metersPerUnit``, glTF meters); BVH does not (assumed cm)
     units: bool = True
+    #: the writer takes ``name=``, what to call the animation (a glTF animation, a USD SkelAnimation prim)
+    named: bool = True
 
 
 _USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
@@ -54,7 +56,7 @@ _GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.
 #: format name -> :class:`Format`, in the order messages list them
 FORMATS = {f.name: f for f in (
     Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text",
-           magic=b"HIERARCHY", units=False, template=True),
+           magic=b"HIERARCHY", units=False, template=True, named=False),
     Format("usda", "usd", *_USD, (".usda",), "USD text (UsdSkel)", magic=b"#usda"),
     Format("usdc", "usd", *_USD, (".usdc",), "USD binary crate (UsdSkel)",
            magic=b"PXR-USDC"),
@@ -194,7 +196,8 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
     family and the format keeps a :attr:`Format.template`, what it holds
     beyond the motion is kept (a glTF character's meshes and materials).
     ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key
-    files). A format with a :attr:`Format.sidecar`
+    files). A :attr:`Format.named` format's animation is named after the output
+    file's stem (on standard output the source's, if any). A format with a :attr:`Format.sidecar`
     writes that file beside the output, atomically too: its writer gets
     ``sidecar=(temporary path, final file name)``, or ``sidecar=None`` on
     standard output, where it embeds what the sidecar would hold.
@@ -205,6 +208,9 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
     source_suffix = Path(source).suffix.lower() if source is not None and str(source) != STDIO else None
     if spec.template and source_suffix in SUFFIXES and FORMATS[SUFFIXES[source_suffix]].family == spec.family:
         options["template"] = Path(source)
+    if spec.named:
+        named_after = source if str(path) == STDIO else path
+        options.setdefault("name", None if named_after is None or str(named_after) == STDIO else Path(named_after).stem)
     if str(path) == STDIO:
         if spec.sidecar:
             options["sidecar"] = None

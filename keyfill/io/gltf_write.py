@@ -6,7 +6,9 @@ joints with inverse bind matrices of the rest pose (identity rotations, as in
 BVH), and one animation with a LINEAR sampler per animated channel (times
 ``i / fps`` s, shared by all samplers; a rotation channel for each joint with
 rotation channels or whose rotation moves, a translation channel for each with
-position channels or whose translation moves). Translations are turned into
+position channels or whose translation moves; a skeleton with none of these
+gets its first joint's rotation held, since glTF has no empty animations),
+named after the output file (its stem). Translations are turned into
 metres and a Z-up skeleton's roots into Y-up; the skin's and the animation's
 ``extras.keyfill`` record the source units, up axis, channel layout, End
 Sites, frame rate and keys, so that reading gives back what was written.
@@ -40,6 +42,8 @@ from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 
 #: ``sidecar`` default of :func:`write`: the buffer goes to ``<stem>.bin`` beside a ``.gltf``
 BESIDE = "beside"
+#: the animation's name when :func:`write` is given none (standard output without a source file)
+DEFAULT_NAME = "keyfill"
 
 
 def from_source(rot: np.ndarray, pos: np.ndarray, rest: np.ndarray, above: dict, scale: float, mpu: float,
@@ -79,34 +83,42 @@ def _timing(motion: Motion) -> dict:
     return out
 
 
-def _animation(writer: BufferWriter, motion: Motion, rot, pos, rest_rot, rest_pos, nodes: list[int]):
-    """The pygltflib Animation of ``rot (F, J, 4)`` and ``pos (F, J, 3)`` (glTF frame) for joint ``nodes``."""
+def _animation(writer: BufferWriter, motion: Motion, rot, pos, rest_rot, rest_pos, nodes: list[int], name: str):
+    """The pygltflib Animation ``name`` of ``rot (F, J, 4)`` and ``pos (F, J, 3)`` (glTF frame) for joint ``nodes``.
+
+    A skeleton with nothing to animate (every joint without channels and at rest) still gets one channel, its
+    first joint's rotation held at every frame: glTF allows no animation without channels, and the samples
+    keep the frame count.
+    """
     from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
 
     times = (np.arange(motion.num_frames) / motion.fps).astype(np.float32)
     if np.any(np.diff(times) <= 0):
         raise DataError(f"{motion.num_frames} frames at {motion.fps:g} fps: the frame times cannot be told apart "
                         "in glTF's 32-bit float times")
-    anim = Animation(name="keyfill", extras={EXTRAS: _timing(motion)})
+    anim = Animation(name=name, extras={EXTRAS: _timing(motion)})
     time_acc = writer.add(times[:, None], "SCALAR", bounds=True)
     chans = motion.skeleton.channels
-    for j, node in enumerate(nodes):
-        rotates = any(c in ROTATION_CHANNELS for c in chans[j]) or np.abs(R.quat_angle(rot[:, j], rest_rot[j])).max(
-            initial=0.0) > 1e-9
-        moves = any(c in POSITION_CHANNELS for c in chans[j]) or np.abs(pos[:, j] - rest_pos[j]).max(
-            initial=0.0) > 1e-9 * max(1.0, float(np.abs(rest_pos).max()))
-        for path, values, kind, on in (("translation", pos[:, j], "VEC3", moves),
-                                       ("rotation", rot[:, j][:, [1, 2, 3, 0]], "VEC4", rotates)):
-            if not on:
-                continue
-            anim.samplers.append(AnimationSampler(input=time_acc, output=writer.add(values, kind),
-                                                  interpolation="LINEAR"))
-            anim.channels.append(AnimationChannel(sampler=len(anim.samplers) - 1,
-                                                  target=AnimationChannelTarget(node=node, path=path)))
+
+    def add(j: int, path: str) -> None:
+        values, kind = (pos[:, j], "VEC3") if path == "translation" else (rot[:, j][:, [1, 2, 3, 0]], "VEC4")
+        anim.samplers.append(AnimationSampler(input=time_acc, output=writer.add(values, kind), interpolation="LINEAR"))
+        anim.channels.append(AnimationChannel(sampler=len(anim.samplers) - 1,
+                                              target=AnimationChannelTarget(node=nodes[j], path=path)))
+
+    for j in range(len(nodes)):
+        if any(c in POSITION_CHANNELS for c in chans[j]) or np.abs(pos[:, j] - rest_pos[j]).max(
+                initial=0.0) > 1e-9 * max(1.0, float(np.abs(rest_pos).max())):
+            add(j, "translation")
+        if any(c in ROTATION_CHANNELS for c in chans[j]) or np.abs(R.quat_angle(rot[:, j], rest_rot[j])).max(
+                initial=0.0) > 1e-9:
+            add(j, "rotation")
+    if not anim.channels:
+        add(0, "rotation")
     return anim
 
 
-def _fresh(motion: Motion) -> tuple[dict, bytes]:
+def _fresh(motion: Motion, name: str) -> tuple[dict, bytes]:
     """The JSON and binary buffer of a glTF file holding ``motion`` alone."""
     from pygltflib import GLTF2, Asset, Buffer, Node, Scene, Skin
 
@@ -132,7 +144,7 @@ def _fresh(motion: Motion) -> tuple[dict, bytes]:
     gltf.skins = [Skin(joints=list(range(J)), inverseBindMatrices=writer.add(ibm.transpose(0, 2, 1).reshape(J, 16),
                                                                             "MAT4"),
                        skeleton=roots[0] if len(roots) == 1 else None, extras={EXTRAS: _layout(motion)})]
-    gltf.animations = [_animation(writer, motion, rot, pos, ident, rest, list(range(J)))]
+    gltf.animations = [_animation(writer, motion, rot, pos, ident, rest, list(range(J)), name)]
     gltf.buffers = [Buffer(byteLength=len(writer.data))]
     return json.loads(gltf.gltf_to_json()), bytes(writer.data)
 
@@ -191,7 +203,7 @@ def _drop_animation(raw: dict, a: int) -> None:
                                    refs)
 
 
-def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
+def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, bytes]:
     """The JSON and buffer of ``template`` with ``motion`` as the animation of its skin."""
     from pygltflib import GLTF2
 
@@ -235,7 +247,7 @@ def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
         embedded.append(image)
     rot, pos, rest = motion.rotations.copy(), motion.positions.copy(), sk.offsets.copy()
     from_source(rot, pos, rest, rig.above, rig.scale, sk.meters_per_unit, sk.up_axis)
-    scratch.animations = [_animation(writer, motion, rot, pos, rig.rest_rot, rig.rest_pos, rig.nodes)]
+    scratch.animations = [_animation(writer, motion, rot, pos, rig.rest_rot, rig.rest_pos, rig.nodes, name)]
     part = json.loads(scratch.gltf_to_json())
     views, accessors = raw.setdefault("bufferViews", []), raw.setdefault("accessors", [])
     offset_views, offset_acc = len(views), len(accessors)
@@ -261,7 +273,8 @@ def _with_template(motion: Motion, template: Path) -> tuple[dict, bytes]:
     return raw, bytes(blob)
 
 
-def write(motion: Motion, path: str | Path, sidecar=BESIDE, template: str | Path | None = None) -> None:
+def write(motion: Motion, path: str | Path, sidecar=BESIDE, template: str | Path | None = None,
+          name: str | None = None) -> None:
     """Write ``motion`` to ``path`` as glTF, binary for ``.glb`` (not atomic; see :func:`keyfill.io.save`).
 
     Args:
@@ -270,12 +283,15 @@ def write(motion: Motion, path: str | Path, sidecar=BESIDE, template: str | Path
             None: embedded in the ``.gltf`` as a ``data:`` URI.
         template: a glTF file whose meshes, materials and other content to keep
             (see the module docstring).
+        name: the animation's name (:func:`keyfill.io.save` gives the output's
+            stem); None: :data:`DEFAULT_NAME`.
     """
     limits.check_values(motion)
     if motion.num_frames == 0:
         raise DataError("the motion has no frames; a glTF animation needs at least one")
     path = Path(path)
-    doc, blob = _fresh(motion) if template is None else _with_template(motion, Path(template))
+    name = DEFAULT_NAME if name is None else name
+    doc, blob = _fresh(motion, name) if template is None else _with_template(motion, Path(template), name)
     if path.suffix.lower() == ".glb":
         path.write_bytes(glb_bytes(json.dumps(doc, separators=(",", ":"), allow_nan=False), blob))
         return

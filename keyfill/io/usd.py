@@ -5,10 +5,10 @@ Layout keyfill writes::
     /<Root>                 SkelRoot, the stage's defaultPrim
     /<Root>/Skeleton        Skeleton: joints (paths), jointNames, restTransforms
                             (local), bindTransforms (world); SkelBindingAPI with
-                            skel:animationSource -> Animation
-    /<Root>/Skeleton/Animation
-                            SkelAnimation: translations, rotations, scales as
-                            time samples, one per frame (time code = frame index)
+                            skel:animationSource -> <name>
+    /<Root>/Skeleton/<name> SkelAnimation: translations, rotations, scales as
+                            time samples, one per frame (time code = frame index);
+                            named after the output file (its stem as an identifier)
 
 Stage metadata: ``timeCodesPerSecond`` = ``framesPerSecond`` = fps,
 ``startTimeCode`` 0, ``endTimeCode`` F-1, ``upAxis``, ``metersPerUnit``. The
@@ -127,13 +127,17 @@ def _matrices(Gf, Vt, rot: np.ndarray, pos: np.ndarray):
     return Vt.Matrix4dArray(out)
 
 
-def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str = "Root") -> None:
+def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str = "Root",
+          name: str | None = None) -> None:
     """Write ``motion`` to a USD file (format from the suffix).
 
     Args:
         sparse: author time samples only at ``motion.keys`` (a keyframe file);
             readers then see the keys as the motion's keys.
         root_name: name of the SkelRoot prim.
+        name: name of the SkelAnimation prim, made an identifier (letters,
+            digits and ``_``, not starting with a digit; :func:`keyfill.io.save`
+            gives the output's stem); None: ``Animation``.
     """
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     sk = motion.skeleton
@@ -149,7 +153,7 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
     root = UsdSkel.Root.Define(stage, "/" + _identifier(root_name))
     stage.SetDefaultPrim(root.GetPrim())
     skel = UsdSkel.Skeleton.Define(stage, root.GetPath().AppendChild("Skeleton"))
-    anim = UsdSkel.Animation.Define(stage, skel.GetPath().AppendChild("Animation"))
+    anim = UsdSkel.Animation.Define(stage, skel.GetPath().AppendChild("Animation" if name is None else _identifier(name)))
     paths = Vt.TokenArray(joint_paths(sk))
     skel.CreateJointsAttr(paths)
     skel.CreateJointNamesAttr(Vt.TokenArray([p.rsplit("/", 1)[-1] for p in paths]))

@@ -5,8 +5,8 @@ Layout (``.usda``, ``.usdc`` or ``.usd``)::
     /Root                      SkelRoot (defaultPrim)
     /Root/Skeleton             UsdSkel Skeleton, as keyfill.io.usd writes it (joint names,
                                BVH channel layouts, End Sites and the keys in customData)
-    /Root/Skeleton/Animation   SkelAnimation: the curves baked at every frame, so that any
-                               UsdSkel viewer plays the motion
+    /Root/Skeleton/<name>      SkelAnimation: the curves baked at every frame, so that any
+                               UsdSkel viewer plays the motion (named after the file's stem)
     /Root/Curves               Scope; customData keyfill = {layout = "keyfill.curves", version = 1}
         double <Joint>_<Channel>.spline = { bezier, <knots> }   one attribute per control
 
@@ -63,14 +63,16 @@ def _attr_name(skeleton, control: Control, used: set[str]) -> str:
     return name
 
 
-def write(curves: Curves, path: str | Path) -> None:
+def write(curves: Curves, path: str | Path, name: str | None = None) -> None:
     """Write ``curves`` to a USD file (format from the suffix); see the module docstring.
+
+    ``name``: the SkelAnimation's (see :func:`keyfill.io.usd.write`).
 
     Not atomic by itself: callers write through :func:`keyfill.files.atomic_output`.
     """
     from pxr import Sdf, Ts, Usd, UsdGeom
 
-    usd.write(curves.bake(), path)
+    usd.write(curves.bake(), path, name=name)
     layer = Sdf.Layer.FindOrOpen(str(path))
     layer.Reload(force=True)
     stage = Usd.Stage.Open(layer)
@@ -111,7 +113,7 @@ def save(curves: Curves, path: str | Path) -> None:
         io.save(curves.bake(), path)
         return
     with atomic_output(path) as tmp:
-        write(curves, tmp)
+        write(curves, tmp, name=Path(path).stem)
 
 
 def curves_prim(stage):

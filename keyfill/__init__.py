@@ -9,6 +9,11 @@ The library behind the ``keyfill`` command. One data type flows through it:
 importing the package (as the ``keyfill`` command does first) loads no numpy.
 """
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # type checkers see the real classes; at run time __getattr__ imports them
+    from keyfill.motion import Keys, Motion, Skeleton
+
 __version__ = "0.1.0"
 
 __all__ = ["Keys", "Motion", "Skeleton", "__version__"]

@@ -77,7 +77,7 @@ class Skeleton:
     meters_per_unit: float = 0.01
     up_axis: str = "Y"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.names)
         parents = np.asarray(self.parents, dtype=np.int64).reshape(-1)
         offsets = np.asarray(self.offsets, dtype=np.float64)
@@ -237,7 +237,7 @@ class Keys:
     mask: np.ndarray | None = field(default=None)
     given: str = "pose"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
         if np.any(frames < 0):
             raise UsageError(f"key {int(frames[frames < 0][0])} is negative")
@@ -401,7 +401,7 @@ class Motion:
     positions: np.ndarray
     keys: Keys | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         rot = np.asarray(self.rotations, dtype=np.float64)
         pos = np.asarray(self.positions, dtype=np.float64)
         J = self.skeleton.num_joints

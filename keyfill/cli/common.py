@@ -136,6 +136,15 @@ def meters_per_unit_option(f):
              "centimetres, 0.01). Files that record their units (USD, glTF) keep their own.")(f)
 
 
+def up_axis_option(f):
+    """``--up-axis``: the up axis of an input whose format records none (BVH)."""
+    return click.option(
+        "--up-axis", metavar="Y|Z",
+        help="The up axis of a BVH input, Y or Z (BVH files do not say; without this keyfill assumes Y, BVH's "
+             "custom; Blender exports Z-up BVH). The values stay as they are: the axis goes into the outputs' "
+             "metadata (USD upAxis; glTF outputs are turned Y-up). Files that record their axis keep their own.")(f)
+
+
 def keys_options(f):
     """``--keys`` and ``--key-every`` options."""
     f = click.option(

@@ -16,6 +16,7 @@ from keyfill.cli.common import (
     resolve_keys,
     run_batch,
     say,
+    up_axis_option,
 )
 
 
@@ -27,12 +28,13 @@ from keyfill.cli.common import (
               help="Output format (needed when DST is '-'; with -o, the outputs' suffix).")
 @in_format_option
 @meters_per_unit_option
+@up_axis_option
 @click.option("--curves", is_flag=True,
               help="Fit editable Bezier curves through the keys and write a curves file (USD only).")
 @keys_options
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_every, workers, scheduler,
+def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, curves, keys_text, key_every, workers, scheduler,
             connect_timeout, force, batch_size, as_json):
     """Convert a motion file between BVH, USD (.usda, .usdc, .usd) and glTF (.glb, .gltf).
 
@@ -62,6 +64,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
       keyfill convert walk.bvh walk_curves.usda --curves --keys 0,10,20,30
       cat walk.bvh | keyfill convert - - --format usda > walk.usda
       keyfill convert capture.bvh capture.usda --meters-per-unit 0.0254     (inches: metersPerUnit 0.0254)
+      keyfill convert blender_export.bvh shot.usda --up-axis Z               (upAxis Z)
       keyfill convert mocap/ -o usd/ --format usdc --workers 2
     """
     from keyfill import io
@@ -69,9 +72,9 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
 
     if outdir is not None:
         if curves or keys_text is not None or key_every is not None or in_fmt is not None \
-                or meters_per_unit is not None:
+                or meters_per_unit is not None or up_axis is not None:
             raise UsageError("-o OUTDIR converts motion files by their suffixes; --curves, --keys, --key-every, "
-                             "--in-format and --meters-per-unit take one SRC and DST")
+                             "--in-format, --meters-per-unit and --up-axis take one SRC and DST")
         return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", None, workers, scheduler,
                          connect_timeout, force, batch_size, as_json, "converted")
     if len(paths) == 1:
@@ -87,7 +90,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, curves, keys_text, key_
     refuse_overwriting_input(dst, [src], force)
     refuse_read_only(dst, force)
 
-    motion = io.load(src, input_format(src, in_fmt), meters_per_unit)
+    motion = io.load(src, input_format(src, in_fmt), meters_per_unit, up_axis)
     if curves:
         from keyfill.edit.fit import fit
         from keyfill.io import usd_curves as curvefile

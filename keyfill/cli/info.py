@@ -5,14 +5,16 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from keyfill.cli.common import FORMAT_CHOICE, emit_json, in_format_option, meters_per_unit_option
+from keyfill.cli.common import FORMAT_CHOICE, emit_json, in_format_option, meters_per_unit_option, up_axis_option
 
 
-def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = False) -> dict:
+def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = False,
+             axis_assumed: bool = False) -> dict:
     """A JSON-ready summary of ``motion``: skeleton, timing, keys, bounding box (docs/json.md).
 
     ``fmt``: the format the file was read as; ``units_assumed``: its format records no units (BVH) and none
-    were given, so ``meters_per_unit`` is keyfill's assumption (centimetres), not the file's word.
+    were given, so ``meters_per_unit`` is keyfill's assumption (centimetres), not the file's word;
+    ``axis_assumed``: the same for ``up_axis`` (Y).
     """
     sk = motion.skeleton
     world = motion.world_positions() if motion.num_frames else np.zeros((0, sk.num_joints, 3))
@@ -31,6 +33,7 @@ def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = Fa
         "meters_per_unit": sk.meters_per_unit,
         "units_assumed": units_assumed,
         "up_axis": sk.up_axis,
+        "up_axis_assumed": axis_assumed,
         "hierarchy": [
             {
                 "name": sk.names[j],
@@ -51,6 +54,7 @@ def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = Fa
 @in_format_option
 @click.option("--format", "fmt", type=FORMAT_CHOICE, hidden=True, help="Old name of --in-format.")
 @meters_per_unit_option
+@up_axis_option
 @click.option("--representative", type=int, metavar="N",
               help="Also list the N representative frames (largest joint-rotation change; the frames a Motion DNA "
                    "takes from this file, see docs/gan.md).")
@@ -61,13 +65,13 @@ def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = Fa
               help='Give roles the mapper does not find, as TOML lines role = "JointName" (e.g. hand_l = "L_Wrist"; '
                    "spine = [...] for the chain); implies --rig.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
-def info(file, in_fmt, fmt, meters_per_unit, representative, rig, rig_map, as_json):
+def info(file, in_fmt, fmt, meters_per_unit, up_axis, representative, rig, rig_map, as_json):
     """Show what a motion file (BVH, USD or glTF) holds.
 
     Skeleton (joints, channels, Euler orders), frame count, frame rate,
-    duration, units, keys and the world-space bounding box. BVH files
-    record no units: they are reported as centimetres assumed, unless
-    --meters-per-unit states them.
+    duration, units, up axis, keys and the world-space bounding box. BVH
+    files record no units and no up axis: they are reported as centimetres
+    and Y-up assumed, unless --meters-per-unit and --up-axis state them.
 
     With --rig: the humanoid role of each joint (hips, spine chain, neck,
     head, per side clavicle, upper arm, forearm, hand, thigh, shin, foot,
@@ -83,6 +87,7 @@ def info(file, in_fmt, fmt, meters_per_unit, representative, rig, rig_map, as_js
       keyfill info keys.usda --json | jq .keys
       cat walk.bvh | keyfill info -                      (the format from the first bytes)
       keyfill info capture.bvh --meters-per-unit 0.0254     (a file in inches)
+      keyfill info blender_export.bvh --up-axis Z           (Blender's BVH export is Z-up)
       keyfill info salsa.bvh --representative 8 --json | jq .representative_frames
       keyfill info character.bvh --rig
       keyfill info character.bvh --rig-map character.toml --json | jq .rig
@@ -91,8 +96,9 @@ def info(file, in_fmt, fmt, meters_per_unit, representative, rig, rig_map, as_js
 
     if in_fmt is not None and fmt is not None and in_fmt != fmt:
         raise click.UsageError("--format is the old name of --in-format; give one")
-    motion, read_as = io.load_format(file, in_fmt or fmt, meters_per_unit)
-    d = describe(motion, file, read_as, units_assumed=not io.FORMATS[read_as].units and meters_per_unit is None)
+    motion, read_as = io.load_format(file, in_fmt or fmt, meters_per_unit, up_axis)
+    d = describe(motion, file, read_as, units_assumed=not io.FORMATS[read_as].units and meters_per_unit is None,
+                 axis_assumed=not io.FORMATS[read_as].axes and up_axis is None)
     if representative is not None:
         from keyfill.learn.representative import representative_frames
 
@@ -114,7 +120,9 @@ def info(file, in_fmt, fmt, meters_per_unit, representative, rig, rig_map, as_js
         units = f"cm assumed; {read_as.upper()} does not say (--meters-per-unit states them)"
     else:
         units = f"{d['meters_per_unit']:g} m"
-    click.echo(f"units: {units}, up axis {d['up_axis']}")
+    axis = f"{d['up_axis']}" + (f" assumed; {read_as.upper()} does not say (--up-axis states it)"
+                                 if d["up_axis_assumed"] else "")
+    click.echo(f"units: {units}; up axis {axis}")
     keys = d["keys"]
     click.echo(f"keys: {', '.join(map(str, keys)) if keys is not None else 'none recorded'}")
     if representative is not None:

@@ -49,6 +49,9 @@ class Format:
     units: bool = True
     #: the writer takes ``name=``, what to call the animation (a glTF animation, a USD SkelAnimation prim)
     named: bool = True
+    #: the file records its up axis (USD ``upAxis``; glTF is Y-up, or says otherwise in its extras); BVH does not
+    #: (assumed Y)
+    axes: bool = True
 
 
 _USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
@@ -56,7 +59,7 @@ _GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.
 #: format name -> :class:`Format`, in the order messages list them
 FORMATS = {f.name: f for f in (
     Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text",
-           magic=b"HIERARCHY", units=False, template=True, named=False),
+           magic=b"HIERARCHY", units=False, template=True, named=False, axes=False),
     Format("usda", "usd", *_USD, (".usda",), "USD text (UsdSkel)", magic=b"#usda"),
     Format("usdc", "usd", *_USD, (".usdc",), "USD binary crate (UsdSkel)",
            magic=b"PXR-USDC"),
@@ -141,24 +144,37 @@ def sniff(data: bytes) -> str | None:
     return None
 
 
-def load(path: str | os.PathLike, format: str | None = None, meters_per_unit: float | None = None) -> Motion:
+def load(path: str | os.PathLike, format: str | None = None, meters_per_unit: float | None = None,
+         up_axis: str | None = None) -> Motion:
     """Read a motion file (``"-"``: standard input, in ``format`` or else the one :func:`sniff` finds).
 
     ``meters_per_unit`` states the units of a format that records none (BVH, :attr:`Format.units`); without
     it such a file is assumed in centimetres (0.01). A format that records its units ignores it.
+    ``up_axis`` (``"Y"`` or ``"Z"``, any case) states the up axis of a format that records none (BVH,
+    :attr:`Format.axes`; Blender exports Z-up BVH); without it such a file is assumed Y-up. The values are
+    kept as they are: the axis becomes the skeleton's :attr:`~keyfill.motion.Skeleton.up_axis`, which USD
+    records and glTF turns into its Y-up. A format that records its up axis ignores it.
     """
-    return load_format(path, format, meters_per_unit)[0]
+    return load_format(path, format, meters_per_unit, up_axis)[0]
 
 
-def load_format(path: str | os.PathLike, format: str | None = None,
-                meters_per_unit: float | None = None) -> tuple[Motion, str]:
+def load_format(path: str | os.PathLike, format: str | None = None, meters_per_unit: float | None = None,
+                up_axis: str | None = None) -> tuple[Motion, str]:
     """:func:`load`, and the name of the format the file was read as (sniffed for standard input)."""
     if meters_per_unit is not None and not (0 < meters_per_unit < float("inf")):
         raise UsageError(f"meters_per_unit must be a positive number, got {meters_per_unit!r}",
                          params="meters_per_unit")
+    up = None if up_axis is None else str(up_axis).upper()
+    if up is not None and up not in ("X", "Y", "Z"):
+        raise UsageError(f"up_axis must be X, Y or Z, got {up_axis!r}", params="up_axis")
+    if up == "X":
+        raise UsageError("up_axis X is not supported: keyfill's skeletons, like USD's upAxis, are Y-up or Z-up",
+                         params="up_axis")
     fmt, motion = _read(path, format)
     if meters_per_unit is not None and not FORMATS[fmt].units:
         motion = motion.replace(skeleton=motion.skeleton.replace(meters_per_unit=float(meters_per_unit)))
+    if up is not None and not FORMATS[fmt].axes:
+        motion = motion.replace(skeleton=motion.skeleton.replace(up_axis=up))
     return motion, fmt
 
 

@@ -12,7 +12,7 @@ from conftest import DATA, one_error_line, run
 
 from keyfill import interpolate, io
 from keyfill import rotations as R
-from keyfill.errors import ModelError
+from keyfill.errors import ModelError, UsageError
 from keyfill.learn import registry
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.library import store
@@ -252,3 +252,17 @@ def test_the_lafan1_protocol_scores_match_and_a_library_clip_comes_back_exactly(
                              proto.stats, lengths=(15, 30))
     for n in (15, 30):
         assert scores["match"][n]["L2P"] < 1e-4 < scores["linear"][n]["L2P"]
+
+
+def test_a_root_path_is_walked_with_its_spots_exact(library):
+    m = clip()
+    keys = Keys([0, 30, 60]).restrict(m.skeleton, ["mixamorig:Hips"], "position")
+    options = CompleteOptions(library=str(library), guard="off")
+    done = registry.complete(m, keys, "match", options)
+    hips = m.skeleton.index("mixamorig:Hips")
+    k = keys.frames
+    assert np.array_equal(done.motion.positions[k, hips], m.positions[k, hips])
+    assert [g["filled_by"] for g in done.info["gaps"]] == ["match", "match"]
+    hands = Keys([0, 30, 60]).restrict(m.skeleton, ["mixamorig:LeftHand"], "position")
+    with pytest.raises(UsageError, match="root path"):
+        registry.complete(m, hands, "match", options)

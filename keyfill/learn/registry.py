@@ -137,7 +137,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            onnx="keyfill.learn.gan.onnx", partial_keys=True, dna=True, humanoid=True),
     Method("match", "in-betweens matched from a library of real motion (motion matching through the keys)",
            "keyfill.learn.match.model:complete", module="keyfill.learn.match.model", protocol="lafan1",
-           humanoid=True, library=True, feet="lock"),
+           partial_keys=True, humanoid=True, library=True, feet="lock"),
 )}
 
 

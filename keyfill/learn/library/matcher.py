@@ -16,6 +16,13 @@ library's skeleton and frame rate (the rig bridge brings others there) and its k
   anything the library holds).
 
 Keys are exact. The report says, per gap, what filled it and from where.
+
+**Root paths** (partial keys giving only the hips' positions, ``--key-joints HIPS --key-positions``): the
+key poses are made first, gap by gap (:meth:`Matcher.path_poses`): the first gap's stretch is the one whose
+hips travel as far as the keys' (:func:`~keyfill.learn.library.search.path_start`), turned to travel their
+way; every next stretch starts near the pose the last one ended with and travels towards the next spot; the
+pose a stretch ends with, moved onto the keyed spot, is the next key's pose. Those whole keys are then filled
+as above, and the keyed positions come out exact.
 """
 
 from __future__ import annotations
@@ -26,10 +33,11 @@ import numpy as np
 
 from keyfill import interpolate
 from keyfill import rotations as R
-from keyfill.learn.library.features import chain_world, describe, hips_world, pose_world
+from keyfill.errors import DataError, UsageError
+from keyfill.learn.library.features import chain_world, describe, hips_world, pose_world, yaw
 from keyfill.learn.library.guard import THRESHOLD
 from keyfill.learn.library.index import Tree
-from keyfill.learn.library.search import Costs, Gap, candidates, choose
+from keyfill.learn.library.search import Costs, Gap, candidates, choose, path_start
 from keyfill.learn.library.stitch import join, place
 from keyfill.motion import Keys, Motion
 
@@ -109,6 +117,8 @@ class Matcher:
              settings: MatchSettings = MatchSettings()) -> tuple[Motion, list[dict]]:
         """``(motion with every gap filled, per-gap report)``; ``motion`` is on the library's skeleton and
         frame rate, ``keys`` whole poses. Frames outside the keys hold the nearest key, as the splines do."""
+        if keys.partial:
+            motion, keys = self.path_poses(motion, keys, seed, settings), Keys(keys.frames)
         lib = self.library
         J = lib.skeleton.num_joints
         spline = interpolate.cubic(motion, keys)
@@ -166,6 +176,62 @@ class Matcher:
             rot[b - h: b + h + 1] = jr
             hips[b - h: b + h + 1] = jh
         return self.to_motion(spline, rot, hips).replace(keys=keys), report
+
+    def path_poses(self, motion: Motion, keys: Keys, seed: int, settings: MatchSettings) -> Motion:
+        """``motion`` with a whole pose at every key of a root path (the module docstring); a
+        :class:`~keyfill.errors.UsageError` for partial keys of another kind."""
+        lib, fr = self.library, self.library.frames
+        if keys.given != "position" or not keys.joint_mask(motion.num_joints)[:, fr.hips].all():
+            raise UsageError(f"match takes whole poses, or a root path: the hips' positions at every key "
+                             f"(key_joints {motion.skeleton.names[fr.hips]}, key_positions)",
+                             params=("key_joints", "key_positions"))
+        k = keys.frames
+        _, hips_k = hips_world(motion.rotations[k], motion.positions[k], motion.skeleton, fr)
+        a, b = fr.ground_axes
+        spots = hips_k[:, [a, b]] * fr.meters_per_unit  # (K, 2) the path's spots on the ground, meters
+        poses = []  # library-form (rotations (J, 4), hips (3,)) at each key
+        i, L = path_start(lib, float(np.linalg.norm(spots[1] - spots[0])), int(k[1] - k[0]), seed, settings.costs)
+        if i < 0:
+            raise DataError(f"no clip of the library {lib.name} is long enough for the first gap of the path")
+        src = np.asarray(lib.ground[[i, i + L]], dtype=np.float64)
+        turn = (np.arctan2(*(spots[1] - spots[0])[::-1]) - np.arctan2(*(src[1] - src[0])[::-1]))
+        poses.append(self._moved(i, turn, src[0], spots[0]))
+        for n in range(len(k) - 1):
+            rot, hp = poses[-1]
+            feats, ground, head = describe(pose_world(rot[None], hp[None], lib.skeleton, fr), fr)
+            gap = Gap(int(k[n]), int(k[n + 1]), np.repeat(feats, 2, axis=0), np.stack([ground[0], spots[n + 1]]),
+                      np.repeat(head, 2), np.full((2, feats.shape[1]), np.nan), end_pose=False)
+            i_s, L_s, cost = candidates(lib, self.tree, [gap], settings.costs)[0]
+            if not len(i_s):
+                raise DataError(f"no clip of the library {lib.name} is long enough for the path's gap "
+                                f"{gap.a}-{gap.b}")
+            c = choose(i_s, L_s, cost, lib.clip_of, seed, n, settings.costs)
+            i, L = int(i_s[c]), int(L_s[c])
+            turn = head[0] - float(lib.heading[i])
+            poses.append(self._moved(i + L, turn, np.asarray(lib.ground[i], np.float64), ground[0],
+                                     spot=spots[n + 1]))
+        rot = np.array(motion.rotations, dtype=np.float64)
+        pos = np.array(motion.positions, dtype=np.float64)
+        local = self.to_motion(motion.frames(k), np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses]))
+        rot[k], pos[k] = local.rotations, local.positions
+        return motion.replace(rotations=rot, positions=pos, keys=None)
+
+    def _moved(self, frame: int, turn: float, origin: np.ndarray, target: np.ndarray,
+               spot: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The library-form pose of ``frame`` turned by ``turn`` (radians about up) and moved so that the
+        ground point ``origin`` (m) lands on ``target`` (m); then its hips' ground point put on ``spot``."""
+        lib, fr = self.library, self.library.frames
+        a, b = fr.ground_axes
+        rot = np.asarray(lib.rotations[frame], dtype=np.float64).copy()
+        q = yaw(np.float64(turn), fr)
+        rot[fr.hips] = R.quat_mul(q, rot[fr.hips])
+        shift = np.zeros(3)
+        shift[[a, b]] = origin / fr.meters_per_unit
+        hips = R.quat_rotate(q, np.asarray(lib.hips[frame], np.float64) - shift)
+        hips[[a, b]] += target / fr.meters_per_unit
+        if spot is not None:
+            hips[[a, b]] = spot / fr.meters_per_unit
+        return rot, hips
 
     def to_motion(self, spline: Motion, rot: np.ndarray, hips: np.ndarray) -> Motion:
         """Library-form poses back to ``spline``'s local channels: the hips' world transform under the joints

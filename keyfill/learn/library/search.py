@@ -48,7 +48,8 @@ class Costs:
 class Gap:
     """What the search knows of one gap: the key frames ``a < b`` and the key descriptions at both ends
     (``features (2, D)``, ``ground (2, 2)``, ``heading (2,)``) and, where the frame next to a key is given,
-    the feature velocities ``velocity (2, D)`` (m/s; NaN where unknown)."""
+    the feature velocities ``velocity (2, D)`` (m/s; NaN where unknown). Without ``end_pose`` only the ground
+    point of ``B`` is known (a root path): its pose and turn terms are left out."""
 
     a: int
     b: int
@@ -56,6 +57,7 @@ class Gap:
     ground: np.ndarray
     heading: np.ndarray
     velocity: np.ndarray
+    end_pose: bool = True
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
@@ -79,7 +81,8 @@ def candidates(lib, tree, gaps: list[Gap], costs: Costs = Costs()) -> list[tuple
     for n, gap in enumerate(gaps):
         g = gap.b - gap.a
         Ls = np.unique(np.maximum(1, np.rint(g * np.asarray(costs.warps)).astype(np.int64)))
-        fa, fb = near[n, 0], near[n, 1]
+        fa = near[n, 0]
+        fb = near[n, 1] if gap.end_pose else near[n, 1][:0]  # a root path's B has no pose to be near
         i = np.concatenate([np.repeat(fa, len(Ls)), np.repeat(fb, len(Ls)) - np.tile(Ls, len(fb))])
         L = np.concatenate([np.tile(Ls, len(fa)), np.tile(Ls, len(fb))])
         ok = (i >= 0) & (i < lib.num_frames)
@@ -95,17 +98,19 @@ def candidates(lib, tree, gaps: list[Gap], costs: Costs = Costs()) -> list[tuple
         j = i + L
         F_i = np.asarray(lib.features[i], dtype=np.float64)
         F_j = np.asarray(lib.features[j], dtype=np.float64)
-        cost = (((F_i - gap.features[0]) ** 2).sum(-1) + ((F_j - gap.features[1]) ** 2).sum(-1)) / J
         H_i, H_j = np.asarray(lib.heading[i], np.float64), np.asarray(lib.heading[j], np.float64)
+        cost = ((F_i - gap.features[0]) ** 2).sum(-1) / J
+        if gap.end_pose:
+            cost += ((F_j - gap.features[1]) ** 2).sum(-1) / J
+            cost += costs.turn * _wrap((H_j - H_i) - (gap.heading[1] - gap.heading[0])) ** 2
         travel = to_ground(np.asarray(lib.ground[j], np.float64) - np.asarray(lib.ground[i], np.float64), H_i)
         want = to_ground(gap.ground[1] - gap.ground[0], gap.heading[0])
         cost += costs.travel * ((travel - want) ** 2).sum(-1)
-        cost += costs.turn * _wrap((H_j - H_i) - (gap.heading[1] - gap.heading[0])) ** 2
         cost += costs.warp * np.log(L / g) ** 2
         rough = _range_means(lib, i, j)
         cost += costs.roughness * rough**2
         for end, frame in ((0, i), (1, j)):
-            v = gap.velocity[end]
+            v = gap.velocity[end] if end == 0 or gap.end_pose else np.nan
             if np.isfinite(v).all():
                 lo = np.maximum(frame - 1, clip_start[frame])
                 hi = np.minimum(frame + 1, clip_stop[frame] - 1)
@@ -140,3 +145,25 @@ def choose(i: np.ndarray, L: np.ndarray, cost: np.ndarray, clip_of: np.ndarray, 
     w = np.exp(-(cost[pool] - best) / costs.temperature)
     rng = np.random.default_rng([seed, gap_index])
     return int(pool[rng.choice(len(pool), p=w / w.sum())])
+
+
+def path_start(lib, length_m: float, g: int, seed: int, costs: Costs = Costs(), stride: int = 2) -> tuple[int, int]:
+    """The stretch ``(i, L)`` that starts a root path: no pose is known, only how far the hips travel over the
+    first gap of ``g`` frames (``length_m``); every ``stride``-th library frame is tried with every warp, by
+    ``travel * (|T| - length)^2 + warp + roughness`` (seed 0: the cheapest; others: :func:`choose`)."""
+    starts = lib.starts()
+    i0 = np.arange(0, lib.num_frames, stride)
+    Ls = np.unique(np.maximum(1, np.rint(g * np.asarray(costs.warps)).astype(np.int64)))
+    i = np.repeat(i0, len(Ls))
+    L = np.tile(Ls, len(i0))
+    ok = i + L < starts[lib.clip_of[i] + 1]
+    i, L = i[ok], L[ok]
+    if not len(i):
+        return -1, -1
+    ground = np.asarray(lib.ground, dtype=np.float64)
+    travel = np.linalg.norm(ground[i + L] - ground[i], axis=-1)
+    cost = costs.travel * (travel - length_m) ** 2 + costs.warp * np.log(L / g) ** 2
+    cost += costs.roughness * _range_means(lib, i, i + L) ** 2
+    order = np.argsort(cost, kind="stable")
+    c = choose(i[order], L[order], cost[order], lib.clip_of, seed, 0, costs)
+    return int(i[order][c]), int(L[order][c])

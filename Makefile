@@ -12,7 +12,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop test-floors fuzz gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 gltf-validator clean
+.PHONY: demo test test-slow test-interop test-floors fuzz gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
 
 $(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,7 +36,9 @@ demo: $(STAMP)
 	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_transformer.usda --method transformer
 	$(BIN)/keyfill complete examples/human/keys_15.usda -o $(OUT)/human15_cubic.usda --method cubic
 	$(BIN)/keyfill preview $(OUT)/human15_cubic.usda $(OUT)/human15_transformer.usda --labels cubic,transformer --view side -o $(OUT)/human15.png
-	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model of models/bandai, CC BY-NC 4.0, with its feet locked and raw, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_gan_raw.usda, human_cubic.usda, human.png, human_feet.png (frames 0-99, raw against locked feet), human_feet_contacts.png (toe curves and foot contacts, frames 0-99), human15_transformer.usda, human15_cubic.usda, human15.png)"
+	$(BIN)/keyfill complete examples/human/keys.usda -o $(OUT)/human_match.usda --method match
+	$(BIN)/keyfill preview $(OUT)/human_cubic.usda $(OUT)/human_match.usda --labels cubic,match --view side --frames 68:137 --step 4 --trail Toes_L --size 1200x500 -o $(OUT)/human_match.png
+	@echo "demo: completed examples/mixamo_keys.usda (cubic), examples/lamp/keys.usda (ARNN, the model shipped in keyfill/learn/models/lamp-arnn), examples/human/keys.usda (the shipped human gan model of models/bandai, CC BY-NC 4.0, with its feet locked and raw, and cubic) and examples/human/keys_15.usda (the shipped human transformer, CC BY-NC 4.0, and cubic) and examples/human/keys.usda again with --method match (the shipped motion library, CC BY-NC 4.0); results in $(OUT)/ (mixamo_cubic.usda, mixamo_cubic.bvh, lamp_arnn.usda, lamp_cubic.usda, lamp_arnn.png, human_gan.usda, human_gan_raw.usda, human_cubic.usda, human.png, human_feet.png (frames 0-99, raw against locked feet), human_feet_contacts.png (toe curves and foot contacts, frames 0-99), human15_transformer.usda, human15_cubic.usda, human15.png, human_match.usda and human_match.png: the shipped motion library's match against cubic over one 68-frame gap, the left toe's path: planted steps against a glide)"
 
 test: $(STAMP)
 	@command -v npm >/dev/null && $(MAKE) --no-print-directory gltf-validator \
@@ -138,6 +140,21 @@ $(SHIPPED)/%/model.onnx: $(SHIPPED)/%/weights.safetensors $(SHIPPED)/%/config.js
 	$(BIN)/keyfill export $(SHIPPED)/$*
 
 gan-graphs: $(SHIPPED)/bandai2-gan/model.onnx $(SHIPPED)/bandai2-gan-partial/model.onnx
+
+# The shipped motion library of `--method match` (docs/match.md; its MODEL_CARD.md): every third clip of
+# dataset-2 and dataset-1 without the held-out styles (normal; dataset-1's sad and feminine), half precision,
+# 31.8 MiB; a re-run reads no clip (their SHA-256 are in its library.json). Without --every 3 --precision half
+# the same command builds the full library (2,168 clips, 184 MiB). `make pose-indexes` writes each shipped
+# human model's pose index (the guard's) from the clips it was trained on (keyfill train writes it for new models).
+LIBRARY_CLIPS := --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' --exclude 'dataset-1_*_feminine_*'
+library: | $(BANDAI2) $(BANDAI1)
+	$(BIN)/keyfill library build $(BANDAI2) $(BANDAI1) $(LIBRARY_CLIPS) --every 3 --precision half \
+	    -o $(SHIPPED)/bandai2-library
+
+pose-indexes: | $(BANDAI2) $(BANDAI1)
+	$(BIN)/keyfill library index $(SHIPPED)/bandai2-transformer $(BANDAI2) --exclude '*_normal_*'
+	$(BIN)/keyfill library index $(SHIPPED)/bandai2-gan $(BANDAI2) $(BANDAI1) $(LIBRARY_CLIPS)
+	$(BIN)/keyfill library index $(SHIPPED)/bandai2-gan-partial $(BANDAI2) $(BANDAI1) $(LIBRARY_CLIPS)
 
 # The shipped transformer (docs/transformer.md), in two steps, one thread each: the base model, the
 # benchmark's config with the SLERP pre-fill (about 3 hours of one core of the project's VM, 2.9 h

@@ -59,6 +59,15 @@ def test_a_z_up_bvh_lands_z_up_in_usd(capsys, tmp_path, zup):
     assert np.ptp(back.skeleton.rest_world_positions()[:, 2]) == pytest.approx(20.0)  # the height is on Z
 
 
+def test_complete_takes_the_up_axis_too(capsys, tmp_path, zup):
+    out = tmp_path / "filled.usda"
+    code, _, err = run(capsys, "complete", zup, "--keys", "0,1", "-o", out, "--up-axis", "Z")
+    assert code == 0, err
+    assert UsdGeom.GetStageUpAxis(Usd.Stage.Open(str(out))) == UsdGeom.Tokens.z
+    code, _, err = run(capsys, "complete", zup, zup, "-o", tmp_path / "many/", "--up-axis", "Z")
+    assert code == 2 and "--up-axis take one file" in err
+
+
 def test_a_z_up_bvh_is_turned_y_up_in_gltf_and_back(capsys, tmp_path, zup):
     out = tmp_path / "shot.gltf"
     code, _, err = run(capsys, "convert", zup, out, "--up-axis", "Z")

@@ -19,6 +19,7 @@ from keyfill.cli.common import (
     resolve_keys,
     run_batch,
     say,
+    up_axis_option,
 )
 from keyfill.errors import UsageError
 from keyfill.learn.registry import ALIASES, METHODS
@@ -71,11 +72,12 @@ from keyfill.learn.registry import ALIASES, METHODS
                    "one.")
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
 @in_format_option
+@up_axis_option
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
-             device, dna, dna_count, rig_map, feet, ground, library, guard, runtime, fmt, in_fmt, workers, scheduler, connect_timeout,
-             force, batch_size, as_json):
+             device, dna, dna_count, rig_map, feet, ground, library, guard, runtime, fmt, in_fmt, up_axis, workers,
+             scheduler, connect_timeout, force, batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -155,9 +157,9 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     if is_batch(inputs, dst):
         from keyfill.learn.batch import CompleteSpec
 
-        if dst == "-" or in_fmt is not None:
+        if dst == "-" or in_fmt is not None or up_axis is not None:
             raise UsageError("a batch reads files by their suffixes and writes into a folder (-o OUTDIR/); "
-                             "'-' and --in-format take one file")
+                             "'-', --in-format and --up-axis take one file")
         if key_joints or key_positions or key_plane:
             raise UsageError("partial keys (--key-joints, --key-positions, --key-plane) take one file at a time")
 
@@ -174,7 +176,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     fmt = output_format(dst, fmt)  # a misnamed output is refused before any work
     refuse_overwriting_input(dst, [src, *dna_files], force)
     refuse_read_only(dst, force)
-    motion = io.load(src, input_format(src, in_fmt))
+    motion = io.load(src, input_format(src, in_fmt), up_axis=up_axis)
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)
     result = run(motion, keys, method, options)

@@ -17,8 +17,7 @@ from keyfill.learn import registry
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.library import store
 from keyfill.learn.library.features import describe
-from keyfill.learn.library.guard import THRESHOLD
-from keyfill.learn.library.index import library_index
+from keyfill.learn.library.index import THRESHOLD, library_index
 from keyfill.learn.library.matcher import Matcher, MatchSettings
 from keyfill.motion import Keys, Motion
 

@@ -15,12 +15,21 @@ from keyfill.limits import CONNECT_SECONDS
 from keyfill.motion import Keys, Motion
 
 
+def did_you_mean(word: str, names) -> str:
+    """The hint click adds to a mistyped option (its close matches by :mod:`difflib`, in its words), for a
+    mistyped command or choice: ``" Did you mean 'complete'?"``, or ``""`` when no name is close."""
+    from difflib import get_close_matches
+
+    close = sorted(get_close_matches(word, list(names)))
+    if len(close) > 1:
+        return f" (Did you mean one of: {', '.join(map(repr, close))}?)"
+    return f" Did you mean {close[0]!r}?" if close else ""
+
+
 class Choice(click.Choice):
     """click's choice, whose refusal ends with the close choices, as a mistyped option's does."""
 
     def get_invalid_choice_message(self, value, ctx) -> str:
-        from keyfill.cli.main import did_you_mean
-
         return super().get_invalid_choice_message(value, ctx) + did_you_mean(str(value), map(str, self.choices))
 
 

@@ -117,7 +117,7 @@ def index(model, clips, include, exclude, as_json):
     Example:
       keyfill library index models/my-transformer bandai2/data --exclude '*_normal_*'
     """
-    from keyfill.learn.library.index import model_pose_index
+    from keyfill.learn.library.guard import model_pose_index
 
     written = model_pose_index(model, clips, include, exclude)
     if as_json:

@@ -48,17 +48,6 @@ COMMANDS = {
 }
 
 
-def did_you_mean(word: str, names) -> str:
-    """The hint click adds to a mistyped option (its close matches by :mod:`difflib`, in its words), for a
-    mistyped command or choice: ``" Did you mean 'complete'?"``, or ``""`` when no name is close."""
-    from difflib import get_close_matches
-
-    close = sorted(get_close_matches(word, list(names)))
-    if len(close) > 1:
-        return f" (Did you mean one of: {', '.join(map(repr, close))}?)"
-    return f" Did you mean {close[0]!r}?" if close else ""
-
-
 class SuggestingGroup(click.Group):
     """A group whose unknown command suggests the close names of :meth:`list_commands` (click suggests only
     among the commands added to a group; ours are found on first use)."""
@@ -67,6 +56,8 @@ class SuggestingGroup(click.Group):
         try:
             return super().resolve_command(ctx, args)
         except click.UsageError as e:
+            from keyfill.cli.common import did_you_mean
+
             hint = did_you_mean(click.utils.make_str(args[0]), self.list_commands(ctx))
             if not hint or not e.message.startswith("No such command"):
                 raise

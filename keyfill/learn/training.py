@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from keyfill.errors import KeyfillError, ModelError, UsageError
+from keyfill.learn.library.guard import write_corpus_index
 from keyfill.limits import check_seed
 
 CHECKPOINT_FORMAT = "keyfill-checkpoint"
@@ -437,25 +438,10 @@ def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on
         if bar is not None:
             bar.close()
     model = task.save(output, nets, history) if ctx.main else None
-    if ctx.main:
-        _write_pose_index(task, output)
+    if ctx.main:  # beside the weights, the corpus's poses for the guard (docs/match.md)
+        write_corpus_index(getattr(task, "corpus", None), output)
     return Outcome(model, output, task.epochs, seconds, cpu, history, Path(checkpoint) if checkpoint else None,
                    Path(log) if log else None, ctx.world)
-
-
-def _write_pose_index(task, output: Path) -> None:
-    """Beside a human model's weights, the pose index of its training corpus (the guard's, docs/match.md);
-    nothing for a task without a corpus of clips (the lamp's) or whose skeleton is no humanoid."""
-    corpus = getattr(task, "corpus", None)
-    if corpus is None or not hasattr(corpus, "quats"):
-        return
-    from keyfill.errors import DataError
-    from keyfill.learn.library.index import corpus_pose_index
-
-    try:
-        corpus_pose_index(corpus, output.name).save(output)
-    except DataError:
-        return
 
 
 def _epoch(task, epoch: int, update: Updater, ctx: Context, progress) -> tuple[dict[str, float], dict[str, float]]:

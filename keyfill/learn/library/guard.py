@@ -8,23 +8,22 @@ largest. A gap above the index's threshold is *unfamiliar*: a motion the model n
 down, lying, climbing), where its in-betweens are guesses. :func:`fall_back` fills such gaps with the cubic
 spline through the same keys.
 
-The threshold (:data:`THRESHOLD`, in spreads) is calibrated on held-out clips (docs/match.md, "The guard"):
+The threshold (:data:`keyfill.learn.library.index.THRESHOLD`, in spreads) is calibrated on held-out clips (docs/match.md, "The guard"):
 on held-out styles of the actions a corpus holds it changes few gaps, on actions it lacks most.
 """
 
 from __future__ import annotations
 
 from itertools import pairwise
+from pathlib import Path
 
 import numpy as np
 
 from keyfill import interpolate
 from keyfill.learn.library.features import Frames, describe
-from keyfill.learn.library.index import PoseIndex
+from keyfill.learn.library.index import PoseIndex, index_step, subsampled
 from keyfill.motion import Keys, Motion
 
-#: a gap whose largest distance to the known poses exceeds this many spreads is unfamiliar
-THRESHOLD = 12.0
 #: every how many frames of a gap the output's poses are scored
 OUTPUT_STEP = 3
 MODES = ("fallback", "warn", "off")
@@ -68,3 +67,53 @@ def fall_back(output: Motion, motion: Motion, keys: Keys, unfamiliar: np.ndarray
         a, b = int(k[g]) + 1, int(k[g + 1])
         rot[a:b], pos[a:b] = spline.rotations[a:b], spline.positions[a:b]
     return output.replace(rotations=rot, positions=pos)
+
+
+def corpus_pose_index(corpus, name: str) -> PoseIndex:
+    """The pose index of a training corpus (:class:`keyfill.learn.corpus.Corpus`; :func:`subsampled`). A
+    :class:`~keyfill.errors.DataError` when its skeleton is no humanoid."""
+    from keyfill.kinematics import fk
+    from keyfill.learn.library.features import describe
+    from keyfill.learn.library.store import frames_of
+
+    sk = corpus.skeleton
+    frames = frames_of(sk)
+    rows = np.arange(0, len(corpus.quats), index_step(len(corpus.quats)))
+    pos = np.broadcast_to(sk.offsets, (len(rows),) + sk.offsets.shape).copy()
+    pos[:, 0] = corpus.root[rows]
+    feats = describe(fk(np.asarray(corpus.quats[rows]), pos, sk.parents)[1], frames)[0]
+    return subsampled(feats, np.searchsorted(corpus.starts, rows, side="right") - 1, name)
+
+
+def model_pose_index(model, clips, include=(), exclude=()) -> dict:
+    """Write the pose index of ``clips`` (the clips a model was trained on) into the model folder ``model``:
+    ``{"path", "poses", "spread_m"}``. Clips of other humanoid rigs are retargeted onto the model's skeleton."""
+    from keyfill.learn.library.store import clip_files, frames_of, served_by
+    from keyfill.learn.rig_bridge import on_model_skeleton, served
+
+    model_skeleton = served(model).skeleton
+    frames = frames_of(model_skeleton)
+    target = served_by(model_skeleton, 30.0)
+    feats, clip_of = [], []
+    from keyfill import io
+    from keyfill.learn.library.features import describe
+
+    for c, f in enumerate(clip_files(clips, include, exclude)):
+        motion = on_model_skeleton(io.load(f).replace(keys=None), target, what=f.name)
+        feats.append(describe(motion.world_positions(), frames)[0].astype(np.float32))
+        clip_of.append(np.full(len(feats[-1]), c, dtype=np.int32))
+    index = subsampled(np.concatenate(feats), np.concatenate(clip_of), Path(model).name)
+    return {"path": index.save(model), "poses": len(index.features), "spread_m": index.spread}
+
+
+def write_corpus_index(corpus, folder) -> None:
+    """Beside a human model's weights (``folder``), the pose index of its training corpus; nothing for a corpus
+    that is no clips of a humanoid (the lamp's, or None)."""
+    from keyfill.errors import DataError
+
+    if corpus is None or not hasattr(corpus, "quats"):
+        return
+    try:
+        corpus_pose_index(corpus, folder.name).save(folder)
+    except DataError:
+        return

@@ -27,6 +27,9 @@ from keyfill.errors import ModelError
 SPREAD_SAMPLE = 2000
 #: the file of a model folder's pose index
 POSE_INDEX = "pose_index.npz"
+#: a gap whose largest distance to the known poses exceeds this many spreads is unfamiliar (the guard's,
+#: :mod:`keyfill.learn.library.guard`; calibrated in docs/match.md)
+THRESHOLD = 12.0
 #: principal axes of a tree (16 of 66 for a 22-joint body keep about 99 % of the variance)
 TREE_DIMS = 16
 #: nearest poses on the principal axes among which :meth:`PoseIndex.familiarity` takes the nearest in full
@@ -156,8 +159,6 @@ def load_pose_index(folder: str | os.PathLike, name: str) -> PoseIndex | None:
 def library_index(library) -> PoseIndex:
     """The pose index of a loaded library (:mod:`keyfill.learn.library.store`): the poses :func:`subsampled`
     keeps, with the spread the build measured among them; built once per library and process."""
-    from keyfill.learn.library.guard import THRESHOLD
-
     cached = library.__dict__.get("_pose_index")
     if cached is None:
         cached = PoseIndex(np.asarray(library.features[::index_step(library.num_frames)], dtype=np.float32),
@@ -175,46 +176,7 @@ def subsampled(features: np.ndarray, clip_of: np.ndarray, name: str) -> PoseInde
     """The pose index of ``features (N, D)`` of clips ``clip_of (N,)``: evenly spaced frames, at most
     :data:`MAX_INDEX_POSES`, their spread measured among themselves (so that an index of every 10th frame and
     one of every frame score a pose alike), the guard's threshold."""
-    from keyfill.learn.library.guard import THRESHOLD
-
     step = index_step(len(features))
     feats = np.asarray(features[::step], dtype=np.float32)
     clips = np.asarray(clip_of[::step])
     return PoseIndex(feats, spread(feats, clips), THRESHOLD, name)
-
-
-def corpus_pose_index(corpus, name: str) -> PoseIndex:
-    """The pose index of a training corpus (:class:`keyfill.learn.corpus.Corpus`; :func:`subsampled`). A
-    :class:`~keyfill.errors.DataError` when its skeleton is no humanoid."""
-    from keyfill.kinematics import fk
-    from keyfill.learn.library.features import describe
-    from keyfill.learn.library.store import frames_of
-
-    sk = corpus.skeleton
-    frames = frames_of(sk)
-    rows = np.arange(0, len(corpus.quats), index_step(len(corpus.quats)))
-    pos = np.broadcast_to(sk.offsets, (len(rows),) + sk.offsets.shape).copy()
-    pos[:, 0] = corpus.root[rows]
-    feats = describe(fk(np.asarray(corpus.quats[rows]), pos, sk.parents)[1], frames)[0]
-    return subsampled(feats, np.searchsorted(corpus.starts, rows, side="right") - 1, name)
-
-
-def model_pose_index(model, clips, include=(), exclude=()) -> dict:
-    """Write the pose index of ``clips`` (the clips a model was trained on) into the model folder ``model``:
-    ``{"path", "poses", "spread_m"}``. Clips of other humanoid rigs are retargeted onto the model's skeleton."""
-    from keyfill.learn.library.store import clip_files, frames_of, served_by
-    from keyfill.learn.rig_bridge import on_model_skeleton, served
-
-    model_skeleton = served(model).skeleton
-    frames = frames_of(model_skeleton)
-    target = served_by(model_skeleton, 30.0)
-    feats, clip_of = [], []
-    from keyfill import io
-    from keyfill.learn.library.features import describe
-
-    for c, f in enumerate(clip_files(clips, include, exclude)):
-        motion = on_model_skeleton(io.load(f).replace(keys=None), target, what=f.name)
-        feats.append(describe(motion.world_positions(), frames)[0].astype(np.float32))
-        clip_of.append(np.full(len(feats[-1]), c, dtype=np.int32))
-    index = subsampled(np.concatenate(feats), np.concatenate(clip_of), Path(model).name)
-    return {"path": index.save(model), "poses": len(index.features), "spread_m": index.spread}

@@ -35,8 +35,7 @@ from keyfill import interpolate
 from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
 from keyfill.learn.library.features import chain_world, describe, hips_world, pose_world, yaw
-from keyfill.learn.library.guard import THRESHOLD
-from keyfill.learn.library.index import Tree
+from keyfill.learn.library.index import THRESHOLD, Tree
 from keyfill.learn.library.search import Costs, Gap, candidates, choose, path_start
 from keyfill.learn.library.stitch import join, place
 from keyfill.motion import Keys, Motion

@@ -83,10 +83,14 @@ def test_keys_too_far_apart(models, motion):
         complete(motion, Keys(np.array([0, 10, 131])), CompleteOptions(model=str(models[1])))
 
 
-def test_sequence_longer_than_supported(models):
+def test_a_key_range_longer_than_max_frames_is_filled_by_windows(models):
+    """301 frames of keys with a 256-frame model: two windows (tests/test_gan_long.py has the long takes)."""
     long = walker_motion(walker_skeleton(), 400, np.random.default_rng(1))
-    with pytest.raises(UsageError, match=r"span 301 frames.*at most 256"):
-        complete(long, Keys(np.array([0, 100, 200, 300])), CompleteOptions(model=str(models[1])))
+    keys = Keys(np.array([0, 100, 200, 300]))
+    out = complete(long, keys, CompleteOptions(model=str(models[1])))
+    assert out.info["windows"] == 2 and out.info["frames_generated"] == 301
+    assert np.array_equal(out.motion.rotations[keys.frames], long.rotations[keys.frames])
+    assert np.array_equal(out.motion.positions[keys.frames], long.positions[keys.frames])
 
 
 def test_another_skeleton(models):

@@ -1,4 +1,4 @@
-"""Motion DNA data (numpy): the bank of representative poses, and how many poses a sequence gets (Appendix D).
+"""Motion DNA data (numpy): the bank of representative poses, how many poses a sequence gets (Appendix D), a model's DNA.
 
 A Motion DNA is a set of representative poses (:mod:`keyfill.learn.representative`:
 root-free, in metres here), which the generator's DNA encoder turns into the
@@ -17,6 +17,8 @@ style vector joined to every latent step (section 3.5.1).
   for the paper's "motion class": a clip is one kind of motion), or of a given
   clip (an in-clip window's own, ``GanConfig.dna_source`` ``"own"``); drawn
   without repetition while the clip has enough, with repetition beyond.
+* :func:`dna_poses`: the DNA ``complete`` gives a model: from a motion file, the
+  bank or the keys; one for the whole take, however many windows fill it.
 """
 
 from __future__ import annotations
@@ -25,8 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from keyfill.errors import DataError
+from keyfill.errors import DataError, UsageError
+from keyfill.learn.gan.long_takes import windows
 from keyfill.learn.representative import pick_frames, root_free_poses, rotation_change
+from keyfill.limits import check_count
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,3 +109,46 @@ def pad_dna(sets) -> tuple[np.ndarray, np.ndarray]:
         poses[b, : len(s)] = s
         valid[b, : len(s)] = True
     return poses, valid
+
+
+def dna_poses(model, source=None, frames=None, count: int | None = None, key_frames=None,
+              seed: int = 0, key_quats=None) -> np.ndarray:
+    """The Motion DNA for :func:`keyfill.learn.gan.model.generate`: ``(P, J - 1, 3)`` root-free poses in metres.
+
+    ``model`` is a :class:`~keyfill.learn.gan.model.GanModel` with Motion DNA.
+
+    Args:
+        source: a :class:`~keyfill.motion.Motion` of the model's skeleton to take the poses from,
+            or None for the model's bank of its training clips' representative poses.
+        frames: the frames of ``source`` to use (None: its ``count`` representative frames).
+        count: how many poses (None: Appendix D's count for ``key_frames``, one per 3 s of gap; for a key
+            range of several windows, :func:`~keyfill.learn.gan.long_takes.windows`, the largest count of a window's keys).
+        key_frames: the keys, for the default count.
+        seed: the draw from the bank (``numpy.random.default_rng(seed)``).
+        key_quats: ``([B,] K, J, 4)`` the keys' rotations in the model's hierarchy: without a ``source``, a
+            model trained on its windows' own DNA (``dna_source`` ``"own"``) takes its DNA from them
+            (:func:`~keyfill.learn.gan.dna.key_dna`) instead of the bank.
+    """
+    from keyfill.learn.corpus import model_hierarchy
+
+    cfg = model.config
+    if not cfg.dna:
+        raise UsageError("this gan model has no Motion DNA encoder (it was trained without --dna)")
+    if count is None:
+        count = 1 if key_frames is None else max(dna_count(key_frames[i : j + 1], model.fps, cfg.dna_seconds)
+                                                 for i, j in windows(key_frames, cfg.max_frames))
+    check_count("count", count, cfg.max_frames)  # at most a pose per frame the model fills at once
+    m = model.skeleton.meters_per_unit
+    if source is None and key_quats is not None and cfg.dna_source == "own":
+        return key_dna(key_quats, model.skeleton.offsets * m, model.skeleton.parents, int(count))
+    if source is None:
+        return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
+    q, _ = model_hierarchy(model.skeleton, model.folded, source.skeleton, source.rotations, source.positions,
+                           what="the DNA motion")
+    if frames is None:
+        frames = pick_frames(rotation_change(q), int(count))
+    frames = np.asarray(frames, dtype=np.int64)
+    bad = frames[(frames < 0) | (frames >= len(q))]
+    if len(bad):
+        raise UsageError(f"DNA frame {int(bad[0])} is outside the motion (frames 0-{len(q) - 1})")
+    return root_free_poses(q[frames], model.skeleton.offsets * m, model.skeleton.parents).astype(np.float32)

@@ -57,8 +57,9 @@ from keyfill.errors import KeyfillError, ModelError, UsageError
 from keyfill.learn import installed_models
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
-from keyfill.learn.gan.dna import DnaBank, dna_count, draw_dna, key_dna
+from keyfill.learn.gan.dna import DnaBank, dna_poses
 from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
+from keyfill.learn.gan.long_takes import FRAME_MULTIPLE, check_anchors, fill_take, latent_steps, take_noise, windows
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
 from keyfill.learn.gan.spline_base import spline_root, spline_values
 from keyfill.limits import check_count, check_fps
@@ -72,8 +73,6 @@ DEFAULT_MODEL = installed_models.shipped("bandai2-gan")
 #: the shipped model ``complete`` uses for partial keys (also trained with ``--partial-keys``), or None
 PARTIAL_MODEL = installed_models.shipped("bandai2-gan-partial")
 #: ends the error for a motion of another skeleton
-#: the generator takes a multiple of this many frames (keyfill.learn.gan.network.GENERATOR_MULTIPLE; no torch here)
-FRAME_MULTIPLE = 64
 TRAIN_HINT = ("; train a gan model on your own clips with 'keyfill train gan CLIPS -o MODEL-path --stage path' "
               "then 'keyfill train gan CLIPS -o MODEL --stage generator --path-model MODEL-path'")
 
@@ -223,20 +222,20 @@ def load(path: str | os.PathLike, device: str = "cpu") -> GanModel:
 
 
 def check_keys(model: GanModel, frames: np.ndarray) -> None:
-    """A :class:`UsageError` when two consecutive keys are too far apart or the key range too long."""
+    """A :class:`UsageError` when two consecutive keys are too far apart (a key range of any length is filled
+    by windows, :func:`~keyfill.learn.gan.long_takes.windows`)."""
     cfg = model.config
     for a, b in itertools.pairwise(int(f) for f in frames):
         if b - a > cfg.max_gap:
             raise UsageError(f"keys {a} and {b} are {b - a} frames apart; this gan model fills gaps of at most "
                              f"{cfg.max_gap} frames (the longest gap it was trained for); add a key between them")
-    span = int(frames[-1] - frames[0] + 1)
-    if span > cfg.max_frames:
-        raise UsageError(f"the keys span {span} frames ({int(frames[0])}-{int(frames[-1])}); this gan model fills "
-                         f"at most {cfg.max_frames} frames at once")
+        if b - a >= cfg.max_frames:
+            raise UsageError(f"keys {a} and {b} are {b - a} frames apart; this gan model fills at most "
+                             f"{cfg.max_frames} frames at once (its max_frames); add a key between them")
 
 
 def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None,
-             dna=None, coords=None, key_quats=None):
+             dna=None, coords=None, key_quats=None, noise=None):
     """Run the networks over the key range (the generator, and the path predictor of a model without a base).
 
     Args:
@@ -253,6 +252,9 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         key_quats: ``([B,] K, J, 4)`` the keys' local rotations, for a model with a base (``GanConfig.base``,
             :mod:`keyfill.learn.gan.spline_base`: the network corrects their interpolation, and the root
             path is the interpolation of the key roots).
+        noise: ``(B, noise_dim, T' / 64)`` float32, the noise of a model with noise instead of the draw from
+            ``seed`` (``T'`` the key range padded to a multiple of 64 frames; a window's share of a long
+            take's noise, :func:`complete_motion`).
 
     Returns:
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
@@ -265,7 +267,10 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     x = network_input(model, key_frames, poses, coords)
     base = spline_input(model, key_frames, key_quats, len(poses), x.shape[-1])
     run = getattr(model.generator, "run_numpy", None)  # an exported graph (keyfill.learn.gan.onnx)
-    quats, root = (run if run is not None else _run_torch)(model, x, seed, style, dna, base)
+    if run is not None:  # a graph: no noise (only noise-free models export)
+        quats, root = run(model, x, seed, style, dna, base)
+    else:
+        quats, root = _run_torch(model, x, seed, style, dna, base, noise)
     kr = poses[:, :, 0]
     if base is not None:
         root = np.stack([spline_root(T, key_frames, r, model.config.base) for r in kr])
@@ -306,10 +311,11 @@ def spline_input(model: GanModel, key_frames, key_quats, batch: int, frames: int
     return np.stack([spline_values(model.ranges, frames, key_frames, q, model.config.base) for q in kq])
 
 
-def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None):
+def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None, noise=None):
     """The torch networks on ``x`` (:func:`network_input`): ``(quats (B, T', J, 4), root (B, T', 3))`` float32,
-    the root path from 0 (noise from ``torch.Generator().manual_seed(seed)``, one draw for the batch); with a
-    ``base`` (:func:`spline_input`) the output corrects it and the root is None (the caller's spline)."""
+    the root path from 0 (``noise``, or noise from ``torch.Generator().manual_seed(seed)``, one draw for the
+    batch); with a ``base`` (:func:`spline_input`) the output corrects it and the root is None (the caller's
+    spline)."""
     import torch
 
     from keyfill.learn.gan.network import GENERATOR_MULTIPLE, joint_channels, root_path
@@ -318,8 +324,11 @@ def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None)
     B, Tp = len(x), x.shape[-1]
     dev = next(model.generator.parameters()).device
     x = torch.as_tensor(x, device=dev)
-    g = torch.Generator().manual_seed(int(seed))
-    noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=g).to(dev) if cfg.noise_dim else None
+    if not cfg.noise_dim:
+        noise = None
+    elif noise is None:
+        noise = torch.randn(B, cfg.noise_dim, Tp // GENERATOR_MULTIPLE, generator=torch.Generator().manual_seed(int(seed)))
+    noise = None if noise is None else torch.as_tensor(noise).to(dev)
     w = d = None
     if style is not None:
         w = torch.as_tensor(np.asarray(style, dtype=np.float32), device=dev).reshape(-1, cfg.style_dim).expand(B, -1)
@@ -333,46 +342,6 @@ def _run_torch(model: GanModel, x: np.ndarray, seed: int, style, dna, base=None)
             return quats.cpu().numpy(), None
         root = root_path(model.path(joint_channels(rel)))
     return quats.cpu().numpy(), root.cpu().numpy()
-
-
-def dna_poses(model: GanModel, source=None, frames=None, count: int | None = None, key_frames=None,
-              seed: int = 0, key_quats=None) -> np.ndarray:
-    """The Motion DNA for :func:`generate`: ``(P, J - 1, 3)`` root-free poses in metres.
-
-    Args:
-        source: a :class:`~keyfill.motion.Motion` of the model's skeleton to take the poses from,
-            or None for the model's bank of its training clips' representative poses.
-        frames: the frames of ``source`` to use (None: its ``count`` representative frames).
-        count: how many poses (None: Appendix D's count for ``key_frames``, one per 3 s of gap).
-        key_frames: the keys, for the default count.
-        seed: the draw from the bank (``numpy.random.default_rng(seed)``).
-        key_quats: ``([B,] K, J, 4)`` the keys' rotations in the model's hierarchy: without a ``source``, a
-            model trained on its windows' own DNA (``dna_source`` ``"own"``) takes its DNA from them
-            (:func:`~keyfill.learn.gan.dna.key_dna`) instead of the bank.
-    """
-    from keyfill.learn.corpus import model_hierarchy
-    from keyfill.learn.representative import pick_frames, root_free_poses, rotation_change
-
-    cfg = model.config
-    if not cfg.dna:
-        raise UsageError("this gan model has no Motion DNA encoder (it was trained without --dna)")
-    if count is None:
-        count = dna_count(key_frames, model.fps, cfg.dna_seconds) if key_frames is not None else 1
-    check_count("count", count, cfg.max_frames)  # at most a pose per frame the model fills at once
-    m = model.skeleton.meters_per_unit
-    if source is None and key_quats is not None and cfg.dna_source == "own":
-        return key_dna(key_quats, model.skeleton.offsets * m, model.skeleton.parents, int(count))
-    if source is None:
-        return draw_dna(model.bank, np.random.default_rng(int(seed)), int(count))
-    q, _ = model_hierarchy(model.skeleton, model.folded, source.skeleton, source.rotations, source.positions,
-                           what="the DNA motion")
-    if frames is None:
-        frames = pick_frames(rotation_change(q), int(count))
-    frames = np.asarray(frames, dtype=np.int64)
-    bad = frames[(frames < 0) | (frames >= len(q))]
-    if len(bad):
-        raise UsageError(f"DNA frame {int(bad[0])} is outside the motion (frames 0-{len(q) - 1})")
-    return root_free_poses(q[frames], model.skeleton.offsets * m, model.skeleton.parents).astype(np.float32)
 
 
 def _undriven(model: GanModel, num_joints: int) -> np.ndarray:
@@ -416,9 +385,12 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     ``keys`` is a :class:`~keyfill.motion.Keys` (partial keys need a ``partial_keys`` model) or
     key frames; ``dna`` the ``(P, J - 1, 3)`` poses of :func:`dna_poses` (a DNA model without
     them draws from its bank by ``seed``). Returns ``(motion, info)``; keys are not yet exact.
+
+    A key range longer than ``GanConfig.max_frames`` is filled by overlapping windows that share one Motion
+    DNA (a model of its keys' own DNA, ``dna_source`` ``"own"``: each window's) and one draw of noise, cross-faded
+    where they overlap (:mod:`keyfill.learn.gan.long_takes`). Memory: the motion's arrays plus one window's.
     """
     from keyfill.learn.corpus import model_hierarchy
-    from keyfill.learn.gan.poses import relative_positions
     from keyfill.motion import Keys
 
     if model.generator is None:
@@ -435,33 +407,30 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
     skel = motion.skeleton
     q, p = model_hierarchy(model.skeleton, model.folded, skel, lin_q, lin_p, int(k[0]), hint=TRAIN_HINT)
-    if model.config.dna and dna is None:
-        dna = dna_poses(model, key_frames=k, seed=seed, key_quats=q[k])
     if model.folded and coords is not None:  # the folded top joint is the hips: keyed where either of them is
         c = skel.children(0)[0]
         coords = coords.copy()
         coords[:, 0] |= coords[:, c]
         coords[:, c] = coords[:, 0]
-    if coords is not None and not coords[:, 0].any():
-        raise UsageError("partial keys must give the root's position at one key at least (the path has no "
-                         "anchor otherwise)")
-    m = model.skeleton.meters_per_unit
-    poses = relative_positions(q[k], model.skeleton.offsets * m, model.skeleton.parents)
-    poses[:, 0] = p[k, 0] * m
-    poses, shift = centre_keys(poses, model.skeleton.up_axis, coords)
-    k0 = int(k[0])
-    gq, groot = generate(model, k - k0, poses, seed, dna=dna, coords=coords, key_quats=q[k])
-    if coords is None:  # whole keys: exact in the ranges' angles, so the ranges hold between keys
-        gq = snap_in_range(model.ranges, gq, k - k0, q[k])
-    span = slice(k0, int(k[-1]) + 1)
-    out_q = q.copy()
-    driven = np.concatenate([[0], model.ranges.driven])
-    out_q[span, driven] = gq[:, driven]
-    pos = p.copy()
-    pos[span, 0] = (groot + shift) / m
+    plan = windows(k, model.config.max_frames)
+    if coords is not None:
+        check_anchors(coords, k, plan, model.config.max_frames)
+    key_q, key_root = q[k], p[k, 0]  # the windows' input; q and p then take their output in place
+    if model.config.dna and dna is None and model.config.dna_source != "own":
+        dna = dna_poses(model, key_frames=k, seed=seed)
+    noise = take_noise(model.config.noise_dim, k, plan, seed)
+    k0, end = int(k[0]), int(k[-1])
+
+    def fill(i: int, j: int):
+        first = (int(k[i]) - k0) // FRAME_MULTIPLE  # the window's first latent step in the take's noise
+        return _fill_window(model, k[i : j + 1] - k[i], key_q[i : j + 1], key_root[i : j + 1],
+                            None if coords is None else coords[i : j + 1], seed, dna,
+                            None if noise is None else noise[:, :, first : first + latent_steps(k[j] - k[i] + 1)])
+
+    fill_take(q, p[:, 0], k, plan, model.ranges, fill)
+    out_q, pos = q, p
     # outside the key range, hold the generated first and last frames (the exact-key correction then
     # moves them onto the keys together with the frames inside)
-    end = int(k[-1])
     out_q[:k0], out_q[end + 1 :] = out_q[k0], out_q[end]
     pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
     if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
@@ -472,13 +441,41 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
         pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
         out_q[:, 0], pos[:, 0] = top_q, top_p
     result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=keys)
-    info = {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0)}
+    span = slice(k0, end + 1)
+    info = {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0),
+            "windows": len(plan)}
     if keys.partial:
         keyed = "all" if keys.mask is None else f"{int(keys.mask.any(0).sum())} of {motion.num_joints}"
         info["partial_keys"] = f"{keys.given}, {keyed} joints keyed"
     if dna is not None:
         info["dna_poses"] = len(dna)
     return result, info
+
+
+def _fill_window(model: GanModel, key_frames: np.ndarray, key_quats: np.ndarray, key_roots: np.ndarray, coords,
+                 seed: int, dna, noise) -> tuple[np.ndarray, np.ndarray]:
+    """One window of :func:`complete_motion`: ``(quats (T, J, 4), root (T, 3))`` of its ``T`` frames in the
+    model's hierarchy (root in file units; driven joints and the root set, whole keys' driven joints exact
+    in the ranges).
+
+    Args:
+        key_frames: ``(K,)`` from 0; key_quats: ``(K, J, 4)`` their local rotations (the model's hierarchy);
+        key_roots: ``(K, 3)`` their root positions (file units); coords: ``(K, J, 3)`` bool of partial keys
+        or None; dna: the take's Motion DNA or None (a DNA model then takes the keys' own poses); noise: the
+        window's ``(1, noise_dim, T' / 64)`` or None (:func:`generate`).
+    """
+    from keyfill.learn.gan.poses import relative_positions
+
+    m = model.skeleton.meters_per_unit
+    poses = relative_positions(key_quats, model.skeleton.offsets * m, model.skeleton.parents)
+    poses[:, 0] = key_roots * m
+    poses, shift = centre_keys(poses, model.skeleton.up_axis, coords)
+    if model.config.dna and dna is None:
+        dna = dna_poses(model, key_frames=key_frames, seed=seed, key_quats=key_quats)
+    gq, groot = generate(model, key_frames, poses, seed, dna=dna, coords=coords, key_quats=key_quats, noise=noise)
+    if coords is None:  # whole keys: exact in the ranges' angles, so the ranges hold between keys
+        gq = snap_in_range(model.ranges, gq, key_frames, key_quats)
+    return gq, (groot + shift) / m
 
 
 def parse_dna(text: str) -> tuple[str, list[int] | None]:
@@ -558,6 +555,9 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         raise ModelError(f"the gan model serves another skeleton: {diff}")
     k = np.asarray(keys, dtype=np.int64)
     check_keys(model, k)
+    if k[-1] - k[0] >= model.config.max_frames:
+        raise UsageError(f"the benchmark's keys span {int(k[-1] - k[0]) + 1} frames; this gan model fills windows "
+                         f"of at most {model.config.max_frames} frames at once")
     m = model.skeleton.meters_per_unit
     poses = relative_positions(np.asarray(quats)[:, k], model.skeleton.offsets * m, model.skeleton.parents)
     poses[:, :, 0] = np.asarray(root)[:, k] * m

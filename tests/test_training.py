@@ -110,7 +110,7 @@ def test_a_checkpoint_of_another_kind_or_configuration_is_refused(corpus_dir, co
     assert "(training.lr=0.002, now 0.001)" in capsys.readouterr().err
     # another kind: a lamp ARNN checkpoint given to the transformer
     arnn_ckpt = tmp_path / "arnn.checkpoint.pt"
-    from keyfill.learn.training import CHECKPOINT_FORMAT
+    from keyfill.learn.checkpoints import CHECKPOINT_FORMAT
 
     torch.save({"format": CHECKPOINT_FORMAT, "kind": "arnn"}, arnn_ckpt)
     assert main(["train", "transformer", str(corpus_dir), "-o", str(tmp_path / "m"), "--config", str(config),

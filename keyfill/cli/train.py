@@ -9,11 +9,12 @@ torch) is imported only when its subcommand runs or shows its help.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
 
-from keyfill.cli.common import emit_json, progress, say
+from keyfill.cli.common import emit_json, progress, say, verbosity
 from keyfill.cli.main import SuggestingGroup
 from keyfill.learn import registry
 from keyfill.limits import MAX_WORKERS, check_count
@@ -78,7 +79,8 @@ def _command(method: registry.Method) -> click.Command:
             say(spec.started(task))
         line = spec.epoch_line if spec.epoch_line is not None and not as_json else None
         outcome = train(task, output, seed=seed, checkpoint=checkpoint, log=log, resume=resume, device=device,
-                        progress=progress, on_epoch=(lambda row: say(line(row))) if line else None)
+                        progress=progress, on_epoch=(lambda row: say(line(row))) if line else None,
+                        progress_lines=None if sys.stderr.isatty() or verbosity() < 0 else say)  # no bar: lines
         if outcome.model is None:  # a process other than rank 0 of a torchrun job: rank 0 reports
             return
         summary, text = spec.finished(task, outcome)

@@ -13,12 +13,16 @@ model folder. :func:`train` owns everything else, once for all methods:
   divergence check, backward, gradient averaging across processes, gradient
   norm clipping, the optimiser step;
 * the JSONL log (one row per epoch: the task's named losses weighted by batch
-  rows, its validation scores, the learning rates, wall and CPU seconds);
+  rows, its validation scores, the learning rates, wall and CPU seconds),
+  written from the first finished epoch on (an interrupt before it leaves no
+  empty log);
 * checkpoints tagged with the task's kind (networks, optimisers, the task's
   own random state, the log so far), written every ``checkpoint_every`` epochs
   and at the end, and ``resume`` from them, refused with one line naming the
-  first difference when the kind, configuration or data differ;
-* progress bars and a per-epoch report callback;
+  first difference when the kind, configuration or data differ (the files
+  themselves: :mod:`keyfill.learn.checkpoints`);
+* progress bars, progress lines where no bar is drawn (epoch, step, loss, time
+  left; every :data:`LINE_EVERY_S` seconds) and a per-epoch report callback;
 * data-parallel training: started by ``torchrun`` (``RANK`` / ``WORLD_SIZE``
   in the environment), each process builds the same networks, draws the same
   *global* batches and trains on its :meth:`TrainingTask.shard` of each;
@@ -38,6 +42,7 @@ do for these small models.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -47,11 +52,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from keyfill.errors import KeyfillError, ModelError, UsageError
+from keyfill.errors import KeyfillError, UsageError
+from keyfill.learn.checkpoints import LossLog, check_resume, read_checkpoint, write_checkpoint
 from keyfill.learn.library.guard import write_corpus_index
 from keyfill.limits import check_seed
+from keyfill.progress import Ticker
 
-CHECKPOINT_FORMAT = "keyfill-checkpoint"
+#: seconds between the progress lines of ``progress_lines`` (off a terminal: a line at least every 30 s)
+LINE_EVERY_S = 20.0
 
 
 class TrainingDiverged(KeyfillError):
@@ -338,6 +346,7 @@ def train(
     device: str = "cpu",
     progress: Callable | None = None,
     on_epoch: Callable[[dict], None] | None = None,
+    progress_lines: Callable[[str], None] | None = None,
 ) -> Outcome:
     """Train ``task`` and write its model folder ``output``.
 
@@ -350,6 +359,9 @@ def train(
         device: torch device (``"cpu"``, ``"cuda"``); under ``torchrun`` each CUDA process takes its local rank's.
         progress: ``progress(total=..., desc=..., unit=...)`` -> a tqdm-like bar, or None.
         on_epoch: called with each log row (rank 0).
+        progress_lines: called every :data:`LINE_EVERY_S` seconds with one line (rank 0): the epoch, the step,
+            the epoch's running loss, the time so far and about how long is left (:class:`keyfill.progress.Ticker`);
+            for where no bar is drawn (the CLI passes it when stderr is not a terminal).
 
     Raises :class:`TrainingDiverged` (keeping the last good checkpoint) when a loss is not finite.
     """
@@ -361,9 +373,10 @@ def train(
         check_outputs(output, checkpoint, log)
         if resume and (checkpoint is None or not Path(checkpoint).is_file()):
             raise UsageError(f"resume: no checkpoint {checkpoint}", params="resume")
-        with torch.random.fork_rng(devices=[]):
+        ticker = Ticker(progress_lines, LINE_EVERY_S) if progress_lines is not None and ctx.main else None
+        with torch.random.fork_rng(devices=[]), ticker or contextlib.nullcontext():
             torch.manual_seed(seed)
-            return _run(task, Path(output), seed, checkpoint, log, resume, ctx, progress, on_epoch)
+            return _run(task, Path(output), seed, checkpoint, log, resume, ctx, progress, on_epoch, ticker)
     finally:
         if ctx.started_group:
             import torch.distributed as dist
@@ -371,7 +384,7 @@ def train(
             dist.destroy_process_group()
 
 
-def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on_epoch) -> Outcome:
+def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on_epoch, ticker) -> Outcome:
     import torch
 
     task.begin(ctx.rank, ctx.world, ctx.device)
@@ -385,7 +398,7 @@ def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on
     last_good = None
     if resume:
         state = read_checkpoint(checkpoint, task.kind)
-        _check_resume(checkpoint, state, config, fingerprint)
+        check_resume(checkpoint, state, config, fingerprint)
         for name, net in nets.items():
             from keyfill.learn.modelfile import load_state
 
@@ -398,20 +411,21 @@ def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on
         last_good = (checkpoint, start)
     if ctx.world > 1:
         _broadcast_parameters(nets)
-    if ctx.main and log is not None:
-        _write_log(log, history)
+    loss_log = LossLog(log) if ctx.main and log is not None else None
     update = Updater(optimizers, task.clip, ctx)
     update.last_good = last_good
     bar = progress(total=task.epochs, initial=start, desc="training", unit="epoch") if progress and ctx.main else None
+    tell = _Teller(ticker, task.epochs, start)
     try:
         for epoch in range(start, task.epochs):
             t0, c0 = time.perf_counter(), time.process_time()
             update.epoch = epoch
             for net in nets.values():
                 net.train()
-            losses, lrs = _epoch(task, epoch, update, ctx, progress)
+            losses, lrs = _epoch(task, epoch, update, ctx, progress, tell)
             for net in nets.values():
                 net.eval()
+            tell(epoch, 1.0, "validating")
             validation = task.validate(epoch) if ctx.main else {}
             seconds += time.perf_counter() - t0
             cpu += time.process_time() - c0
@@ -422,8 +436,8 @@ def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on
                 raise _diverged(epoch, "the held-out loss is not finite", last_good)
             history.append(row)
             if ctx.main:
-                if log is not None:
-                    _append_log(log, row)
+                if loss_log is not None:
+                    loss_log.record(history)
                 if bar is not None:
                     bar.set_postfix({k: f"{v:.4f}" for k, v in list(losses.items())[:3]}, refresh=False)
                     bar.update(1)
@@ -444,9 +458,11 @@ def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on
                    Path(log) if log else None, ctx.world)
 
 
-def _epoch(task, epoch: int, update: Updater, ctx: Context, progress) -> tuple[dict[str, float], dict[str, float]]:
+def _epoch(task, epoch: int, update: Updater, ctx: Context, progress, tell: _Teller) \
+        -> tuple[dict[str, float], dict[str, float]]:
     """Train one epoch: the row-weighted mean of each named loss over all processes, and the last learning rates."""
     steps = task.steps(epoch)
+    tell(epoch, 0.0, "starting")
     bar = progress(total=steps, desc=f"epoch {epoch + 1}/{task.epochs}", unit="step", leave=False) \
         if progress and ctx.main and steps and steps > 1 else None
     sums: dict[str, float] = {}
@@ -467,6 +483,8 @@ def _epoch(task, epoch: int, update: Updater, ctx: Context, progress) -> tuple[d
             for k, v in out.items():
                 sums[k] = sums.get(k, 0.0) + n * v
             rows += n
+            tell(epoch, (i + 1) / steps if steps else 0.0, f"step {i + 1}" + (f"/{steps}" if steps else ""),
+                 {k: v / max(rows, 1) for k, v in sums.items()})
             if bar is not None:
                 bar.update(1)
                 first = next(iter(out), None)
@@ -480,6 +498,25 @@ def _epoch(task, epoch: int, update: Updater, ctx: Context, progress) -> tuple[d
     if not lrs:
         lrs = {name: opt.param_groups[0]["lr"] for name, opt in update.optimizers.items()}
     return {k: v / max(rows, 1) for k, v in sums.items()}, lrs
+
+
+class _Teller:
+    """Tells the loop's state to a :class:`~keyfill.progress.Ticker` (nothing without one): the epoch, the step,
+    the epoch's running loss, and the fraction of this run's epochs done."""
+
+    def __init__(self, ticker: Ticker | None, epochs: int, start: int):
+        self.ticker, self.epochs, self.start = ticker, epochs, start
+        self.loss = ""
+
+    def __call__(self, epoch: int, part: float, doing: str, losses: dict[str, float] | None = None) -> None:
+        """``part`` of 0-based ``epoch`` is done; ``doing`` says what now (``"step 3/40"``, ``"validating"``)."""
+        if self.ticker is None:
+            return
+        if losses:
+            name = "total" if "total" in losses else next(iter(losses))
+            self.loss = f", loss {'' if name == 'total' else name + ' '}{losses[name]:.4g}"
+        done = (epoch - self.start + part) / max(self.epochs - self.start, 1)
+        self.ticker.set(done, f"training: epoch {epoch + 1}/{self.epochs}, {doing}{self.loss}")
 
 
 def _shard(task, batch, ctx: Context):
@@ -532,71 +569,3 @@ def _lr_fields(lrs: dict[str, float]) -> dict[str, float]:
     if len(lrs) == 1:
         return {"lr": next(iter(lrs.values()))}
     return {f"lr_{k}": v for k, v in lrs.items()}
-
-
-# --- checkpoints and the log -------------------------------------------------------------------------
-
-
-def write_checkpoint(path, task, nets, optimizers, epoch, seconds, cpu, config, fingerprint, history) -> None:
-    """Atomically write a checkpoint: tensors, numbers and strings only (read back with ``weights_only=True``)."""
-    import torch
-
-    from keyfill.files import atomic_output
-
-    state = {
-        "format": CHECKPOINT_FORMAT,
-        "kind": task.kind,
-        "config": json.dumps(config, sort_keys=True),
-        "data": fingerprint,
-        "epoch": epoch,
-        "seconds": seconds,
-        "cpu_seconds": cpu,
-        "history": json.dumps(history),
-        "networks": {k: v.state_dict() for k, v in nets.items()},
-        "optimizers": {k: v.state_dict() for k, v in optimizers.items()},
-        "task": task.state_dict(),
-    }
-    with atomic_output(path) as tmp:
-        torch.save(state, tmp)
-
-
-def read_checkpoint(path, kind: str | None = None) -> dict:
-    """A checkpoint written by :func:`write_checkpoint`; never unpickles objects (``weights_only=True``)."""
-    import torch
-
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - torch raises many types for damaged or foreign files
-        raise ModelError(f"{path}: not a readable keyfill checkpoint ({' '.join(str(e).split())[:200]})") from None
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise ModelError(f"{path}: not a keyfill checkpoint")
-    if kind is not None and state.get("kind") != kind:
-        raise UsageError(f"resume: {path} is a checkpoint of a {state.get('kind')!r} model, not {kind!r}",
-                         params="resume")
-    return state
-
-
-def _check_resume(path, state: dict, config: dict, fingerprint: str) -> None:
-    """Refuse a checkpoint made with another configuration or other data, naming the first difference."""
-    saved = json.loads(state["config"])
-    now = json.loads(json.dumps(config, sort_keys=True))
-    for key in sorted(set(saved) | set(now)):
-        if saved.get(key) != now.get(key):
-            what = f"seed {saved.get(key)}, now {now.get(key)}" if key == "seed" else \
-                f"{key}={saved.get(key)!r}, now {now.get(key)!r}"
-            raise UsageError(f"resume: {path} was made with other settings ({what}); give the same options to resume",
-                             params=("resume", "seed") if key == "seed" else "resume")
-    if state["data"] != fingerprint:
-        raise UsageError(f"resume: {path} was made with other training data", params="resume")
-
-
-def _write_log(path, rows: list[dict]) -> None:
-    from keyfill.files import atomic_output
-
-    with atomic_output(path) as tmp:
-        tmp.write_text("".join(json.dumps(r) + "\n" for r in rows))
-
-
-def _append_log(path, row: dict) -> None:
-    with open(path, "a") as f:
-        f.write(json.dumps(row) + "\n")

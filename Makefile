@@ -12,7 +12,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop test-floors fuzz gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
+.PHONY: demo test test-slow test-interop test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
 
 $(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -111,6 +111,12 @@ $(BANDAI2): | $(STAMP)
 
 $(BANDAI1): | $(STAMP)
 	$(BIN)/python -c "from keyfill.learn.corpus import locate; print(locate('bandai1'))"
+
+# The corpora of the README's training tour (and of the models and the library below): Bandai-Namco dataset-1
+# (174 clips, 40 MB) and dataset-2 (2,501 clips, about 430 MB), unpacked once from ../shared/data/corpora
+# (KEYFILL_SHARED_DATA: another folder of the archives) into the git-ignored data/. A re-run does nothing.
+corpora: | $(BANDAI1) $(BANDAI2)
+	@echo "corpora: dataset-1 in $(BANDAI1), dataset-2 in $(BANDAI2)"
 
 $(MODELS)/bandai2-gan-path/weights.safetensors: | $(BANDAI2)
 	@mkdir -p $(dir $(@D))

@@ -31,7 +31,7 @@ TINY = {"model": {"layers": 1, "d_model": 16, "heads": 2, "ffn": 32, "dropout": 
 SLOW = {"model": {**TINY["model"], "d_model": 64, "ffn": 256, "layers": 2},
         "training": {**TINY["training"], "batch_size": 1, "window_offset": 1}}
 #: a progress line: where the loop is, the loss, the time so far and the time left
-LINE = re.compile(r"^training: epoch (\d+)/(\d+), (step \d+/\d+|starting|validating)(, loss [0-9.e+-]+)?; "
+LINE = re.compile(r"^training: epoch (\d+)/(\d+), (step \d+/\d+|starting|validating|writing the model)(, loss [0-9.e+-]+)?; "
                   r"(\d+ s|\d+ min \d\d s) so far, (about (\d+ s|\d+ min \d\d s) left|time left not known yet)$")
 
 

@@ -451,6 +451,7 @@ def _run(task, output, seed, checkpoint, log, resume, ctx: Context, progress, on
     finally:
         if bar is not None:
             bar.close()
+    tell(task.epochs - 1, 1.0, "writing the model")
     model = task.save(output, nets, history) if ctx.main else None
     if ctx.main:  # beside the weights, the corpus's poses for the guard (docs/match.md)
         write_corpus_index(getattr(task, "corpus", None), output)

@@ -359,8 +359,11 @@ def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray
     from keyfill.interpolate import segment_coordinates
 
     s, u = segment_coordinates(motion.num_frames, k)
-    p0, p1 = motion.positions[k[s]], motion.positions[k[s + 1]]
-    pos = p0 + u[:, None, None] * (p1 - p0)
+    p0, pos = motion.positions[k[s]], motion.positions[k[s + 1]]
+    pos -= p0  # p0 + u (p1 - p0) in place: two arrays of the motion's positions at a time
+    pos *= u[:, None, None]
+    pos += p0
+    del p0
     rot = motion.rotations.copy()
     if len(joints):
         q0, q1 = motion.rotations[k[s]][:, joints], motion.rotations[k[s + 1]][:, joints]
@@ -407,6 +410,8 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
     skel = motion.skeleton
     q, p = model_hierarchy(model.skeleton, model.folded, skel, lin_q, lin_p, int(k[0]), hint=TRAIN_HINT)
+    top_q, top_p = lin_q[:, 0].copy(), lin_p[:, 0].copy()  # the file's top joint, given back when folded
+    del lin_q, lin_p  # (folded: q and p are new arrays)
     if model.folded and coords is not None:  # the folded top joint is the hips: keyed where either of them is
         c = skel.children(0)[0]
         coords = coords.copy()
@@ -435,12 +440,12 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
     if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
         c = skel.children(0)[0]
-        top_q, top_p = lin_q[:, 0], lin_p[:, 0]
         inv = R.quat_conjugate(top_q)
         out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
         pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
         out_q[:, 0], pos[:, 0] = top_q, top_p
-    result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=keys)
+    out_q /= np.sqrt(np.sum(out_q * out_q, axis=-1, keepdims=True))  # R.quat_normalize in place
+    result = motion.replace(rotations=out_q, positions=pos, keys=keys)
     span = slice(k0, end + 1)
     info = {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0),
             "windows": len(plan)}

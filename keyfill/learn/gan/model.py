@@ -359,15 +359,17 @@ def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray
     from keyfill.interpolate import segment_coordinates
 
     s, u = segment_coordinates(motion.num_frames, k)
-    p0, pos = motion.positions[k[s]], motion.positions[k[s + 1]]
+    kp = motion.positions[k]  # (K, J, 3): frames gather from the keys alone
+    p0, pos = kp[s], kp[s + 1]
     pos -= p0  # p0 + u (p1 - p0) in place: two arrays of the motion's positions at a time
     pos *= u[:, None, None]
     pos += p0
     del p0
     rot = motion.rotations.copy()
     if len(joints):
-        q0, q1 = motion.rotations[k[s]][:, joints], motion.rotations[k[s + 1]][:, joints]
-        rot[:, joints] = R.quat_slerp(q0, q1, np.broadcast_to(u[:, None], q0.shape[:2]))
+        kq = motion.rotations[k][:, joints]  # (K, U, 4)
+        q0 = kq[s]
+        rot[:, joints] = R.quat_slerp(q0, kq[s + 1], np.broadcast_to(u[:, None], q0.shape[:2]))
     rot[k], pos[k] = motion.rotations[k], motion.positions[k]
     return rot, pos
 

@@ -6,7 +6,9 @@ core types, so that every package can use it without importing another one.
 :func:`quiet_stderr` silences what C and C++ libraries (pxr, pybullet) print
 straight to file descriptor 2, where Python's ``sys.stderr`` cannot catch it.
 :func:`read_json_object` reads a user's settings file (``--config``) with
-one-line errors.
+one-line errors. :func:`sha256_file` and :func:`verified` check files against their
+recorded SHA-256 (model weights, library arrays) without hashing an unchanged
+file again; the marks of what was verified live under :func:`cache_dir`.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import signal
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -202,3 +205,64 @@ def refuse_overwriting_input(output: str | os.PathLike | None, inputs, force: bo
             also = "" if os.path.abspath(output) == os.path.abspath(src) else f" (through a link: {src})"
             raise UsageError(f"output {output} is the input {src}{also}: writing it would overwrite the input; "
                              "choose another output, or give force to overwrite it", params=("output", "force"))
+
+
+#: a file changed less than this long before it is hashed is not marked verified: file times advance in clock
+#: ticks, so a change in the same tick as the one before would leave every time as it was (git's "racily
+#: clean" entries)
+RACY_S = 2.0
+
+
+def cache_dir() -> Path:
+    """The one folder keyfill caches in (preprocessed corpora; the marks of verified files): ``KEYFILL_CACHE``
+    when it is set and not empty, else the user's cache folder (``platformdirs``: ``$XDG_CACHE_HOME/keyfill``
+    or ``~/.cache/keyfill`` on Linux). Never inside the package; deleting it is safe."""
+    if os.environ.get("KEYFILL_CACHE"):
+        return Path(os.environ["KEYFILL_CACHE"])
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("keyfill"))
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """The SHA-256 (hex) of the bytes of ``path``, read in blocks of 1 MiB."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _state(st: os.stat_result) -> str:
+    return f"{st.st_dev}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}:{st.st_ctime_ns}"
+
+
+def verified(path: str | os.PathLike, sha256: str) -> bool:
+    """Whether the bytes of ``path`` hash to ``sha256`` (hex); raises ``OSError`` when it cannot be read.
+
+    A state of the file once verified is not hashed again: the state (device, inode, size, modification and
+    change times) and ``sha256`` name an empty mark file under ``cache_dir()/verified``. That is sound because
+    every change of a file's bytes (a write, a truncation, another file renamed in its place: a new inode) sets
+    its change time to the present, and nothing but the system clock sets a change time back (``os.utime``
+    restores the modification time only). A file changed within :data:`RACY_S` of its hash, or while it was
+    being hashed, is not marked. An unwritable cache costs a hash each time, nothing more.
+    """
+    import hashlib
+
+    path = Path(path)
+    before = os.stat(path)
+    mark = cache_dir() / "verified" / hashlib.sha256(f"{_state(before)}:{sha256}".encode()).hexdigest()
+    if mark.is_file():
+        return True
+    if sha256_file(path) != sha256:
+        return False
+    settled = time.time_ns() - before.st_ctime_ns > RACY_S * 1e9
+    if settled and _state(os.stat(path)) == _state(before):
+        try:
+            mark.parent.mkdir(parents=True, exist_ok=True)
+            mark.touch()
+        except OSError:
+            pass
+    return True

@@ -20,7 +20,6 @@ graph through onnxruntime, with the method's numpy pre- and post-processing.
 from __future__ import annotations
 
 import functools
-import hashlib
 import importlib.util
 import json
 import os
@@ -36,21 +35,11 @@ RUNTIMES = ("auto", "torch", "onnx")
 
 
 def weights_digest(folder: str | os.PathLike) -> str:
-    """SHA-256 (hex) of a model folder's ``weights.safetensors`` (remembered while the file is unchanged)."""
+    """SHA-256 (hex) of a model folder's ``weights.safetensors``."""
+    from keyfill.files import sha256_file
     from keyfill.learn.modelfile import WEIGHTS
 
-    path = Path(folder) / WEIGHTS
-    st = path.stat()
-    return _digest(str(path.resolve()), (st.st_mtime_ns, st.st_size))
-
-
-@functools.lru_cache(maxsize=16)
-def _digest(path: str, stamp: tuple) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    return sha256_file(Path(folder) / WEIGHTS)
 
 
 def metadata(kind: str, folder: str | os.PathLike, config: dict, contract: dict) -> dict[str, str]:
@@ -118,14 +107,17 @@ def is_graph(model: str | os.PathLike | None) -> bool:
 
 
 def check_binding(graph: Graph, folder: Path) -> None:
-    """:class:`ModelError` unless ``graph`` was exported from the model folder ``folder``."""
+    """:class:`ModelError` unless ``graph`` was exported from the model folder ``folder``: the folder's weights
+    must hash to the graph's ``keyfill.weights_sha256`` (:func:`keyfill.files.verified`: hashed once per state
+    of the file, not on every run)."""
+    from keyfill.files import verified
     from keyfill.learn.modelfile import WEIGHTS, read_config
 
     kind = read_config(folder)["kind"]
     if graph.kind != kind:
         raise ModelError(f"{graph.path}: a graph of a {graph.kind!r} model in a {kind!r} model folder; "
                          f"export it again with 'keyfill export {folder}'")
-    if not (folder / WEIGHTS).is_file() or weights_digest(folder) != graph.weights_sha256:
+    if not (folder / WEIGHTS).is_file() or not verified(folder / WEIGHTS, graph.weights_sha256):
         raise ModelError(f"{graph.path}: exported from other weights than {folder / WEIGHTS}; "
                          f"export it again with 'keyfill export {folder}'")
     if read_config(folder) != graph.config:  # the graph runs with the settings it was exported with

@@ -21,7 +21,7 @@ Arrays, ``N`` frames of all clips one after another, ``J`` joints, ``D = J * 3``
 
 ``rotations`` and ``features`` are float16 or float32 (``precision``); the others float32 (a ground point
 in float16 would round to centimetres). Loading checks every field of the manifest and every array's dtype,
-shape and hash (a hash is computed once per file and state of the file: :func:`_verified`).
+shape and hash (a hash is computed once per file and state of the file: :func:`keyfill.files.verified`).
 
 Building (:func:`build`) reads each clip (any format keyfill reads), brings it onto the library's skeleton
 through the rig bridge (:mod:`keyfill.learn.rig_bridge`) when it has another humanoid rig, resamples it to
@@ -32,7 +32,6 @@ as a licence, stay).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -44,6 +43,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError, ModelError, UsageError
+from keyfill.files import sha256_file, verified
 from keyfill.learn.library.features import Frames, describe, hips_world, pose_world
 from keyfill.motion import Motion, Skeleton
 
@@ -116,14 +116,6 @@ class Library:
 
 
 # --- building ------------------------------------------------------------------------------------
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def describe_motion(motion: Motion, frames: Frames) -> dict[str, np.ndarray]:
@@ -218,7 +210,7 @@ def build(paths, out: str | os.PathLike, *, include=(), exclude=(), every: int =
     old = load(out) if (out / MANIFEST).is_file() else None
     if old is None and out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UsageError(f"{out}: exists and is not a keyfill library; refusing to replace it")
-    hashes = [file_sha256(f) for f in files]
+    hashes = [sha256_file(f) for f in files]
     if len(set(hashes)) < len(hashes):
         dup = next(h for h in hashes if hashes.count(h) > 1)
         same = [str(f) for f, h in zip(files, hashes) if h == dup]
@@ -324,7 +316,7 @@ def _save(out: Path, skeleton: Skeleton, fps: float, frames: Frames, clips: list
             a = np.ascontiguousarray(arrays[name], dtype="float32" if name in _PRECISE else dtype)
             np.save(tmp / f"{name}.npy", a, allow_pickle=False)
             described[name] = {"dtype": str(a.dtype), "shape": list(a.shape),
-                               "sha256": file_sha256(tmp / f"{name}.npy")}
+                               "sha256": sha256_file(tmp / f"{name}.npy")}
         manifest = {
             "format": FORMAT, "version": VERSION, "skeleton": skeleton.to_json(), "fps": fps,
             "hips": skeleton.names[frames.hips], "precision": dtype,
@@ -359,28 +351,6 @@ def _save(out: Path, skeleton: Skeleton, fps: float, frames: Frames, clips: list
 
 def _bad(path: Path, why: str) -> ModelError:
     return ModelError(f"{path}: not a usable keyfill library ({why})")
-
-
-def _verified(path: Path, sha256: str) -> bool:
-    """Whether ``path``'s bytes hash to ``sha256``. A file already verified in this state (device, inode,
-    size, modification and change times: the change time cannot be set back by a user) is not hashed again;
-    the states verified are kept under the cache folder."""
-    from keyfill.learn.corpus import cache_dir
-
-    st = path.stat()
-    stamp = hashlib.sha256(f"{st.st_dev}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}:{st.st_ctime_ns}:{sha256}"
-                           .encode()).hexdigest()
-    mark = cache_dir() / "verified" / stamp
-    if mark.is_file():
-        return True
-    if file_sha256(path) != sha256:
-        return False
-    try:
-        mark.parent.mkdir(parents=True, exist_ok=True)
-        mark.touch()
-    except OSError:
-        pass  # an unwritable cache costs a hash per load, nothing more
-    return True
 
 
 def load(path: str | os.PathLike) -> Library:
@@ -449,7 +419,7 @@ def load(path: str | os.PathLike) -> Library:
                              f"{tuple('d' if s is None else s for s in shape)}")
         if spec.get("dtype") != str(a.dtype) or spec.get("shape") != list(a.shape):
             raise _bad(path, f"{f.name} does not agree with {MANIFEST}")
-        if not isinstance(spec.get("sha256"), str) or not _verified(f, spec["sha256"]):
+        if not isinstance(spec.get("sha256"), str) or not verified(f, spec["sha256"]):
             raise _bad(path, f"{f.name} has changed since the library was built (its SHA-256 differs)")
         loaded[name] = a
     if not 0 < loaded["basis"].shape[1] <= J * 3:

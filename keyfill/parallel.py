@@ -35,6 +35,36 @@ def available_cpus() -> int:
         return os.cpu_count() or 1
 
 
+#: input bytes of a batch for each local worker process started for it by default: a worker's start (Python,
+#: numpy, keyfill and the method's model) costs about 0.4 s of CPU and cubic completion of BVH about 0.2 s per
+#: MB, so a worker pays for itself from a few MB of work; below 8 MB each, the batch stays in this process
+BYTES_PER_WORKER = 8 << 20
+
+
+def default_workers(jobs: int, work_bytes: int) -> int:
+    """The local worker processes of a batch given no ``--workers``: one per idle core (the cores this process
+    may use less the 1-minute load average, rounded), at most one per job and one per
+    :data:`BYTES_PER_WORKER` of ``work_bytes`` (the inputs' size); 1 (everything in this process) when more
+    would not pay. On a busy machine, workers only compete with the work for the same cores."""
+    cpus = available_cpus()
+    try:
+        idle = round(cpus - os.getloadavg()[0])
+    except (AttributeError, OSError):  # no load average on this system
+        idle = cpus
+    return max(1, min(cpus, idle, jobs, work_bytes // BYTES_PER_WORKER))
+
+
+def input_bytes(paths) -> int:
+    """The total size in bytes of the files ``paths`` (a file that cannot be read counts 0: its job says why)."""
+    total = 0
+    for path in paths:
+        try:
+            total += os.stat(path).st_size
+        except OSError:
+            pass
+    return total
+
+
 class Inline:
     """Runs each job in this process when submitted (``workers=1``)."""
 
@@ -189,8 +219,8 @@ def executor(workers: int | None = None, scheduler: str | None = None, connect_t
     """The executor for ``--workers`` / ``--scheduler``: ``(executor, jobs to keep in flight)``.
 
     ``workers`` defaults to one process per available core (1 runs everything
-    in this process); with ``scheduler`` it is the number of jobs kept in
-    flight on the cluster (default: its thread count).
+    in this process; a batch passes :func:`default_workers`); with ``scheduler`` it is the number of jobs
+    kept in flight on the cluster (default: its thread count).
     """
     if scheduler:
         ex = DaskCluster(scheduler, connect_timeout)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import sys
+import time
 from pathlib import Path
 
 import click
@@ -100,12 +101,38 @@ def with_global_options(command: click.Command) -> click.Command:
     return command
 
 
+def progress_shown() -> bool:
+    """Whether progress bars are drawn: stderr is a terminal and ``-q`` was not given."""
+    return verbosity() >= 0 and sys.stderr.isatty()
+
+
 def progress(iterable=None, **kwargs):
     """A tqdm progress bar on stderr, silent with ``-q`` or when stderr is not a terminal."""
     from tqdm import tqdm
 
-    disable = verbosity() < 0 or not sys.stderr.isatty()
-    return tqdm(iterable, disable=disable, file=sys.stderr, dynamic_ncols=True, **kwargs)
+    return tqdm(iterable, disable=not progress_shown(), file=sys.stderr, dynamic_ncols=True, **kwargs)
+
+
+class DelayedBar:
+    """The ``update(n)`` / ``close()`` of a progress bar that ``make(done)`` draws only once the task has run for
+    ``delay`` seconds where bars are shown (:func:`progress_shown`). A short task, or any task whose stderr is
+    not a terminal, makes no bar and imports no tqdm (about 40 ms of a command's start)."""
+
+    def __init__(self, make, delay: float):
+        self._make, self._shown, self._due = make, progress_shown(), time.monotonic() + delay
+        self._done, self._bar = 0, None
+
+    def update(self, n: int = 1) -> None:
+        if self._bar is not None:
+            self._bar.update(n)
+            return
+        self._done += n
+        if self._shown and time.monotonic() >= self._due:
+            self._bar = self._make(self._done)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
 
 
 def emit_json(data: dict) -> None:
@@ -248,7 +275,10 @@ def load_labelled(files, labels: str | None, in_fmt: str | None, keys_text: str 
 
 
 def _executor_option(ctx, param, value):
-    """``--workers`` and ``--connect-timeout`` checked as they are parsed: one file refuses what a batch does."""
+    """``--workers`` and ``--connect-timeout`` checked as they are parsed: one file refuses what a batch does
+    (the defaults need no check, and a command given neither imports no :mod:`keyfill.parallel`)."""
+    if value is None or (param.name == "connect_timeout" and value == CONNECT_SECONDS):
+        return value
     from keyfill.parallel import check_options
 
     if param.name == "workers":
@@ -270,8 +300,9 @@ def batch_options(f):
     f = click.option("--scheduler", metavar="ADDRESS",
                      help="Run the batch on a Dask distributed cluster, e.g. tcp://host:8786.")(f)
     f = click.option("--workers", type=int, metavar="N", callback=_executor_option,
-                     help="Local worker processes for a batch [default: one per core when there is more than "
-                          "one job]; with --scheduler, jobs kept in flight.")(f)
+                     help="Local worker processes for a batch [default: one per idle core, when the inputs are "
+                          "large enough to pay for starting them (8 MB each), else 1]; with --scheduler, jobs "
+                          "kept in flight.")(f)
     return f
 
 

@@ -169,11 +169,12 @@ def _interrupted(error: BaseException | None) -> int:
 
 
 def _progress_bar(description: str, total: int, unit: str):
-    """The CLI's progress listener: a tqdm bar on a terminal, shown once a task has taken 2 s."""
-    from keyfill.cli.common import progress
+    """The CLI's progress listener: a tqdm bar on a terminal, shown once a task has taken 2 s (tqdm is imported
+    only then: :class:`~keyfill.cli.common.DelayedBar`)."""
+    from keyfill.cli.common import DelayedBar, progress
 
-    return progress(total=total, desc=description, unit=unit.strip() or "it", delay=2.0,
-                    unit_scale=unit.strip() == "B", leave=False)
+    return DelayedBar(lambda done: progress(total=total, initial=done, desc=description, unit=unit.strip() or "it",
+                                            unit_scale=unit.strip() == "B", leave=False), delay=2.0)
 
 
 def _note(message: str) -> None:

@@ -582,6 +582,7 @@ def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: 
 
     from keyfill import __version__
     from keyfill.files import interrupts_deferred, remove_stale
+    from keyfill.parallel import default_workers, input_bytes
     from keyfill.parallel import executor as make_executor
 
     start = time.perf_counter()
@@ -659,8 +660,9 @@ def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: 
 
     if jobs:
         # Reach the cluster before touching the output folder: an unreachable scheduler leaves nothing behind.
-        executor, window = make_executor(workers if workers is not None else (1 if len(jobs) == 1 else None),
-                                         scheduler, connect_timeout)
+        if workers is None and not scheduler:
+            workers = default_workers(len(jobs), input_bytes(it.src for job in jobs for it in job if it.write))
+        executor, window = make_executor(workers, scheduler, connect_timeout)
         sent = []
         try:
             prepare_outputs([it for job in jobs for it in job if it.write])

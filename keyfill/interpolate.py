@@ -36,6 +36,24 @@ from keyfill.motion import Keys, Motion
 VELOCITY_FRAMES = 3.0
 
 
+#: frames per block of the baselines' per-frame arithmetic: its temporaries stay a few MB for a few dozen
+#: joints, whatever the motion's length (:func:`_by_blocks`)
+BLOCK = 4096
+
+
+def _by_blocks(num_frames: int, evaluate) -> tuple[np.ndarray, np.ndarray]:
+    """``(rotations (F, ...), positions (F, ...))`` made :data:`BLOCK` frames at a time by
+    ``evaluate(first, end) -> (rotations, positions)`` of the frames ``first .. end - 1``."""
+    rot = pos = None
+    for a in range(0, max(num_frames, 1), BLOCK):
+        b = min(num_frames, a + BLOCK)
+        r, p = evaluate(a, b)
+        if rot is None:
+            rot, pos = np.empty((num_frames,) + r.shape[1:]), np.empty((num_frames,) + p.shape[1:])
+        rot[a:b], pos[a:b] = r, p
+    return rot, pos
+
+
 def segment_coordinates(num_frames: int, key_frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For every frame, the segment index ``s`` (keys ``s``, ``s+1``) and ``u`` in [0, 1].
 
@@ -115,10 +133,14 @@ def linear(motion: Motion, keys: Keys) -> Motion:
     """Lerp translations and slerp rotations between the keys of ``motion``."""
     k = keys.frames
     s, u = segment_coordinates(motion.num_frames, k)
-    p0, p1 = motion.positions[k[s]], motion.positions[k[s + 1]]
-    pos = p0 + u[:, None, None] * (p1 - p0)
-    q0, q1 = motion.rotations[k[s]], motion.rotations[k[s + 1]]
-    rot = R.quat_slerp(q0, q1, np.broadcast_to(u[:, None], q0.shape[:2]))
+
+    def frames(a, b):
+        ss, uu = s[a:b], u[a:b]
+        p0, p1 = motion.positions[k[ss]], motion.positions[k[ss + 1]]
+        q0, q1 = motion.rotations[k[ss]], motion.rotations[k[ss + 1]]
+        return R.quat_slerp(q0, q1, np.broadcast_to(uu[:, None], q0.shape[:2])), p0 + uu[:, None, None] * (p1 - p0)
+
+    rot, pos = _by_blocks(motion.num_frames, frames)
     return _keep_keys(rot, pos, motion, keys)
 
 
@@ -133,19 +155,22 @@ def cubic_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames) -> tu
     k = np.asarray(key_frames)
     s, u = segment_coordinates(len(rotations), k)
     h = np.diff(k).astype(np.float64)  # (K-1,)
-    hf = h[s][:, None, None]
-    h00, h10, h01, h11 = (c[:, None, None] for c in _hermite(u))
-
     P = positions[k]  # (K, M, 3)
-    m = _tangents(np.diff(P, axis=0) / h[:, None, None], h)  # per-frame tangents
-    pos = h00 * P[s] + h10 * hf * m[s] + h01 * P[s + 1] + h11 * hf * m[s + 1]
-
+    m = _tangents(np.diff(P, axis=0) / h[:, None, None], h)  # key tangents
     Q = R.quat_continuous_np(rotations[k], axis=0)
     phi = R.quat_to_rotvec(R.quat_mul(R.quat_conjugate(Q[:-1]), Q[1:]))  # (K-1, N, 3)
     omega = _tangents(phi / h[:, None, None], h)  # body angular velocity at keys (K, N, 3)
     end_tangent = np.einsum("kjab,kjb->kja", inverse_right_jacobian(phi), omega[1:])  # (K-1, N, 3)
-    v = h01 * phi[s] + h10 * hf * omega[s] + h11 * hf * end_tangent[s]
-    return R.quat_normalize(R.quat_mul(Q[s], R.quat_from_rotvec(v))), pos
+
+    def frames(a, b):
+        ss = s[a:b]
+        hf = h[ss][:, None, None]
+        h00, h10, h01, h11 = (c[:, None, None] for c in _hermite(u[a:b]))
+        pos = h00 * P[ss] + h10 * hf * m[ss] + h01 * P[ss + 1] + h11 * hf * m[ss + 1]
+        v = h01 * phi[ss] + h10 * hf * omega[ss] + h11 * hf * end_tangent[ss]
+        return R.quat_normalize(R.quat_mul(Q[ss], R.quat_from_rotvec(v))), pos
+
+    return _by_blocks(len(rotations), frames)
 
 
 def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, frames: float):

@@ -378,6 +378,10 @@ class Keys:
         return keys.check(motion.num_frames, min_keys=min_keys)
 
 
+#: frames per block of :meth:`Motion.euler_blocks`: its temporaries are a few MB for a few dozen joints
+EULER_BLOCK = 4096
+
+
 def _turns_off(angles: np.ndarray) -> np.ndarray:
     """Distance of ``angles`` (radians) from the nearest whole number of turns."""
     return np.abs((angles + np.pi) % (2 * np.pi) - np.pi)
@@ -449,36 +453,59 @@ class Motion:
         and no flips between the two Euler solutions of a rotation. For a joint
         with fewer than three rotation channels the missing (trailing) angles
         are zero; a rotation about an axis without a channel raises
-        :class:`DataError` naming the joint and frame.
+        :class:`DataError` naming the joint and frame. Made by :meth:`euler_blocks`.
+        """
+        angles = np.empty((self.num_frames, self.skeleton.num_joints, 3))
+        for start, block in self.euler_blocks():
+            angles[start : start + len(block)] = block
+        return angles
+
+    def euler_blocks(self, block: int = EULER_BLOCK):
+        """:meth:`euler_angles` a block of frames at a time: ``(first frame, (b, J, 3) radians)`` per block.
+
+        Each block continues the curves of the one before it (it is made continuous from that block's last
+        frame), so a writer can stream any number of frames with temporaries of ``block`` frames.
         """
         sk = self.skeleton
-        F, J = self.num_frames, sk.num_joints
+        J = sk.num_joints
         orders = sk.euler_orders
         n_rot = np.array([sum(c in ROTATION_CHANNELS for c in chans) for chans in sk.channels])
-        angles = np.empty((F, J, 3))
-        for order in set(orders):
-            js = [j for j in range(J) if orders[j] == order]
-            angles[:, js] = R.quat_to_euler(self.rotations[:, js], order)
-        if F == 0:
-            return angles
         full = n_rot == 3
-        angles[:, full] = R.euler_continuous_np(angles[:, full])
-        for j in np.flatnonzero(~full):
-            n, a = n_rot[j], angles[:, j]
-            # Of the two Euler solutions, take the one whose missing angles are zero.
-            alt = np.stack([a[:, 0] + np.pi, np.pi - a[:, 1], a[:, 2] + np.pi], axis=-1)
-            use_alt = _turns_off(alt[:, n:]).sum(axis=1) < _turns_off(a[:, n:]).sum(axis=1)
-            a = np.where(use_alt[:, None], alt, a)
-            missing = _turns_off(a[:, n:])
-            if missing.size and missing.max() > 1e-6:
-                f = int(np.argmax(missing.max(axis=1)))
-                chans = " ".join(sk.channels[j]) or "none"
-                raise DataError(
-                    f"joint {sk.names[j]!r} rotates about an axis that its channels ({chans}) cannot hold, at frame {f}"
-                )
-            a[:, n:] = 0.0
-            angles[:, j] = np.unwrap(a, axis=0)
-        return angles
+        groups = [(order, [j for j in range(J) if orders[j] == order]) for order in sorted(set(orders))]
+        last = None  # (J, 3) the previous block's last frame
+        for start in range(0, self.num_frames, block):
+            angles = np.empty((min(block, self.num_frames - start), J, 3))
+            for order, js in groups:
+                angles[:, js] = R.quat_to_euler(self.rotations[start : start + len(angles), js], order)
+            if last is None:
+                angles[:, full] = R.euler_continuous_np(angles[:, full])
+            else:  # continue from the last frame: it stays first, and the whole turns it was moved by come back
+                turns = 2 * np.pi * np.round(last[full] / (2 * np.pi))
+                angles[:, full] = R.euler_continuous_np(np.concatenate([last[None, full], angles[:, full]]))[1:] + turns
+            for j in np.flatnonzero(~full):
+                angles[:, j] = self._partial_joint(j, int(n_rot[j]), angles[:, j], start, None if last is None else last[j])
+            last = angles[-1].copy()
+            yield start, angles
+
+    def _partial_joint(self, j: int, n: int, a: np.ndarray, start: int, last) -> np.ndarray:
+        """The ``(b, 3)`` angles ``a`` (frames from ``start``) of joint ``j`` with ``n`` < 3 rotation channels,
+        as :meth:`euler_angles` gives them: continuing from ``last`` ((3,) or None)."""
+        # Of the two Euler solutions, take the one whose missing angles are zero.
+        alt = np.stack([a[:, 0] + np.pi, np.pi - a[:, 1], a[:, 2] + np.pi], axis=-1)
+        use_alt = _turns_off(alt[:, n:]).sum(axis=1) < _turns_off(a[:, n:]).sum(axis=1)
+        a = np.where(use_alt[:, None], alt, a)
+        missing = _turns_off(a[:, n:])
+        if missing.size and missing.max() > 1e-6:
+            f = start + int(np.argmax(missing.max(axis=1)))
+            chans = " ".join(self.skeleton.channels[j]) or "none"
+            raise DataError(
+                f"joint {self.skeleton.names[j]!r} rotates about an axis that its channels ({chans}) cannot hold, "
+                f"at frame {f}"
+            )
+        a[:, n:] = 0.0
+        if last is None:
+            return np.unwrap(a, axis=0)
+        return np.unwrap(np.concatenate([last[None], a]), axis=0)[1:]
 
     def replace(self, **changes) -> Motion:
         return dataclasses.replace(self, **changes)

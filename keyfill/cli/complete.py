@@ -180,12 +180,14 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)
     result = run(motion, keys, method, options)
+    frames = motion.num_frames
+    del motion  # the input's arrays are not needed to write the result (a long take: half the memory)
     io.save(result.motion, dst, fmt, source=src)
     say_guard(src, result.info)
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})
     elif dst != "-":
-        say(f"wrote {dst}: {motion.num_frames} frames completed from {len(keys)} keys with {method}")
+        say(f"wrote {dst}: {frames} frames completed from {len(keys)} keys with {method}")
 
 
 def say_guard(src: str, info: dict) -> None:

@@ -23,7 +23,9 @@ are unwrapped towards them (:func:`follow_template`).
 
 from __future__ import annotations
 
+import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -237,26 +239,63 @@ def _nonempty_lines(data: bytes) -> int:
     return sum(1 for line in data.split(b"\n") if line.strip())
 
 
-def _values(raw: bytes, begin: int, num_frames: int, num_channels: int, label, first_data_line: int, frames_line_no: int):
-    """The ``(F, C)`` channel values of the motion block ``raw[begin:]`` (never copied whole).
-
-    The block is read in chunks of about :data:`CHUNK_BYTES` (one C-level pass
-    each); a bad chunk is read again line by line to name the line to blame.
-    """
-    if num_channels == 0:
-        return np.zeros((num_frames, 0))
-    if raw.count(b"\n", begin) + 1 < num_frames:  # too few lines: refuse before allocating
-        raise FormatError(
-            f"'Frames: {num_frames}' but {_nonempty_lines(raw[begin:])} lines of motion data follow", label, frames_line_no
-        )
-    values = np.empty((num_frames, num_channels))
-    limit = limits.max_abs()
-    row, pos, line_no = 0, begin, first_data_line
-    with progress.task("reading BVH", len(raw) - begin, "B") as update:
+def _text_blocks(layout: _Layout):
+    """``(byte offset, text)`` of the motion block, about :data:`CHUNK_BYTES` at a time, each ending at a line
+    end (or the end of the text): from memory, or read from the file as it goes."""
+    if layout.file is None:
+        raw, pos = layout.head, layout.data_start
         while pos < len(raw):
             end = raw.find(b"\n", min(pos + CHUNK_BYTES, len(raw)))
             end = len(raw) if end < 0 else end + 1
-            chunk = raw[pos:end]
+            yield pos, raw[pos:end]
+            pos = end
+        return
+    with open(layout.file, "rb") as f:
+        f.seek(layout.data_start)
+        pos, rest = layout.data_start, b""
+        while True:
+            more = f.read(CHUNK_BYTES)
+            text = rest + more
+            cut = text.rfind(b"\n") + 1 if more else len(text)
+            if cut == 0 and more:  # a line longer than a chunk: read on
+                rest = text
+                continue
+            if cut:
+                yield pos, text[:cut]
+            pos, rest = pos + cut, text[cut:]
+            if not more:
+                return
+
+
+def _rest_of(layout: _Layout, pos: int) -> bytes:
+    """The motion block's text from byte ``pos`` on (for an error message that counts its lines)."""
+    if layout.file is None:
+        return layout.head[pos:]
+    with open(layout.file, "rb") as f:
+        f.seek(pos)
+        return f.read()
+
+
+def _value_chunks(layout: _Layout):
+    """``(first row, (n, C) channel values)`` of the motion block of ``layout``, chunk after chunk.
+
+    The block is read in chunks of about :data:`CHUNK_BYTES` (one C-level pass
+    each; the text is never held whole when it comes from a file); a bad chunk is
+    read again line by line to name the line to blame.
+    """
+    label, num_frames, num_channels = layout.label, layout.num_frames, layout.num_channels
+    if num_channels == 0:
+        if num_frames:
+            yield 0, np.zeros((num_frames, 0))
+        return
+    if layout.file is None and layout.head.count(b"\n", layout.data_start) + 1 < num_frames:
+        # too few lines: refuse before allocating (a file is checked as it streams; its rows are not touched)
+        raise FormatError(f"'Frames: {num_frames}' but {_nonempty_lines(layout.head[layout.data_start:])} lines "
+                          f"of motion data follow", label, layout.frames_line_no)
+    limit = limits.max_abs()
+    row, line_no = 0, layout.first_data_line
+    with progress.task("reading BVH", layout.size - layout.data_start, "B") as update:
+        for pos, chunk in _text_blocks(layout):
             arr = None
             if _ALLOWED[np.frombuffer(chunk, dtype=np.uint8)].all():
                 try:
@@ -268,39 +307,96 @@ def _values(raw: bytes, begin: int, num_frames: int, num_channels: int, label, f
             if arr is None or arr.shape[1] != num_channels or not (np.abs(arr) <= limit).all():
                 _diagnose(chunk, num_channels, label, line_no)
             if row + len(arr) > num_frames:
-                rest = raw[pos:]
+                rest = _rest_of(layout, pos)
                 extra = [i for i, line in enumerate(rest.split(b"\n")) if line.strip()][num_frames - row]
                 raise FormatError(
                     f"'Frames: {num_frames}' but {row + _nonempty_lines(rest)} lines of motion data follow",
                     label,
                     line_no + extra,
                 )
-            values[row : row + len(arr)] = arr
+            if len(arr):
+                yield row, arr
             row += len(arr)
             line_no += chunk.count(b"\n")
-            pos = end
             update(len(chunk))
     if row != num_frames:
-        raise FormatError(f"'Frames: {num_frames}' but {row} lines of motion data follow", label, frames_line_no)
-    return values
+        raise FormatError(f"'Frames: {num_frames}' but {row} lines of motion data follow", label,
+                          layout.frames_line_no)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """A BVH file's header, read: its skeleton and frame rate, and where and how long its motion block is."""
+
+    head: bytes  #: the text up to somewhere in the motion block (all of it when parsed from memory)
+    file: Path | None  #: the file the rest of the motion block streams from (None: ``head`` is everything)
+    label: object
+    skeleton: Skeleton
+    fps: float
+    num_frames: int
+    num_channels: int
+    size: int  #: bytes of the whole text
+    data_start: int  #: byte offset of the first motion line
+    first_data_line: int  #: its 1-based line number
+    frames_line_no: int  #: the line of 'Frames:'
 
 
 def parse(raw: bytes | str, path=None) -> Motion:
-    """Parse BVH text (bytes or str) into a :class:`Motion`; ``path`` only labels errors."""
-    skeleton, fps, values = parse_values(raw, path)
-    label = path if path is not None else "<bvh>"
+    """Parse BVH text (bytes or str) into a :class:`Motion`; ``path`` only labels errors.
+
+    The channel values are turned into the pose a chunk at a time, so reading needs little memory
+    beyond the text and the motion's own arrays.
+    """
+    return _pose(_layout(raw, path))
+
+
+def _pose(layout: _Layout) -> Motion:
+    """The :class:`Motion` of a BVH file's ``layout``, its values turned into the pose a chunk at a time."""
+    sk, F = layout.skeleton, layout.num_frames
+    rot, pos = np.empty((F, sk.num_joints, 4)), np.empty((F, sk.num_joints, 3))
     try:
-        rot, pos = channels_to_pose(values, skeleton)
-        del values
-        return Motion(skeleton, fps, rot, pos)
+        for row, values in _value_chunks(layout):
+            rot[row : row + len(values)], pos[row : row + len(values)] = channels_to_pose(values, sk)
+        return Motion(sk, layout.fps, rot, pos)
     except DataError as e:
-        raise FormatError(str(e), label) from None
+        raise FormatError(str(e), layout.label) from None
 
 
 def parse_values(raw: bytes | str, path=None) -> tuple[Skeleton, float, np.ndarray]:
     """``(skeleton, fps, (F, C) channel values as the file writes them)`` of BVH text; ``path`` labels errors."""
+    layout = _layout(raw, path)
+    values = np.empty((layout.num_frames, layout.num_channels))
+    for row, chunk in _value_chunks(layout):
+        values[row : row + len(chunk)] = chunk
+    return layout.skeleton, layout.fps, values
+
+
+#: bytes of a file read for its header at a time (the header is read until MOTION and its two lines)
+HEAD_BYTES = 1 << 20
+
+
+def _read_head(path: Path) -> tuple[bytes, int]:
+    """``(the start of the file up to at least 4 KiB past its MOTION line, or all of it, the file's size)``."""
+    with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        head = b""
+        while True:
+            more = f.read(HEAD_BYTES)
+            head += more
+            m = _MOTION_RE.search(head)
+            if not more or (m is not None and len(head) >= m.end() + 4096):
+                return head, size
+
+
+def _layout(raw: bytes | str, path=None, file: Path | None = None, size: int | None = None) -> _Layout:
+    """The header of BVH text (bytes or str) and where its motion block starts; ``path`` labels errors.
+
+    ``file``: the file ``raw`` is the start of (:func:`_read_head`), ``size`` its size in bytes; the
+    motion block is then streamed from it.
+    """
     if isinstance(raw, str):
         raw = raw.encode("utf-8")
+    size = len(raw) if size is None else size
     label = path if path is not None else "<bvh>"
     if not raw or raw.isspace():  # isspace() stops at the first other byte; strip() would copy
         raise FormatError("the file is empty", label)
@@ -344,7 +440,7 @@ def parse_values(raw: bytes | str, path=None) -> tuple[Skeleton, float, np.ndarr
         raise FormatError(
             f"'Frame Time: {ft_val}' is a frame rate outside {limits.MIN_FPS:g} to {limits.MAX_FPS:g} fps", label, ft_line_no
         )
-    problem = limits.check_size(num_frames, len(h.names), len(raw))
+    problem = limits.check_size(num_frames, len(h.names), size)
     if problem:
         raise FormatError(problem, label, frames_line_no)
 
@@ -356,9 +452,6 @@ def parse_values(raw: bytes | str, path=None) -> tuple[Skeleton, float, np.ndarr
     first_data_line = motion_line + i_ft + 2  # 1-based file line of the first data line
 
     num_channels = sum(len(c) for c in h.channels)
-    values = _values(raw, data_start, num_frames, num_channels, label, first_data_line, frames_line_no)
-    del raw, m  # the text is no longer needed: free it before the pose arrays are made (read() holds no copy)
-
     try:
         skeleton = Skeleton(
             names=tuple(h.names),
@@ -369,45 +462,28 @@ def parse_values(raw: bytes | str, path=None) -> tuple[Skeleton, float, np.ndarr
         )
     except DataError as e:
         raise FormatError(str(e), label) from None
-    return skeleton, _snap_fps(frame_time), values
-
-
-#: the channel values of the last file :func:`read` read, by (path, size, mtime), when they take at most
-#: :data:`KEEP_BYTES`: a completion writes its output next to the input it just read, and
-#: :func:`follow_template` then need not parse the input again (a big file is parsed again rather than kept)
-_LAST_READ: dict[tuple, tuple[Skeleton, np.ndarray]] = {}
-KEEP_BYTES = 32 * 2**20
-
-
-def _stamp(path: Path) -> tuple:
-    st = path.stat()
-    return (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    return _Layout(raw, file, label, skeleton, _snap_fps(frame_time), num_frames, num_channels, size, data_start,
+                   first_data_line, frames_line_no)
 
 
 def read(path: str | Path, label=None) -> Motion:
-    """Read a BVH file; ``label`` (default: the path) names it in error messages."""
+    """Read a BVH file; ``label`` (default: the path) names it in error messages.
+
+    Streaming: the header is read first, then the motion lines a chunk at a time (about
+    :data:`CHUNK_BYTES`), each turned into its frames of the pose at once; memory is the motion's
+    arrays plus a chunk, whatever the file's length.
+    """
     path = Path(path)
-    label = label if label is not None else path
-    skeleton, fps, values = parse_values(path.read_bytes(), label)
-    try:
-        rot, pos = channels_to_pose(values, skeleton)
-        motion = Motion(skeleton, fps, rot, pos)
-    except DataError as e:
-        raise FormatError(str(e), label) from None
-    _LAST_READ.clear()
-    if values.nbytes <= KEEP_BYTES:
-        _LAST_READ[_stamp(path)] = (skeleton, values)
-    return motion
+    head, size = _read_head(path)
+    return _pose(_layout(head, label if label is not None else path, file=path, size=size))
 
 
-def _template_values(template: Path) -> tuple[Skeleton, np.ndarray]:
-    """``(skeleton, (F, C) channel values)`` of the BVH file ``template``: from the last :func:`read` when it
-    was this file, unchanged, else parsed."""
-    hit = _LAST_READ.get(_stamp(template))
-    if hit is not None:
-        return hit
-    skeleton, _, values = parse_values(template.read_bytes(), template)
-    return skeleton, values
+def _template_chunks(template: Path):
+    """``(skeleton, chunks)`` of the BVH file ``template``: its skeleton and the ``(first row, (n, C)
+    channel values)`` of :func:`_value_chunks`, streamed from the file."""
+    head, size = _read_head(template)
+    layout = _layout(head, template, file=template, size=size)
+    return layout.skeleton, _value_chunks(layout)
 
 
 # --- writing -----------------------------------------------------------------
@@ -462,8 +538,9 @@ SAME_ROTATION_RAD = 1e-9
 
 
 def follow_template(values: np.ndarray, motion: Motion, template: str | Path) -> np.ndarray:
-    """``values`` (``(F, C)`` channels of ``motion``, :func:`pose_to_channels`) with the Euler angles of the BVH
-    file ``template`` (e.g. the input ``motion`` was completed from) where they can be kept.
+    """``values`` (``(F, C)`` channels of ``motion``, :func:`pose_to_channels`; changed in place and returned)
+    with the Euler angles of the BVH file ``template`` (e.g. the input ``motion`` was completed from) where
+    they can be kept.
 
     At each frame where a joint's rotation is unchanged from the template's (within :data:`SAME_ROTATION_RAD`;
     only the keys are compared when ``motion`` records keys, as a completion does), its rotation channels take
@@ -472,50 +549,85 @@ def follow_template(values: np.ndarray, motion: Motion, template: str | Path) ->
     The frames after such a frame, up to the next one, are shifted by the whole turns per channel that put
     them next to it (the frames before the first, next to the first): still continuous, and unwrapped
     towards their neighbours. A template of another channel layout, or one that cannot be read, changes
-    nothing.
+    nothing. The template is streamed a chunk of rows at a time (:class:`_Follower`): never held whole;
+    one that stops being readable part way (changed while it is read) leaves the frames after as they
+    were: every frame still holds its own rotation.
     """
     sk = motion.skeleton
     try:
-        tsk, tvalues = _template_values(Path(template))
+        tsk, chunks = _template_chunks(Path(template))
+        if tsk.names != sk.names or tsk.channels != sk.channels or not len(values):
+            return values
+        follower = _Follower(values, motion)
+        for row, tvalues in chunks:
+            if row >= len(values):
+                break
+            follower.chunk(row, tvalues[: len(values) - row])
     except (OSError, FormatError):
-        return values
-    if tsk.names != sk.names or tsk.channels != sk.channels or not len(values) or not len(tvalues):
-        return values
-    n = min(len(values), len(tvalues))
-    # the frames that may hold the template's rotations: a completion's keys, else every frame
-    maybe = np.arange(n) if motion.keys is None else motion.keys.frames[motion.keys.frames < n]
-    trot, _ = channels_to_pose(tvalues[maybe], tsk)
-    same = np.zeros((n, sk.num_joints), dtype=bool)
-    same[maybe] = R.quat_angle(motion.rotations[maybe], trot) < SAME_ROTATION_RAD  # (n, J)
-    scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
-    values = values.copy()
-    frames = np.arange(len(values))
-    col = 0
-    for j, chans in enumerate(sk.channels):
-        cols = np.arange(col, col + len(chans))
-        col += len(chans)
-        rot = cols[[c not in POSITION_CHANNELS for c in chans]]
-        pos = cols[[c in POSITION_CHANNELS for c in chans]]
-        if len(pos):
-            close = np.abs(values[:n, pos] - tvalues[:n, pos]) <= 1e-12 * scale
-            values[:n, pos] = np.where(close, tvalues[:n, pos], values[:n, pos])
-        anchors = np.flatnonzero(same[:, j])
-        if not len(rot) or not len(anchors):
-            continue
-        v, t = values[:, rot], tvalues[anchors][:, rot]
-        turns = 360.0 * np.round((t - v[anchors]) / 360.0)  # (A, r) the whole turns between the two
-        segment = np.maximum(np.searchsorted(anchors, frames, side="right") - 1, 0)
-        v = v + turns[segment]
-        v[anchors] = t
-        values[:, rot] = v
+        pass
     return values
+
+
+class _Follower:
+    """:func:`follow_template`'s work on one chunk of the template's rows at a time (in order), changing
+    ``values`` in place; per joint it carries the whole turns of its last frame that held the template's
+    rotation to the chunks after it."""
+
+    def __init__(self, values: np.ndarray, motion: Motion):
+        sk = motion.skeleton
+        self.values, self.motion, self.skeleton = values, motion, sk
+        self.scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
+        self.joints = []  # per joint: (j, rotation columns, position columns)
+        col = 0
+        for j, chans in enumerate(sk.channels):
+            cols = np.arange(col, col + len(chans))
+            col += len(chans)
+            self.joints.append((j, cols[[c not in POSITION_CHANNELS for c in chans]],
+                                cols[[c in POSITION_CHANNELS for c in chans]]))
+        self.turns: dict[int, np.ndarray] = {}  # joint -> (r,) degrees: the turns of its last anchor so far
+
+    def chunk(self, r0: int, t: np.ndarray) -> None:
+        """Follow the template's rows ``r0 .. r0 + len(t) - 1`` (``t``: their ``(n, C)`` channel values)."""
+        values, motion, r1 = self.values, self.motion, r0 + len(t)
+        keys = motion.keys
+        # the frames that may hold the template's rotations: a completion's keys, else every frame
+        maybe = np.arange(r0, r1) if keys is None else keys.frames[(keys.frames >= r0) & (keys.frames < r1)]
+        same = np.zeros((0, self.skeleton.num_joints), dtype=bool)
+        if len(maybe):
+            trot, _ = channels_to_pose(t[maybe - r0], self.skeleton)
+            same = R.quat_angle(motion.rotations[maybe], trot) < SAME_ROTATION_RAD  # (k, J)
+        frames = np.arange(r0, r1)
+        for j, rot, pos in self.joints:
+            if len(pos):
+                close = np.abs(values[r0:r1, pos] - t[:, pos]) <= 1e-12 * self.scale
+                values[r0:r1, pos] = np.where(close, t[:, pos], values[r0:r1, pos])
+            if not len(rot):
+                continue
+            anchors = maybe[same[:, j]]
+            v = values[r0:r1, rot]
+            if not len(anchors):
+                if j in self.turns:
+                    values[r0:r1, rot] = v + self.turns[j]
+                continue  # else: no anchor yet; these frames take the first anchor's turns when it comes
+            turns = 360.0 * np.round((t[anchors - r0][:, rot] - v[anchors - r0]) / 360.0)  # (A, r)
+            segment = np.searchsorted(anchors, frames, side="right") - 1
+            shift = turns[np.maximum(segment, 0)]
+            if j in self.turns:
+                shift[segment < 0] = self.turns[j]
+            elif r0:  # the frames before this joint's first anchor, in earlier chunks
+                values[:r0, rot] += turns[0]
+            v = v + shift
+            v[anchors - r0] = t[anchors - r0][:, rot]
+            values[r0:r1, rot] = v
+            self.turns[j] = turns[-1]
 
 
 def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None):
     """BVH text of ``motion`` in pieces: the header, then about ``rows`` motion lines at a time."""
     sk = motion.skeleton
     limits.check_values(motion)
-    values = pose_to_channels(motion) + 0.0  # no -0 of the arithmetic (a template's own -0 stays)
+    values = pose_to_channels(motion)
+    values += 0.0  # no -0 of the arithmetic (a template's own -0 stays)
     if template is not None:
         values = follow_template(values, motion, template)
     children: list[list[int]] = [[] for _ in range(sk.num_joints)]
@@ -536,11 +648,9 @@ def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None
     if values.shape[1]:
         line, varying = _line_template(values)
         line += "\n"
-        columns = values[:, varying]
-        del values
-        with progress.task("writing BVH", len(columns), " frames") as update:
-            for start in range(0, len(columns), rows):
-                block = columns[start : start + rows].tolist()
+        with progress.task("writing BVH", len(values), " frames") as update:
+            for start in range(0, len(values), rows):
+                block = values[start : start + rows, varying].tolist()
                 yield "".join(line % tuple(row) for row in block)
                 update(len(block))
     else:

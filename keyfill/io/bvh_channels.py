@@ -46,7 +46,8 @@ def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384)
 def pose_to_channels(motion: Motion) -> np.ndarray:
     """``(F, C)`` BVH channel values (degrees, file units) of ``motion`` in its skeleton's layout.
 
-    Angles come from :meth:`Motion.euler_angles` (continuous curves). Raises
+    Angles come from :meth:`Motion.euler_blocks` (continuous curves, a block of
+    frames at a time: the only full-size array made is the result). Raises
     :class:`DataError` when the motion does something the channels cannot hold
     (a rotation about an axis without a channel, a translation of a joint
     without position channels).
@@ -54,25 +55,31 @@ def pose_to_channels(motion: Motion) -> np.ndarray:
     sk = motion.skeleton
     F = motion.num_frames
     orders = sk.euler_orders
-    degrees = np.rad2deg(motion.euler_angles())
     scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
-    columns = []
+    # per column: (joint, position axis) or (joint, index of the angle in the joint's Euler order)
+    columns: list[tuple[int, bool, int]] = []
     for j, chans in enumerate(sk.channels):
         pos_axes = [c[0] for c in chans if c in POSITION_CHANNELS]
         fixed = [i for i in range(3) if "XYZ"[i] not in pos_axes]
         if F and fixed:
-            dev = np.abs(motion.positions[:, j, fixed] - sk.offsets[j, fixed])
+            dev = np.abs(motion.positions[:, j, fixed] - sk.offsets[j, fixed]).max(axis=1)
             if dev.max() > 1e-6 * scale:
-                f = int(np.argmax(dev.max(axis=1)))
                 raise DataError(
-                    f"joint {sk.names[j]!r} moves away from its OFFSET at frame {f} but has no position "
-                    f"channel for that axis ({' '.join(chans) or 'no channels'})"
+                    f"joint {sk.names[j]!r} moves away from its OFFSET at frame {int(np.argmax(dev))} but has no "
+                    f"position channel for that axis ({' '.join(chans) or 'no channels'})"
                 )
         for c in chans:
             if c in POSITION_CHANNELS:
-                columns.append(motion.positions[:, j, "XYZ".index(c[0])])
+                columns.append((j, True, "XYZ".index(c[0])))
             else:
-                columns.append(degrees[:, j, orders[j].index(c[0])])
-    if not columns:
-        return np.zeros((F, 0))
-    return np.stack(columns, axis=1)
+                columns.append((j, False, orders[j].index(c[0])))
+    values = np.empty((F, len(columns)))
+    for i, (j, is_position, axis) in enumerate(columns):
+        if is_position:
+            values[:, i] = motion.positions[:, j, axis]
+    angle_columns = [(i, j, axis) for i, (j, is_position, axis) in enumerate(columns) if not is_position]
+    if angle_columns:
+        cols, js, axes = (np.array(x) for x in zip(*angle_columns))
+        for start, angles in motion.euler_blocks():
+            values[start : start + len(angles), cols] = np.rad2deg(angles[:, js, axes])
+    return values

@@ -304,13 +304,22 @@ def guess_fps(tracks: list[Track]) -> float:
     return float(fps)
 
 
-def resample(track: Track, x: np.ndarray, seconds: float) -> np.ndarray:
+def grid_tolerance(times: np.ndarray, fps: float) -> np.ndarray:
+    """``(S,)`` frames: how far a sample at ``times`` (seconds) may be from a frame and still be on it.
+
+    :data:`ON_GRID`, plus one step of 32-bit floats at that time (glTF's times are 32-bit: at 120 fps they
+    are that coarse beyond about two minutes, so a long take's frames would otherwise fall off the grid and be
+    resampled between their neighbours).
+    """
+    return ON_GRID + fps * np.spacing(np.abs(times).astype(np.float32)).astype(np.float64)
+
+
+def resample(track: Track, x: np.ndarray, seconds: float, near: np.ndarray) -> np.ndarray:
     """``(F, W)``: the track's value at frames ``x (F,)``; its ``times`` are in frames too, of ``seconds`` each.
 
-    Frames within :data:`ON_GRID` of a sample take its value exactly; those
-    between samples follow the sampler's interpolation (CUBICSPLINE tangents
-    are per second); before the first and after the last sample the value is
-    held.
+    Frames within ``near`` (``(S,)`` frames per sample: :func:`grid_tolerance`) of a sample take its value
+    exactly; those between samples follow the sampler's interpolation (CUBICSPLINE tangents are per second);
+    before the first and after the last sample the value is held.
     """
     keys = track.values[1::3] if track.interpolation == "CUBICSPLINE" else track.values
     t = track.times
@@ -320,9 +329,9 @@ def resample(track: Track, x: np.ndarray, seconds: float) -> np.ndarray:
         return out
     hi = np.minimum(k + 1, len(t) - 1)
     span = t[hi] - t[k]
-    at_hi = (hi != k) & (t[hi] - x <= ON_GRID)
+    at_hi = (hi != k) & (t[hi] - x <= near[hi])
     out[at_hi] = keys[hi[at_hi]]
-    mid = ~at_hi & (x - t[k] > ON_GRID) & (x < t[hi])
+    mid = ~at_hi & (x - t[k] > near[k]) & (x < t[hi])
     if track.interpolation == "STEP" or not mid.any():
         return out
     i = np.flatnonzero(mid)
@@ -395,10 +404,11 @@ def read(path: str | Path, label=None, skin: str | int | None = None, animation:
     on_grid = True
     for tr in tracks:
         x = (tr.times - start) * fps
-        near = np.abs(x - np.round(x)) <= ON_GRID
+        tol = grid_tolerance(tr.times, fps)
+        near = np.abs(x - np.round(x)) <= tol
         on_grid &= bool(near.all())
         sampled.update(np.round(x[near]).astype(np.int64).tolist())
-        values = resample(replace(tr, times=x), frames, 1.0 / fps)
+        values = resample(replace(tr, times=x), frames, 1.0 / fps, tol)
         if tr.path == "scale":
             dev = np.abs(values - 1).max(axis=1)
             if np.any(dev > 1e-3):

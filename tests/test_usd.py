@@ -10,7 +10,7 @@ from pxr import Usd, UsdGeom, UsdSkel, UsdValidation, Vt
 from keyfill import io
 from keyfill import rotations as R
 from keyfill.errors import FormatError
-from keyfill.io import bvh, usd
+from keyfill.io import bvh, usd, usd_samples
 from keyfill.motion import Keys
 
 FIXTURES = sorted(DATA.glob("*.bvh"))
@@ -219,8 +219,8 @@ def test_shortest_decimal_rounds_to_the_stored_float():
     rng = np.random.default_rng(0)
     x = np.concatenate([rng.normal(0, 100, 2000), rng.normal(0, 1e-5, 500), [0.0, -0.0, 1e30, -2.5e-30],
                         np.round(rng.normal(0, 100, 500), 4)]).astype(np.float32)
-    d = usd.shortest_decimal(x.astype(np.float64))
+    d = usd_samples.shortest_decimal(x.astype(np.float64))
     assert np.array_equal(d.astype(np.float32), x) and not np.signbit(d[x == 0]).any()
     for a, b in zip(x.tolist(), d.tolist()):  # never longer than Python's shortest repr of the float32
         assert len(repr(b).replace("e-0", "e-").lstrip("-")) <= len(np.format_float_positional(np.float32(a), unique=True, trim="-").lstrip("-")) + 6
-    assert usd.shortest_decimal(np.float32([-0.2399])).tolist() == [-0.2399]
+    assert usd_samples.shortest_decimal(np.float32([-0.2399])).tolist() == [-0.2399]

@@ -128,7 +128,8 @@ class GanConfig:
         short_gap_seconds: gaps up to this long take both keys from one clip (Appendix C).
         jump_speed: for a gap that jumps to another clip, the root moves at most this
             fast (m/s) between the two keys; distance grows with the gap.
-        max_frames: the longest key range ``complete`` fills.
+        max_frames: the longest window ``complete`` fills at once (a longer key range is filled by
+            overlapping windows, :mod:`keyfill.learn.gan.long_takes`).
         output_smoothing: inference only: the order of the binomial low-pass applied to the
             generator's range-mapped joint angles and root 6D values along time before forward
             kinematics (:func:`keyfill.learn.gan.rcfk.binomial_lowpass`; 0: none). The

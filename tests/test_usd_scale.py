@@ -1,5 +1,5 @@
-"""Long takes through USD (issue 44): a 100,000-frame file round-trips as a short one does, and the reader's
-block-at-a-time checks hold past the first block."""
+"""Long takes through USD (issue 44): a 100,000-frame file round-trips as a short one does, translations that
+never change are written once, and the reader's block-at-a-time checks hold past the first block."""
 
 import numpy as np
 import pytest
@@ -46,6 +46,47 @@ def _animation(path):
     stage = Usd.Stage.Open(str(path))
     anim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
     return stage, UsdSkel.Animation(anim)
+
+
+def test_translations_that_never_change_are_written_once_and_read_back_the_same(tmp_path):
+    m = long_take(50)
+    still = m.replace(positions=np.broadcast_to(m.positions[:1], m.positions.shape).copy())
+    io.save(still, tmp_path / "still.usda")
+    stage, anim = _animation(tmp_path / "still.usda")
+    t_attr = anim.GetTranslationsAttr()
+    assert t_attr.GetNumTimeSamples() == 0 and anim.GetRotationsAttr().GetNumTimeSamples() == 50
+    assert np.array_equal(np.asarray(t_attr.Get()), still.positions[0].astype(np.float32))
+    # UsdSkel resolves the default at every frame: what a viewer poses the skeleton with
+    query = UsdSkel.Cache().GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Root/Skeleton"))).GetAnimQuery()
+    for f in (0, 17, 49):
+        local = query.ComputeJointLocalTransforms(Usd.TimeCode(f))
+        assert np.allclose([list(x.ExtractTranslation()) for x in local], still.positions[f], atol=1e-5)
+    back = io.load(tmp_path / "still.usda")
+    assert back.num_frames == 50 and np.array_equal(back.positions, still.positions)
+    assert R.quat_angle(back.rotations, still.rotations).max() < 1e-6 and back.keys.to_list() == [0]
+    # one translation that moves once: every frame's translations are samples again, read back the same
+    moved = still.positions.copy()
+    moved[30, 2, 0] += 0.5
+    io.save(still.replace(positions=moved), tmp_path / "moved.usda")
+    _stage, anim = _animation(tmp_path / "moved.usda")
+    assert anim.GetTranslationsAttr().GetNumTimeSamples() == 50
+    assert np.array_equal(io.load(tmp_path / "moved.usda").positions, moved)
+
+
+def test_a_sparse_file_with_still_translations_keeps_its_keys_in_the_rotations(tmp_path):
+    m = long_take(40)
+    still = m.replace(positions=np.broadcast_to(m.positions[:1], m.positions.shape).copy(), keys=Keys([0, 9, 39]))
+    path = tmp_path / "keys.usdc"
+    usd.write(still, path, sparse=True)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    stage = Usd.Stage.Open(layer)
+    prim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
+    custom = dict(prim.GetCustomDataByKey("keyfill"))
+    del custom["keys"]  # the reader must find the keys in the samples
+    prim.SetCustomDataByKey("keyfill", custom)
+    layer.Save()
+    back = io.load(path)
+    assert back.keys.to_list() == [0, 9, 39] and np.array_equal(back.positions, still.positions)
 
 
 def _spoiled(tmp_path, frame: int, value) -> str:

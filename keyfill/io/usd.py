@@ -7,9 +7,11 @@ Layout keyfill writes::
                             (local), bindTransforms (world); SkelBindingAPI with
                             skel:animationSource -> <name>
     /<Root>/Skeleton/<name> SkelAnimation: rotations and translations as time
-                            samples, one per frame (time code = frame index),
-                            scales one default (1, 1, 1) per joint; named after
-                            the output file (its stem as an identifier)
+                            samples, one per frame (time code = frame index);
+                            translations that are the same at every frame are
+                            one default value instead, and scales are one default
+                            (1, 1, 1) per joint; named after the output file (its
+                            stem as an identifier)
 
 Stage metadata: ``timeCodesPerSecond`` = ``framesPerSecond`` = fps,
 ``startTimeCode`` 0, ``endTimeCode`` F-1, ``upAxis``, ``metersPerUnit``. The
@@ -185,6 +187,12 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
         if motion.keys is None:
             raise DataError("a sparse USD file needs keys")
         frames = motion.keys.frames
+    # Translations that are the same at every written frame (as 32-bit floats) are written once, as the
+    # attribute's default: USD resolves a default at every time, and the rotations' samples still give the
+    # frames (and, in a sparse file, the keys).
+    held = _held_translations(motion.positions, frames)
+    if held is not None:
+        t_attr.Set(Vt.Vec3fArray.FromNumpy(held))
     # Samples go straight into the layer, in one change block: the same file as
     # attr.Set per frame, four times faster (no change notice per sample). The
     # 32-bit copies are made a block of frames at a time (little memory beside the layer).
@@ -193,12 +201,25 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
         for a in range(0, len(frames), BLOCK):
             chunk = frames[a : a + BLOCK]
             rot = _quat_to_xyzw(motion.rotations[chunk])
-            pos = _float32(motion.positions[chunk])
+            pos = _float32(motion.positions[chunk]) if held is None else None
             for k, f in enumerate(chunk.tolist()):
-                layer.SetTimeSample(t_path, f, Vt.Vec3fArray.FromNumpy(pos[k]))
+                if pos is not None:
+                    layer.SetTimeSample(t_path, f, Vt.Vec3fArray.FromNumpy(pos[k]))
                 layer.SetTimeSample(r_path, f, Vt.QuatfArray.FromNumpy(rot[k]))
             update(len(chunk))
     stage.GetRootLayer().Export(str(path))
+
+
+def _held_translations(positions: np.ndarray, frames: np.ndarray) -> np.ndarray | None:
+    """The 32-bit translations ``(J, 3)`` when ``positions (F, J, 3)`` hold them at every one of ``frames``,
+    else None (also for no frames)."""
+    if not len(frames):
+        return None
+    first = _float32(positions[frames[0]])
+    for a in range(0, len(frames), BLOCK):
+        if not (_float32(positions[frames[a : a + BLOCK]]) == first).all():
+            return None
+    return first
 
 
 # --- reading -----------------------------------------------------------------

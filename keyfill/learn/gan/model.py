@@ -360,16 +360,15 @@ def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray
 
     s, u = segment_coordinates(motion.num_frames, k)
     kp = motion.positions[k]  # (K, J, 3): frames gather from the keys alone
-    p0, pos = kp[s], kp[s + 1]
-    pos -= p0  # p0 + u (p1 - p0) in place: two arrays of the motion's positions at a time
+    p0, pos = kp[s], kp[s + 1]  # p0 + u (p1 - p0) in place: two arrays of the motion's positions at a time
+    pos -= p0
     pos *= u[:, None, None]
     pos += p0
     del p0
     rot = motion.rotations.copy()
     if len(joints):
         kq = motion.rotations[k][:, joints]  # (K, U, 4)
-        q0 = kq[s]
-        rot[:, joints] = R.quat_slerp(q0, kq[s + 1], np.broadcast_to(u[:, None], q0.shape[:2]))
+        rot[:, joints] = R.quat_slerp(kq[s], kq[s + 1], np.broadcast_to(u[:, None], (len(u), len(joints))))
     rot[k], pos[k] = motion.rotations[k], motion.positions[k]
     return rot, pos
 

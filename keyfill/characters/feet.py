@@ -56,6 +56,8 @@ from keyfill.motion import POSITION_CHANNELS, Keys, Motion, Skeleton
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 _LEG_ROLES = ("thigh", "shin", "foot")
+#: frames whose leg kinematics and IK are computed at once (their temporaries: a few MB, for any length)
+BLOCK = 4096
 
 
 @dataclass(frozen=True)
@@ -201,16 +203,20 @@ def _motion_rig(motion: Motion, rig: Rig | Skeleton) -> Rig:
 
 
 def _leg_world(rotations: np.ndarray, positions: np.ndarray, skeleton: Skeleton, joints) -> tuple[np.ndarray, ...]:
-    """World ``(rotations (F, J, 4), positions (F, J, 3))`` of ``joints`` and their ancestors by forward
-    kinematics of those joints alone (the legs of a 55-joint rig are 10); the other columns are undefined."""
+    """World ``(rotations (F, S, 4), positions (F, S, 3), column (J,) int)`` of ``joints`` and their ``S``
+    ancestors by forward kinematics of those joints alone (the legs of a 55-joint rig are 10): joint ``j``'s
+    are column ``column[j]`` (-1 for the joints left out)."""
     parents = skeleton.parents
     sub = np.array(sorted({int(k) for j in joints for k in [j, *_ancestors(parents, j)]}))
-    where = {j: i for i, j in enumerate(sub)}
-    sub_parents = np.array([where[int(parents[j])] if parents[j] >= 0 else -1 for j in sub])
-    w, p = fk(rotations[:, sub], positions[:, sub], sub_parents)
-    W, P = np.empty(rotations.shape[:2] + (4,)), np.empty(rotations.shape[:2] + (3,))
-    W[:, sub], P[:, sub] = w, p
-    return W, P
+    column = np.full(skeleton.num_joints, -1)
+    column[sub] = np.arange(len(sub))
+    sub_parents = np.array([column[parents[j]] if parents[j] >= 0 else -1 for j in sub])
+    F = len(rotations)
+    W, P = np.empty((F, len(sub), 4)), np.empty((F, len(sub), 3))
+    for a in range(0, F, BLOCK):  # a block of frames at a time: the temporaries stay small
+        W[a : a + BLOCK], P[a : a + BLOCK] = fk(rotations[a : a + BLOCK, sub], positions[a : a + BLOCK, sub],
+                                               sub_parents)
+    return W, P, column
 
 
 def _frames(keys, num_frames: int, param: str = "keys") -> np.ndarray:
@@ -253,8 +259,8 @@ def ground_height(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int
         raise DataError("the motion has no frames to find the ground in")
     idx = frames if len(frames) else slice(None)
     feet = [j for _, j in contact_joints(rig)]
-    pos = _leg_world(motion.rotations[idx], motion.positions[idx], motion.skeleton, feet)[1]
-    return float(pos[:, feet, _AXES[motion.skeleton.up_axis]].min())
+    _, pos, column = _leg_world(motion.rotations[idx], motion.positions[idx], motion.skeleton, feet)
+    return float(pos[:, column[feet], _AXES[motion.skeleton.up_axis]].min())
 
 
 def _planted_heights(feet: np.ndarray, roles: list[str], ref: np.ndarray, ground: float | None, up: int,
@@ -335,7 +341,8 @@ def contacts(motion: Motion, rig: Rig | Skeleton, ground: float | None = None,
     if motion.num_frames == 0:
         return np.zeros((0, len(cols)), dtype=bool)
     joints = [j for _, j in cols]
-    feet = _leg_world(motion.rotations, motion.positions, sk, joints)[1][:, joints]
+    _, pos, column = _leg_world(motion.rotations, motion.positions, sk, joints)
+    feet = pos[:, column[joints]]
     floor, _ = _planted_heights(feet, [r for r, _ in cols], _frames(keys, motion.num_frames), _ground_value(ground),
                                 _AXES[sk.up_axis], rig.hip_height, settings)
     return label_contacts(feet, floor, fps=motion.fps, up_axis=sk.up_axis, hip_height=rig.hip_height,
@@ -496,8 +503,8 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     if F == 0:
         raise DataError("the motion has no frames to lock the feet of")
     foot_joints = [j for chain in chains.values() for j in chain if j is not None]
-    W, P = _leg_world(motion.rotations, motion.positions, sk, foot_joints)
-    feet = P[:, [j for _, j in cols]]
+    W, P, col = _leg_world(motion.rotations, motion.positions, sk, foot_joints)  # joint j: column col[j]
+    feet = P[:, col[[j for _, j in cols]]]
     floor, ground_used = _planted_heights(feet, [r for r, _ in cols], key_frames, _ground_value(ground), up, H, settings)
     if labels is None:
         labels = label_contacts(feet, floor, fps=fps, up_axis=sk.up_axis, hip_height=H, settings=settings)
@@ -511,17 +518,17 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
         _, _, foot, toe = chains[s]
         ankle_label = labels[:, column[f"foot_{s}"]]
         if toe is not None and settings.lock_toes:  # the toe first; the ankle where the toe is not held
-            off_toe, w_toe, n = _lock_offsets(P[:, toe], labels[:, column[f"toe_{s}"]], key_frames, ease)
-            off_ankle, _, m = _lock_offsets(P[:, foot] + off_toe, ankle_label, key_frames, ease, free=w_toe)
+            off_toe, w_toe, n = _lock_offsets(P[:, col[toe]], labels[:, column[f"toe_{s}"]], key_frames, ease)
+            off_ankle, _, m = _lock_offsets(P[:, col[foot]] + off_toe, ankle_label, key_frames, ease, free=w_toe)
             off, n = off_toe + (1 - w_toe)[:, None] * off_ankle, n + m
         else:
-            off, _, n = _lock_offsets(P[:, foot], ankle_label, key_frames, ease)
+            off, _, n = _lock_offsets(P[:, col[foot]], ankle_label, key_frames, ease)
             n += len(_runs(labels[:, column[f"toe_{s}"]])[0]) if toe is not None else 0
         intervals += n
         offsets.append(off)
     legs = np.array([chains[s][:3] for s in sides])  # (2, 3): thigh, shin, foot
     offsets = np.stack(offsets, axis=1)  # (F, 2, 3)
-    thighs, knees, ankles = (P[:, legs[:, i]] for i in range(3))
+    thighs, knees, ankles = (P[:, col[legs[:, i]]] for i in range(3))
     targets = ankles + offsets
     length = np.linalg.norm(knees - thighs, axis=-1) + np.linalg.norm(ankles - knees, axis=-1)
     reach = np.maximum(settings.max_reach * length, np.linalg.norm(ankles - thighs, axis=-1))
@@ -535,12 +542,14 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     if np.any(drop > 0):
         mover = _translated_joint(sk, rig.roles.hips)
         parent = sk.parents[mover]
-        local = shift if parent < 0 else R.quat_rotate(R.quat_conjugate(W[:, parent]), shift)
+        local = shift if parent < 0 else R.quat_rotate(R.quat_conjugate(W[:, col[parent]]), shift)
         positions[drop > 0, mover] += local[drop > 0]
     frames = np.flatnonzero(changed.any(axis=1))
     moved = ankles + shift[:, None]  # the ankles: with the hips, then where the IK put them; toes go along
     if len(frames):
-        solved = _solve_legs(rotations, W, P, frames, legs, chains, sides, sk.parents, shift, targets, changed)
+        solved = np.concatenate([  # a block of frames at a time: the temporaries stay small
+            _solve_legs(rotations, W, P, col, frames[i : i + BLOCK], legs, chains, sides, sk.parents, shift,
+                        targets, changed) for i in range(0, len(frames), BLOCK)])
         moved[frames] = np.where(changed[frames, :, None], solved, moved[frames])
     locked = motion.replace(rotations=rotations, positions=positions)
     feet_after = feet + (moved - ankles)[:, [sides.index(role[-1]) for role, _ in cols]]  # feet keep their turn
@@ -565,19 +574,21 @@ def _translated_joint(skeleton: Skeleton, hips: int) -> int:
                  if any(c in POSITION_CHANNELS for c in skeleton.channels[j])), hips)
 
 
-def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, targets, changed) -> np.ndarray:
+def _solve_legs(rotations, W, P, col, frames, legs, chains, sides, parents, shift, targets, changed) -> np.ndarray:
     """Two-bone IK of both legs on ``frames``, written into ``rotations`` (local, in place) where ``changed``;
-    returns the solved ankles' world positions ``(len(frames), 2, 3)``.
+    returns the solved ankles' world positions ``(len(frames), 2, 3)``. ``W``, ``P``: the legs' world
+    rotations and positions of :func:`_leg_world`, joint ``j`` in column ``col[j]``.
 
     The thigh gets ``qa W``, the shin ``qb qa W``, the foot its old world rotation; the knee bends towards
     its side in the motion (plus a hundredth of the leg towards the toes, for a straight knee)."""
     sh = shift[frames, None, :]
-    a, b, c = (P[frames][:, legs[:, i]] + sh for i in range(3))  # (n, 2, 3)
+    Pf = P[frames]
+    a, b, c = (Pf[:, col[legs[:, i]]] + sh for i in range(3))  # (n, 2, 3)
     ac = (c - a) / np.linalg.norm(c - a, axis=-1, keepdims=True)
     pole = (b - a) - ac * np.sum((b - a) * ac, axis=-1, keepdims=True)
     toes = [chains[s][3] for s in sides]
     if all(t is not None for t in toes):
-        fwd = P[frames][:, toes] - P[frames][:, legs[:, 2]]
+        fwd = Pf[:, col[toes]] - Pf[:, col[legs[:, 2]]]
         fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-300)
         pole = pole + 0.01 * np.linalg.norm(b - a, axis=-1, keepdims=True) * fwd
     qa, qb = two_bone_ik(a, b, c, targets[frames], pole)
@@ -588,11 +599,12 @@ def _solve_legs(rotations, W, P, frames, legs, chains, sides, parents, shift, ta
         sel = changed[frames, i]
         (thigh, shin, foot), rows = legs[i], frames[sel]
         qa_i, qba_i, Wi = qa[sel, i], qba[sel, i], Wf[sel]
-        parent_thigh = Wi[:, parents[thigh]] if parents[thigh] >= 0 else R.quat_identity((len(rows),))
+        parent_thigh = Wi[:, col[parents[thigh]]] if parents[thigh] >= 0 else R.quat_identity((len(rows),))
+        w = {j: Wi[:, col[j]] for j in (thigh, shin, foot, parents[shin], parents[foot])}
         new = {
-            thigh: R.quat_mul(R.quat_conjugate(parent_thigh), R.quat_mul(qa_i, Wi[:, thigh])),
-            shin: R.quat_mul(R.quat_conjugate(R.quat_mul(qa_i, Wi[:, parents[shin]])), R.quat_mul(qba_i, Wi[:, shin])),
-            foot: R.quat_mul(R.quat_conjugate(R.quat_mul(qba_i, Wi[:, parents[foot]])), Wi[:, foot]),
+            thigh: R.quat_mul(R.quat_conjugate(parent_thigh), R.quat_mul(qa_i, w[thigh])),
+            shin: R.quat_mul(R.quat_conjugate(R.quat_mul(qa_i, w[parents[shin]])), R.quat_mul(qba_i, w[shin])),
+            foot: R.quat_mul(R.quat_conjugate(R.quat_mul(qba_i, w[parents[foot]])), w[foot]),
         }
         for j, q in new.items():  # in the old rotation's hemisphere
             q = R.quat_normalize(q)

@@ -7,6 +7,9 @@ import numpy as np
 
 from keyfill.cli.common import FORMAT_CHOICE, emit_json, in_format_option, meters_per_unit_option, up_axis_option
 
+#: frames whose world positions :func:`describe` holds at once (its memory stays small for any length)
+BOX_BLOCK = 4096
+
 
 def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = False,
              axis_assumed: bool = False) -> dict:
@@ -17,10 +20,13 @@ def describe(motion, path: str, fmt: str | None = None, units_assumed: bool = Fa
     ``axis_assumed``: the same for ``up_axis`` (Y).
     """
     sk = motion.skeleton
-    world = motion.world_positions() if motion.num_frames else np.zeros((0, sk.num_joints, 3))
     box = None
     if motion.num_frames:
-        box = {"min": world.min(axis=(0, 1)).tolist(), "max": world.max(axis=(0, 1)).tolist()}
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for a in range(0, motion.num_frames, BOX_BLOCK):  # the world positions of a block of frames at a time
+            world = motion.frames(slice(a, a + BOX_BLOCK)).world_positions()
+            lo, hi = np.minimum(lo, world.min(axis=(0, 1))), np.maximum(hi, world.max(axis=(0, 1)))
+        box = {"min": lo.tolist(), "max": hi.tolist()}
     return {
         "input": path,
         "output": None,
@@ -130,12 +136,11 @@ def info(file, in_fmt, fmt, meters_per_unit, up_axis, representative, rig, rig_m
     if d["bounding_box"]:
         lo, hi = d["bounding_box"]["min"], d["bounding_box"]["max"]
         click.echo("bounding box: " + " ".join(f"{a}[{l:.4g}, {h:.4g}]" for a, l, h in zip("xyz", lo, hi)))
-    parents = {j["name"]: j["parent"] for j in d["hierarchy"]}
-
-    def depth(name):
-        return 0 if parents[name] is None else 1 + depth(parents[name])
-
-    rows = [("  " * depth(j["name"]) + j["name"], j["euler_order"], " ".join(j["channels"]) or "-") for j in d["hierarchy"]]
+    depth = [0] * motion.skeleton.num_joints  # parents come first: one pass, any depth
+    for j, p in enumerate(motion.skeleton.parents):
+        depth[j] = 0 if p < 0 else depth[p] + 1
+    rows = [("  " * depth[i] + j["name"], j["euler_order"], " ".join(j["channels"]) or "-")
+            for i, j in enumerate(d["hierarchy"])]
     width = max(len(r[0]) for r in rows)
     for name, order, chans in rows:
         click.echo(f"  {name:<{width}}  {order}  {chans}")

@@ -397,9 +397,9 @@ def _read_stage(stage, label) -> Motion:
     rot = np.empty((num_frames, len(joints), 4))
     pos = np.empty((num_frames, len(joints), 3))
     animated = slice(None) if np.array_equal(to_skel, np.arange(len(joints))) else to_skel
-    still = np.setdiff1d(np.arange(len(joints)), to_skel)
-    rot[:, still] = rest_rot[still]
-    pos[:, still] = rest_pos[still]
+    left_out = np.setdiff1d(np.arange(len(joints)), to_skel)
+    rot[:, left_out] = rest_rot[left_out]
+    pos[:, left_out] = rest_pos[left_out]
     n = len(anim_joints)
     held = stage.GetInterpolationType() == Usd.InterpolationTypeHeld
     frame_times = start + np.arange(num_frames, dtype=np.float64)

@@ -37,11 +37,11 @@ VELOCITY_FRAMES = 3.0
 
 
 #: frames per block of the baselines' per-frame arithmetic: its temporaries stay a few MB for a few dozen
-#: joints, whatever the motion's length (:func:`_by_blocks`)
+#: joints, whatever the motion's length (:func:`in_blocks`; :mod:`keyfill.learn.exact_keys` too)
 BLOCK = 4096
 
 
-def _by_blocks(num_frames: int, evaluate) -> tuple[np.ndarray, np.ndarray]:
+def in_blocks(num_frames: int, evaluate) -> tuple[np.ndarray, np.ndarray]:
     """``(rotations (F, ...), positions (F, ...))`` made :data:`BLOCK` frames at a time by
     ``evaluate(first, end) -> (rotations, positions)`` of the frames ``first .. end - 1``."""
     rot = pos = None
@@ -140,7 +140,7 @@ def linear(motion: Motion, keys: Keys) -> Motion:
         q0, q1 = motion.rotations[k[ss]], motion.rotations[k[ss + 1]]
         return R.quat_slerp(q0, q1, np.broadcast_to(uu[:, None], q0.shape[:2])), p0 + uu[:, None, None] * (p1 - p0)
 
-    rot, pos = _by_blocks(motion.num_frames, frames)
+    rot, pos = in_blocks(motion.num_frames, frames)
     return _keep_keys(rot, pos, motion, keys)
 
 
@@ -170,7 +170,7 @@ def cubic_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames) -> tu
         v = h01 * phi[ss] + h10 * hf * omega[ss] + h11 * hf * end_tangent[ss]
         return R.quat_normalize(R.quat_mul(Q[ss], R.quat_from_rotvec(v))), pos
 
-    return _by_blocks(len(rotations), frames)
+    return in_blocks(len(rotations), frames)
 
 
 def velocity_arrays(rotations: np.ndarray, positions: np.ndarray, key_frames, frames: float):

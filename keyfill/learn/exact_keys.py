@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from keyfill import rotations as R
-from keyfill.interpolate import segment_coordinates
+from keyfill.interpolate import in_blocks, segment_coordinates
 from keyfill.motion import Keys, Motion
 
 
@@ -29,30 +29,45 @@ def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict
 
     Args:
         pred: the predicted motion, ``F`` frames.
-        source: the motion whose key frames are the truth (same skeleton, ``F`` frames).
+        source: the motion whose key frames are the truth (same skeleton, ``F`` frames; only its key
+            frames are read).
         keys: key frames (at least 2); partial keys correct only the channels they give.
 
     Returns:
         ``(corrected motion, report)``, where the report gives the largest
         residual removed: ``key_residual_position`` (file units) and
-        ``key_residual_rotation_rad``.
+        ``key_residual_rotation_rad`` (partial keys: and ``exact_channels``). The correction is made a
+        block of frames at a time (:func:`keyfill.interpolate.in_blocks`): memory is the result's arrays.
     """
-    if keys.partial:
-        return _snap_partial(pred, source, keys)
     k = keys.frames
     res_pos = source.positions[k] - pred.positions[k]  # (K, J, 3)
     res_rot = R.quat_mul(source.rotations[k], R.quat_conjugate(pred.rotations[k]))  # (K, J, 4)
+    angle = R.quat_angle(source.rotations[k], pred.rotations[k])  # (K, J)
+    if keys.partial:  # residuals of unkeyed channels count as zero
+        rot_mask, pos_mask = keys.channel_masks(pred.skeleton)  # (K, J), (K, J, 3)
+        res_pos = np.where(pos_mask, res_pos, 0.0)
+        res_rot = np.where(rot_mask[..., None], res_rot, np.array([1.0, 0.0, 0.0, 0.0]))
+        angle = np.where(rot_mask, angle, 0.0)
     s, u = segment_coordinates(pred.num_frames, k)
-    w = (3 * u**2 - 2 * u**3)[:, None]
-    pos = pred.positions + (1 - w[..., None]) * res_pos[s] + w[..., None] * res_pos[s + 1]
-    corr = R.quat_slerp(res_rot[s], res_rot[s + 1], np.broadcast_to(w, res_rot[s].shape[:2]))
-    rot = R.quat_normalize(R.quat_mul(corr, pred.rotations))
-    rot[k] = source.rotations[k]
-    pos[k] = source.positions[k]
-    report = {
-        "key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
-        "key_residual_rotation_rad": float(R.quat_angle(source.rotations[k], pred.rotations[k]).max(initial=0.0)),
-    }
+    w_all = 3 * u**2 - 2 * u**3
+
+    def frames(a, b):
+        ss, w = s[a:b], w_all[a:b, None]
+        pos = pred.positions[a:b] + (1 - w[..., None]) * res_pos[ss] + w[..., None] * res_pos[ss + 1]
+        corr = R.quat_slerp(res_rot[ss], res_rot[ss + 1], np.broadcast_to(w, res_rot[ss].shape[:2]))
+        return R.quat_normalize(R.quat_mul(corr, pred.rotations[a:b])), pos
+
+    rot, pos = in_blocks(pred.num_frames, frames)
+    report = {"key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
+              "key_residual_rotation_rad": float(angle.max(initial=0.0))}
+    if keys.partial:
+        rot[k] = np.where(rot_mask[..., None], source.rotations[k], rot[k])
+        pos[k] = np.where(pos_mask, source.positions[k], pos[k])
+        report["exact_channels"] = ("keyed joints' rotations and translations" if keys.given == "pose"
+                                    else "the given translation coordinates of keyed joints with position channels")
+    else:
+        rot[k] = source.rotations[k]
+        pos[k] = source.positions[k]
     return pred.replace(rotations=rot, positions=pos, keys=keys), report
 
 
@@ -67,27 +82,3 @@ def key_residual(pred: Motion, source: Motion, keys: Keys) -> dict:
         res_pos, angle = np.where(pos_mask, res_pos, 0.0), np.where(rot_mask, angle, 0.0)
     return {"key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
             "key_residual_rotation_rad": float(angle.max(initial=0.0))}
-
-
-def _snap_partial(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict]:
-    """:func:`snap_to_keys` for partial keys: residuals of unkeyed channels count as zero."""
-    k = keys.frames
-    rot_mask, pos_mask = keys.channel_masks(pred.skeleton)  # (K, J), (K, J, 3)
-    res_pos = np.where(pos_mask, source.positions[k] - pred.positions[k], 0.0)
-    res_rot = R.quat_mul(source.rotations[k], R.quat_conjugate(pred.rotations[k]))
-    res_rot = np.where(rot_mask[..., None], res_rot, np.array([1.0, 0.0, 0.0, 0.0]))
-    s, u = segment_coordinates(pred.num_frames, k)
-    w = (3 * u**2 - 2 * u**3)[:, None]
-    pos = pred.positions + (1 - w[..., None]) * res_pos[s] + w[..., None] * res_pos[s + 1]
-    corr = R.quat_slerp(res_rot[s], res_rot[s + 1], np.broadcast_to(w, res_rot[s].shape[:2]))
-    rot = R.quat_normalize(R.quat_mul(corr, pred.rotations))
-    rot[k] = np.where(rot_mask[..., None], source.rotations[k], rot[k])
-    pos[k] = np.where(pos_mask, source.positions[k], pos[k])
-    angle = R.quat_angle(source.rotations[k], pred.rotations[k])
-    report = {
-        "key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
-        "key_residual_rotation_rad": float(np.where(rot_mask, angle, 0.0).max(initial=0.0)),
-        "exact_channels": "keyed joints' rotations and translations" if keys.given == "pose"
-        else "the given translation coordinates of keyed joints with position channels",
-    }
-    return pred.replace(rotations=rot, positions=pos, keys=keys), report

@@ -265,3 +265,22 @@ def test_a_root_path_is_walked_with_its_spots_exact(library):
     hands = Keys([0, 30, 60]).restrict(m.skeleton, ["mixamorig:LeftHand"], "position")
     with pytest.raises(UsageError, match="root path"):
         registry.complete(m, hands, "match", options)
+
+
+def test_the_tree_finds_the_same_neighbours_by_brute_force_and_by_scipy(monkeypatch):
+    """A few queries are answered without scipy (every point compared), many through the cKDTree: the
+    same neighbours, nearest first."""
+    from keyfill.learn.library import index as I
+
+    rng = np.random.default_rng(3)
+    feats = rng.normal(size=(5000, 30)).astype(np.float32)
+    mean, basis = I.principal_axes(feats, 8)
+    queries = feats[rng.integers(0, 5000, 40)] + rng.normal(scale=0.05, size=(40, 30)).astype(np.float32)
+    brute = I.Tree(feats, mean, basis)
+    by_brute = brute.query(queries, 32)
+    assert brute.tree is None  # 40 x 5000 pairs: no tree built
+    monkeypatch.setattr(I, "BRUTE_FORCE_PAIRS", 0)
+    tree = I.Tree(feats, mean, basis)
+    by_tree = tree.query(queries, 32)
+    assert tree.tree is not None
+    assert np.array_equal(by_brute, by_tree)

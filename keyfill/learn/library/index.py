@@ -36,12 +36,18 @@ TREE_DIMS = 16
 CANDIDATES = 16
 #: at most this many poses in a pose index (evenly spaced frames of its corpus or library)
 MAX_INDEX_POSES = 30_000
+#: rows a pose index's principal axes are computed on (a library's: 50,000): a tenth of the SVD's time at
+#: start-up, for candidates that differ only where the nearest pose was a near tie anyway
+INDEX_AXES_ROWS = 5_000
+#: :meth:`Tree.query` compares every query with every point (numpy, no scipy import, no tree to build) until
+#: it has compared this many query-point pairs in all; then it builds scipy's tree once (the same neighbours)
+BRUTE_FORCE_PAIRS = 2_000_000
 
 
-def principal_axes(features: np.ndarray, dims: int) -> tuple[np.ndarray, np.ndarray]:
+def principal_axes(features: np.ndarray, dims: int, rows: int = 50_000) -> tuple[np.ndarray, np.ndarray]:
     """``(mean (D,), basis (D, d))`` of ``features (N, D)``: the first ``d = min(dims, D)`` principal axes
-    (computed on at most 50,000 evenly spaced rows)."""
-    x = np.asarray(features[:: max(1, len(features) // 50_000)], dtype=np.float64)
+    (computed on at most about ``rows`` evenly spaced rows)."""
+    x = np.asarray(features[:: max(1, len(features) // rows)], dtype=np.float64)
     mean = x.mean(axis=0)
     _, _, vt = np.linalg.svd(x - mean, full_matrices=False)
     return mean.astype(np.float32), np.ascontiguousarray(vt[: min(dims, x.shape[1])].T, dtype=np.float32)
@@ -70,15 +76,22 @@ def spread(features: np.ndarray, clip_of: np.ndarray, sample: int = SPREAD_SAMPL
 
 
 class Tree:
-    """A ``cKDTree`` over features projected on principal axes (``mean``, ``basis``); :meth:`query` gives
-    the ``k`` nearest rows of the projected features for each of ``queries (Q, D)``."""
+    """Features projected on principal axes (``mean``, ``basis``); :meth:`query` gives the ``k`` nearest rows
+    of the projected features for each of ``queries (Q, D)``: by comparing with every row for a few queries
+    (a short clip's, at start-up), else through a ``cKDTree`` built on first need."""
 
     def __init__(self, features: np.ndarray, mean: np.ndarray, basis: np.ndarray):
-        from scipy.spatial import cKDTree
-
         self.mean, self.basis = np.asarray(mean, np.float32), np.asarray(basis, np.float32)
         self.points = self.project(features)
-        self.tree = cKDTree(self.points, balanced_tree=False)  # median splits: 10x slower to build, no faster
+        self.tree = None
+        self.compared = 0  # query-point pairs compared by brute force so far
+
+    def _kd_tree(self):
+        if self.tree is None:
+            from scipy.spatial import cKDTree
+
+            self.tree = cKDTree(self.points, balanced_tree=False)  # median splits: 10x slower to build, no faster
+        return self.tree
 
     def project(self, features: np.ndarray) -> np.ndarray:
         """``(Q, d)`` float32 coordinates of ``features (Q, D)`` on the principal axes (in chunks)."""
@@ -91,8 +104,17 @@ class Tree:
     def query(self, queries: np.ndarray, k: int) -> np.ndarray:
         """``(Q, k')`` int64 rows nearest to each query, nearest first (``k' = min(k, N)``)."""
         k = min(k, len(self.points))
-        _, idx = self.tree.query(self.project(queries), k=k)
-        return np.asarray(idx, dtype=np.int64).reshape(len(queries), k)
+        q = self.project(queries)
+        self.compared += len(q) * len(self.points)
+        if self.tree is not None or self.compared > BRUTE_FORCE_PAIRS:
+            _, idx = self._kd_tree().query(q, k=k)
+            return np.asarray(idx, dtype=np.int64).reshape(len(queries), k)
+        points = self.points.astype(np.float64)
+        d2 = (np.square(q.astype(np.float64)).sum(1)[:, None] - 2 * q.astype(np.float64) @ points.T
+              + np.square(points).sum(1)[None, :])  # (Q, N) squared distances
+        near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < len(self.points) else np.tile(np.arange(k), (len(q), 1))
+        order = np.argsort(np.take_along_axis(d2, near, axis=1), axis=1, kind="stable")
+        return np.take_along_axis(near, order, axis=1).astype(np.int64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,7 +130,7 @@ class PoseIndex:
     def _tree(self) -> Tree:
         tree = self.__dict__.get("_cached_tree")
         if tree is None:
-            mean, basis = principal_axes(self.features, TREE_DIMS)
+            mean, basis = principal_axes(self.features, TREE_DIMS, rows=INDEX_AXES_ROWS)
             tree = Tree(self.features, mean, basis)
             object.__setattr__(self, "_cached_tree", tree)
         return tree

@@ -139,6 +139,13 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
             digits and ``_``, not starting with a digit; :func:`keyfill.io.save`
             gives the output's stem); None: ``Animation``.
     """
+    stage = stage_of(motion, sparse, root_name, name)  # held: the layer goes with the stage
+    stage.GetRootLayer().Export(str(path))
+
+
+def stage_of(motion: Motion, sparse: bool = False, root_name: str = "Root", name: str | None = None):
+    """The in-memory ``Usd.Stage`` that :func:`write` (same arguments) exports; a curves file
+    (:func:`keyfill.io.usd_curves.write`) adds its curves to it before it is written."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     sk = motion.skeleton
     limits.check_values(motion)
@@ -207,7 +214,7 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
                     layer.SetTimeSample(t_path, f, Vt.Vec3fArray.FromNumpy(pos[k]))
                 layer.SetTimeSample(r_path, f, Vt.QuatfArray.FromNumpy(rot[k]))
             update(len(chunk))
-    stage.GetRootLayer().Export(str(path))
+    return stage
 
 
 def _held_translations(positions: np.ndarray, frames: np.ndarray) -> np.ndarray | None:

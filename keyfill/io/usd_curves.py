@@ -32,6 +32,14 @@ rounding: both solve the same cubic.
 
 :func:`keyfill.io.load` reads every USD file through :func:`read_motion`, so a
 curves file opened as a motion gives its curves baked at every frame.
+
+Long takes: the writer adds the curves to the in-memory stage of the baked
+SkelAnimation (:func:`keyfill.io.usd.stage_of`) and USD writes the file once;
+each knot is one ``Ts.Knot`` call with all its fields, from Python lists made
+a control at a time. The reader reads the SkelAnimation as
+:mod:`keyfill.io.usd` does and each knot's fields as Python floats into the
+(K, C) arrays of :class:`~keyfill.curves.Curves`. Both hold the stage, the
+motion's arrays and the knots: linear in frames and keys.
 """
 
 from __future__ import annotations
@@ -70,39 +78,40 @@ def write(curves: Curves, path: str | Path, name: str | None = None) -> None:
 
     Not atomic by itself: callers write through :func:`keyfill.files.atomic_output`.
     """
-    from pxr import Sdf, Ts, Usd, UsdGeom
+    from pxr import Sdf, Ts, UsdGeom
 
-    usd.write(curves.bake(), path, name=name)
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    layer.Reload(force=True)
-    stage = Usd.Stage.Open(layer)
+    stage = usd.stage_of(curves.bake(), name=name)
     root = stage.GetDefaultPrim()
     scope = UsdGeom.Scope.Define(stage, root.GetPath().AppendChild(CURVES_PRIM)).GetPrim()
     scope.SetCustomDataByKey(_CUSTOM, {"layout": LAYOUT, "version": VERSION})
     sk = curves.skeleton
     used: set[str] = set()
-    for i, c in enumerate(curves.controls):
-        attr = scope.CreateAttribute(_attr_name(sk, c, used), Sdf.ValueTypeNames.Double, custom=True)
-        unit = "radians" if c.is_rotation else "file units"
-        attr.SetCustomDataByKey(_CUSTOM, {"joint": sk.names[c.joint], "channel": c.channel, "unit": unit})
-        spline = Ts.Spline()
-        spline.SetCurveType(Ts.CurveTypeBezier)
-        for k, t in enumerate(curves.times):
-            knot = Ts.Knot()
-            knot.SetTime(float(t))
-            knot.SetValue(float(curves.values[k, i]))
-            knot.SetNextInterpolation(Ts.InterpCurve)
-            for side, tan in (("Pre", curves.in_tan[k, i]), ("Post", curves.out_tan[k, i])):
-                width, height = float(tan[0]), float(tan[1])
-                getattr(knot, f"Set{side}TanWidth")(width)
-                getattr(knot, f"Set{side}TanSlope")(height / width if width > 0 else 0.0)
-            knot.SetCustomDataByKey("broken", bool(curves.broken[k, i]))
-            spline.SetKnot(knot)
-        attr.SetSpline(spline)
+    # Python numbers a control at a time ((C, K) lists), and one Ts.Knot call per knot with all its fields
+    times = [float(t) for t in curves.times]
+    values = curves.values.T.tolist()
+    widths, slopes = [], []
+    for tan in (curves.in_tan, curves.out_tan):
+        width, height = tan[..., 0], tan[..., 1]
+        widths.append(width.T.tolist())
+        slopes.append(np.divide(height, width, out=np.zeros_like(height), where=width > 0).T.tolist())
+    broken = curves.broken.T.tolist()
+    with Sdf.ChangeBlock():
+        for i, c in enumerate(curves.controls):
+            attr = scope.CreateAttribute(_attr_name(sk, c, used), Sdf.ValueTypeNames.Double, custom=True)
+            unit = "radians" if c.is_rotation else "file units"
+            attr.SetCustomDataByKey(_CUSTOM, {"joint": sk.names[c.joint], "channel": c.channel, "unit": unit})
+            spline = Ts.Spline()
+            spline.SetCurveType(Ts.CurveTypeBezier)
+            for k, t in enumerate(times):
+                spline.SetKnot(Ts.Knot(time=t, value=values[i][k], nextInterp=Ts.InterpCurve,
+                                       preTanWidth=widths[0][i][k], preTanSlope=slopes[0][i][k],
+                                       postTanWidth=widths[1][i][k], postTanSlope=slopes[1][i][k],
+                                       customData={"broken": broken[i][k]}))
+            attr.SetSpline(spline)
     # usd-core 26.11 warns "TsSpline inner looping is deprecated" for every spline written to text,
     # and about the crate upgrade for splines in .usdc: expected here, and noise on the CLI's stderr.
     with quiet_stderr():
-        layer.Save()
+        stage.GetRootLayer().Export(str(path))
 
 
 def save(curves: Curves, path: str | Path) -> None:
@@ -208,16 +217,16 @@ def from_stage(stage, motion: Motion, label) -> Curves:
                         f"curve {names[i]} has a dual-valued knot at {times[k]:g} (a jump); not supported", label
                     )
                 values[k, i] = float(knot.GetValue())
-                pre = np.array([knot.GetPreTanWidth(), knot.GetPreTanSlope()], dtype=np.float64)
-                post = np.array([knot.GetPostTanWidth(), knot.GetPostTanSlope()], dtype=np.float64)
+                pre_width, pre_slope = knot.GetPreTanWidth(), knot.GetPreTanSlope()  # Python floats: no
+                post_width, post_slope = knot.GetPostTanWidth(), knot.GetPostTanSlope()  # array per knot
                 if curve_type == Ts.CurveTypeHermite:
-                    pre[0] = seg[k - 1] / 3 if k > 0 else seg[0] / 3
-                    post[0] = seg[k] / 3 if k < K - 1 else seg[-1] / 3
-                in_tan[k, i] = pre[0], pre[0] * pre[1]
-                out_tan[k, i] = post[0], post[0] * post[1]
+                    pre_width = seg[k - 1] / 3 if k > 0 else seg[0] / 3
+                    post_width = seg[k] / 3 if k < K - 1 else seg[-1] / 3
+                in_tan[k, i] = pre_width, pre_width * pre_slope
+                out_tan[k, i] = post_width, post_width * post_slope
                 # GetCustomDataByKey segfaults on a missing key (usd-core 26.11)
                 flag = checked(knot.GetCustomData(), KNOT, label, names[i]).get("broken")
-                broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre[1], post[1], rtol=1e-9,
+                broken[k, i] = bool(flag) if flag is not None else not np.isclose(pre_slope, post_slope, rtol=1e-9,
                                                                                   atol=1e-12)
             for k, knot in enumerate(knots[:-1]):
                 interp = knot.GetNextInterpolation()

@@ -82,17 +82,17 @@ def checked(data, dictionary: Dictionary, label, *names: str) -> dict:
     ``names`` fill the ``{}`` of the dictionary's description (a curve's attribute name). Raises a
     :class:`FormatError` (on ``label``, the file) naming the dictionary and the field.
     """
-    what = dictionary.what.format(*names)
     if data is None:
         data = {}
+    what = dictionary.what.format  # the description, made only for a message (a file's knots are many)
     if not isinstance(data, dict):
-        raise FormatError(f"{what} must be a dictionary, got {_short(data)}", label)
+        raise FormatError(f"{what(*names)} must be a dictionary, got {_short(data)}", label)
     for name in dictionary.required:
         if name not in data:
-            raise FormatError(f"{what} has no {name!r}", label)
+            raise FormatError(f"{what(*names)} has no {name!r}", label)
     for name, kind in dictionary.fields.items():
         if name in data:
             test, must = KINDS[kind]
             if not test(data[name]):
-                raise FormatError(f"{what}: {name} must be {must}, got {_short(data[name])}", label)
+                raise FormatError(f"{what(*names)}: {name} must be {must}, got {_short(data[name])}", label)
     return data

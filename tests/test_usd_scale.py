@@ -89,6 +89,24 @@ def test_a_sparse_file_with_still_translations_keeps_its_keys_in_the_rotations(t
     assert back.keys.to_list() == [0, 9, 39] and np.array_equal(back.positions, still.positions)
 
 
+def test_a_file_of_defaults_only_holds_its_pose_at_every_frame(tmp_path):
+    """Another tool may write a still pose as default values alone: every frame of the stage's range is that pose,
+    and no sample times become keys."""
+    m = bvh.read(EDGES)
+    path = tmp_path / "pose.usda"
+    usd.write(m, path)
+    stage, anim = _animation(path)
+    for attr in (anim.GetRotationsAttr(), anim.GetTranslationsAttr()):
+        first = attr.Get(1)
+        attr.Clear()
+        attr.Set(first)
+    stage.GetRootLayer().Save()
+    back = io.load(path)
+    assert back.num_frames == 3 and back.keys is None
+    assert np.array_equal(back.positions, m.positions[[1, 1, 1]])
+    assert R.quat_angle(back.rotations, m.rotations[[1, 1, 1]]).max() < 1e-6
+
+
 def _spoiled(tmp_path, frame: int, value) -> str:
     """A 5,000-frame .usdc whose rotation sample at ``frame`` (past the reader's first block) is ``value``."""
     path = tmp_path / "spoiled.usdc"

@@ -380,7 +380,10 @@ def _read_stage(stage, label) -> Motion:
     rest_rot, rest_pos = _rest_local(skel, joints, label)
     t_attr, r_attr, s_attr = anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr()
     t_times, r_times, s_times = (np.array(a.GetTimeSamples(), dtype=np.float64) for a in (t_attr, r_attr, s_attr))
-    times = np.union1d(t_times, r_times).tolist()
+    times = np.sort(np.concatenate((t_times, r_times)))  # their union (np.union1d would import numpy.ma)
+    first = np.ones(len(times), dtype=bool)
+    first[1:] = times[1:] != times[:-1]
+    times = times[first].tolist()
     start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
     if not stage.HasAuthoredMetadata("startTimeCode") and times:
         start, end = times[0], times[-1]
@@ -404,7 +407,8 @@ def _read_stage(stage, label) -> Motion:
     rot = np.empty((num_frames, len(joints), 4))
     pos = np.empty((num_frames, len(joints), 3))
     animated = slice(None) if np.array_equal(to_skel, np.arange(len(joints))) else to_skel
-    left_out = np.setdiff1d(np.arange(len(joints)), to_skel)
+    left_out = np.ones(len(joints), dtype=bool)
+    left_out[to_skel] = False
     rot[:, left_out] = rest_rot[left_out]
     pos[:, left_out] = rest_pos[left_out]
     n = len(anim_joints)

@@ -45,17 +45,18 @@ into the layer's time samples in one change block, so beside the motion it
 holds the layer, about half the motion's float64 arrays plus some 100 bytes a
 sample, and USD then writes the file in one go. The *reader* lets USD open the
 layer whole (a ``.usdc`` is memory-mapped; a ``.usda`` is parsed from its whole
-text, about 1.4x the file's bytes at the parser's peak, freed before keyfill
+text, about 1.5x the file's bytes at the parser's peak, freed before keyfill
 reads a value), allocates the motion's arrays once and fills them a block of
 frames at a time (:mod:`keyfill.io.usd_samples`: one ``Usd.AttributeQuery.Get``
 a sample into a block, checks and shortest decimals in numpy, worked out once
 for each coordinate that holds still over the block); beside the stage it holds
 the motion's arrays and a few MB. Measured on a 2-core VM at 100,000 frames of
 22 joints (the motion's arrays 117 MiB), CPU and peak memory above the
-interpreter's: reading 19 us/frame and 1.8x the arrays (``.usdc``), 50 us/frame
-and 2.5x (``.usda``, the text parser's peak); writing 19 us/frame and 1.2x
-(``.usdc``), 44 us/frame and 0.8x (``.usda``); BVH for comparison reads in
-52 us/frame and writes in 59 us/frame.
+interpreter's: reading about 17 us/frame and 1.8x the arrays (``.usdc``),
+50 us/frame and 2.5x (``.usda``, the text parser's peak); writing 16 us/frame
+and 1.2x (``.usdc``), 37 us/frame and 0.8x (``.usda``); BVH in the same run
+read in 48 us/frame and wrote in 53. 1,000,000 frames cost 14 and 52 us/frame
+to read (``.usdc``, ``.usda``), 19 and 50 to write.
 """
 
 from __future__ import annotations

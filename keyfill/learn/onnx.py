@@ -67,6 +67,7 @@ class Graph:
         opts.intra_op_num_threads = 1
         opts.inter_op_num_threads = 1
         opts.log_severity_level = 3
+        opts.enable_cpu_mem_arena = False
         try:
             self.session = ort.InferenceSession(self.path, opts, providers=["CPUExecutionProvider"])
         except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types, not a hierarchy

@@ -291,12 +291,16 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
                                    int(k[0]), hint=TRAIN_HINT)
             q = R.quat_continuous_np(q, axis=0)
             parts = spans(k, model.config.max_frames)
-            prepared[j] = (k, lin, q, p, q.copy(), p[:, 0].copy(), parts)
+            # the windows' interiors are written into q and p in place (windows share no frame but keys);
+            # of the interpolation only the top joint stays, for a folded hierarchy
+            top = (lin.rotations[:, 0].copy(), lin.positions[:, 0].copy()) if model.folded else None
+            del lin
+            prepared[j] = (k, top, q, p, parts)
         except KeyfillError as e:
             results[j] = e
     # windows: (job, a, b, key frames inside); spans of one motion never overlap but at their boundary keys
     windows = [(j, a, b, tuple(prep[0][(prep[0] >= a) & (prep[0] <= b)] - a))
-               for j, prep in prepared.items() for a, b in prep[6]]
+               for j, prep in prepared.items() for a, b in prep[4]]
     if batch:
         groups: dict = {}
         for w in windows:
@@ -306,23 +310,22 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
         runs = [[w] for w in windows]
     for run in runs:
         wq, wr = model.complete_windows(np.stack([prepared[j][2][a: b + 1] for j, a, b, _ in run]),
-                                        np.stack([prepared[j][5][a: b + 1] for j, a, b, _ in run]),
+                                        np.stack([prepared[j][3][a: b + 1, 0] for j, a, b, _ in run]),
                                         np.asarray(run[0][3]))
         for i, (j, a, b, _) in enumerate(run):
-            out_q, out_r = prepared[j][4], prepared[j][5]
-            out_q[a + 1: b], out_r[a + 1: b] = wq[i, 1:-1], wr[i, 1:-1]
-    for j, (k, lin, q, p, out_q, out_r, parts) in prepared.items():
+            out_q, pos = prepared[j][2], prepared[j][3]
+            out_q[a + 1: b], pos[a + 1: b, 0] = wq[i, 1:-1], wr[i, 1:-1]
+    for j, (k, top, out_q, pos, parts) in prepared.items():
         motion, skel = jobs[j][0], jobs[j][0].skeleton
-        pos = p.copy()
-        pos[:, 0] = out_r
         if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
             c = skel.children(0)[0]
-            top_q, top_p = lin.rotations[:, 0], lin.positions[:, 0]
+            top_q, top_p = top
             inv = R.quat_conjugate(top_q)
             out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
             pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
             out_q[:, 0], pos[:, 0] = top_q, top_p
-        result = motion.replace(rotations=R.quat_normalize(out_q), positions=pos, keys=Keys(k))
+        out_q /= np.sqrt(np.sum(out_q * out_q, axis=-1, keepdims=True))  # R.quat_normalize, in place
+        result = motion.replace(rotations=out_q, positions=pos, keys=Keys(k))
         results[j] = (result, {"spans": len(parts), "max_frames": model.config.max_frames})
     return results
 

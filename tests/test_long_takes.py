@@ -109,3 +109,13 @@ def test_a_100k_frame_take_round_trips(suffix, tmp_path):
     if suffix == ".bvh":
         io.save(back, second, source=first)
         assert Path(second).read_bytes() == Path(first).read_bytes()
+
+
+def test_a_gltf_may_describe_as_much_as_its_bin_file_holds(tmp_path, monkeypatch):
+    """The bound on frames x joints a file may describe counts the .bin a .gltf names, not its JSON alone
+    (100,000 frames in a .gltf were refused as 'more than a 23186-byte file can describe')."""
+    monkeypatch.setenv("KEYFILL_FREE_JOINT_FRAMES", "1")  # (almost) no allowance beyond the files' bytes
+    motion = long_motion(2000)
+    io.save(motion, tmp_path / "take.gltf")
+    assert (tmp_path / "take.gltf").stat().st_size < 2000 * (31 + 8)  # the JSON alone could not describe it
+    assert io.load(tmp_path / "take.gltf").num_frames == 2000

@@ -245,17 +245,28 @@ def extras_of(item: dict, what: str, label) -> dict:
 
 @dataclass
 class Track:
-    """One channel: joint ``joint``, ``path`` (translation, rotation, scale), samples and interpolation."""
+    """One channel: joint ``joint``, ``path`` (translation, rotation, scale), sample ``times`` (seconds, or
+    frames once placed on the grid) and interpolation; :meth:`values` reads its samples again when asked."""
 
     joint: int
     path: str
     times: np.ndarray
-    values: np.ndarray
     interpolation: str
+    doc: Document
+    output: int  #: the accessor of its values
+    what: str
+
+    def values(self) -> np.ndarray:
+        """``(S, W)`` float64 (``3S`` rows for CUBICSPLINE: in-tangent, value, out-tangent), rotations as w, x,
+        y, z: read from the file's buffer each time, so a long take holds one track's values at a time."""
+        values = read_accessor(self.doc, self.output, self.what + " output",
+                               ("VEC4",) if self.path == "rotation" else ("VEC3",), floats_only=self.path != "rotation")
+        return values[:, [3, 0, 1, 2]] if self.path == "rotation" else values
 
 
 def tracks_of(doc: Document, anim: dict, a: int, rig: Rig) -> list[Track]:
-    """The channels of animation ``a`` that move joints of ``rig``, checked and read."""
+    """The channels of animation ``a`` that move joints of ``rig``, checked (their values read once, to check
+    them, and let go: :meth:`Track.values` reads them again where they are used)."""
     label, samplers = doc.label, anim.get("samplers", [])
     index = {n: j for j, n in enumerate(rig.nodes)}
     tracks, seen = [], set()
@@ -285,9 +296,8 @@ def tracks_of(doc: Document, anim: dict, a: int, rig: Rig) -> list[Track]:
                               f"{per_key * len(times)} for {interp})", label)
         if np.any(np.diff(times) < 0):
             raise FormatError(f"{what}'s times are not in increasing order", label)
-        if path == "rotation":
-            values = values[:, [3, 0, 1, 2]]
-        tracks.append(Track(index[node], path, times, values, interp))
+        del values
+        tracks.append(Track(index[node], path, times, interp, doc, sampler.get("output"), what))
     return tracks
 
 
@@ -321,7 +331,8 @@ def resample(track: Track, x: np.ndarray, seconds: float, near: np.ndarray) -> n
     exactly; those between samples follow the sampler's interpolation (CUBICSPLINE tangents are per second);
     before the first and after the last sample the value is held.
     """
-    keys = track.values[1::3] if track.interpolation == "CUBICSPLINE" else track.values
+    values = track.values()
+    keys = values[1::3] if track.interpolation == "CUBICSPLINE" else values
     t = track.times
     k = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 1)
     out = keys[k].copy()
@@ -339,7 +350,7 @@ def resample(track: Track, x: np.ndarray, seconds: float, near: np.ndarray) -> n
     a, b = keys[k[i]], keys[hi[i]]
     if track.interpolation == "CUBICSPLINE":
         dt = span[i][:, None] * seconds
-        out_tan, in_tan = track.values[2::3][k[i]], track.values[0::3][hi[i]]
+        out_tan, in_tan = values[2::3][k[i]], values[0::3][hi[i]]
         out[i] = ((2 * m**3 - 3 * m**2 + 1) * a + (m**3 - 2 * m**2 + m) * dt * out_tan
                   + (-2 * m**3 + 3 * m**2) * b + (m**3 - m**2) * dt * in_tan)
     elif track.path == "rotation":

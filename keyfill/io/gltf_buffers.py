@@ -116,7 +116,7 @@ class Document:
     buffers: list[bytes | None]
     folder: Path
     label: object
-    size: int
+    size: int  #: bytes of the file and of the buffer files it names (the bound of what it may describe)
 
     def items(self, key: str) -> list[dict]:
         """The objects of a top-level collection (``"nodes"``), ``[]`` when absent."""
@@ -135,7 +135,7 @@ def _strict_json(text: str, label):
         raise FormatError("not glTF: the JSON is nested too deeply", label) from None
 
 
-def split_glb(data: bytes, label) -> tuple[bytes, bytes | None]:
+def split_glb(data: bytes, label) -> tuple[bytes, memoryview | None]:
     """``(JSON chunk, BIN chunk or None)`` of a ``.glb``; :class:`FormatError` for a broken container."""
     if len(data) < 12:
         raise FormatError(f"not a glTF binary: {len(data)} bytes, shorter than the 12-byte header", label)
@@ -155,12 +155,12 @@ def split_glb(data: bytes, label) -> tuple[bytes, bytes | None]:
         size, kind = struct.unpack_from("<II", data, at)
         if at + 8 + size > length:
             raise FormatError(f"a chunk at byte {at} gives a length of {size} bytes, past the end of the file", label)
-        chunks.append((kind, data[at + 8: at + 8 + size]))
+        chunks.append((kind, memoryview(data)[at + 8: at + 8 + size]))  # a view: the binary chunk is not copied
         at += 8 + size
     if not chunks or chunks[0][0] != CHUNK_JSON:
         raise FormatError("the first chunk of a glTF binary must be its JSON", label)
     binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None
-    return chunks[0][1], binary
+    return bytes(chunks[0][1]), binary
 
 
 def load_document(path: Path, label) -> Document:
@@ -183,8 +183,11 @@ def load_document(path: Path, label) -> Document:
     if not isinstance(version, str) or not version.startswith("2."):
         raise FormatError(f"not glTF 2.0: asset.version is {version!r}", label)
     check_schema(raw, label)
-    buffers = [_buffer(b, i, binary, path.parent, label) for i, b in enumerate(raw.get("buffers", []))]
-    return Document(raw, buffers, path.parent, label, len(data))
+    specs = raw.get("buffers", [])
+    buffers = [_buffer(b, i, binary, path.parent, label) for i, b in enumerate(specs)]
+    # what the file brings: its own bytes and those of the buffer files it names (a .gltf's .bin)
+    outside = sum(len(b) for b, spec in zip(buffers, specs) if b is not None and "uri" in spec)
+    return Document(raw, buffers, path.parent, label, len(data) + outside)
 
 
 def _whole(value, what: str, label, low: int = 0) -> int:

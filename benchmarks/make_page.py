@@ -109,6 +109,10 @@ SECTIONS = {
     "formats": Section(
         "Motion file formats: glTF, USD and BVH", "`keyfill.io.save` and `load` of a 10,000-frame 22-joint motion "
         "(the Bandai walk fixture tiled) in each format, in one process (docs/formats.md).", S.formats),
+    "scale": Section(
+        "Long takes: every command from 1k to 1M frames", "CPU time and peak memory of `complete` (each method), "
+        "`convert` between every pair of formats and `info` on Bandai-Namco dataset-1 clips joined into takes of "
+        "1,000 to 1,000,000 frames, each a new process (issue 44; docs/formats.md, \"Long takes\").", S.scale),
     "convert_memory": Section(
         "`keyfill convert` of a big file: memory", "Peak resident memory (`wait4`) of converting a generated 150 MB "
         "BVH to USD and to BVH, beside the fixed overhead of converting a 4-frame file.", S.convert_memory),

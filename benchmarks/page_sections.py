@@ -513,3 +513,32 @@ def formats(f: dict) -> list[str]:
             for suffix, r in f["formats"].items()]
     return [f"Medians of {f['repeat']} runs after a warm-up."] + [""] + table(
         ["format", "write s", "read s", "MB"], rows)
+
+
+def scale(f: dict) -> list[str]:
+    """Every command on long takes: CPU seconds and peak memory per frame count, the fitted exponents, the
+    memory over the motion's arrays, the start-up, and the log-log plot."""
+    counts = [str(n) for n in f["frames"]]
+    lines = [(f"{f['joints']} joints, keys every {f['key_every']} frames; CPU seconds (user + system) and peak "
+              f"resident MiB of one command as a child process (median of {f['repeat']} runs below 100k frames, "
+              "one run from 100k on). *Exponent*: the slope of log CPU time against log frames from 10k frames on "
+              "(below, the fixed start-up hides the per-frame cost); *memory*: the peak beyond the row's own peak "
+              "at the fewest frames (the fixed amount) over the motion's float64 arrays (56 bytes per joint and "
+              "frame), at the most frames."), ""]
+    if f.get("plot"):
+        lines += [f"![CPU seconds against frames, log-log]({f['plot'].removeprefix('docs/')})", ""]
+    rows = []
+    for name, r in f["rows"].items():
+        cpu = [num(r["cpu_seconds"].get(n), 2) for n in counts]
+        rows.append([name, *cpu, num(r.get("exponent"), 2), num(r["fixed_mib"], 0),
+                     num(r["peak_mib"][counts[-1]], 0), num(r["memory"], 2)])
+    top = f"{int(counts[-1]):,}"
+    header = ["command", *[f"CPU s, {int(n):,} frames" for n in counts], "exponent", "fixed MiB",
+              f"peak MiB, {top}", f"memory (x the motion's {num(next(iter(f['rows'].values()))['motion_mib'], 0)} MiB)"]
+    lines += table(header, rows)
+    start = f.get("startup")
+    if start:
+        lines += ["", f"Start-up: `keyfill complete` of a {start['frames']}-frame human BVH, keys every 15, a new "
+                      f"process, median wall seconds of {start['repeat']}: "
+                  + ", ".join(f"{m} {num(v, 3)} s" for m, v in start["seconds"].items()) + "."]
+    return lines

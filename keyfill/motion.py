@@ -14,6 +14,7 @@ End Sites, units and up axis).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -160,9 +161,10 @@ class Skeleton:
         except ValueError:
             raise UsageError(f"unknown joint {name!r}; joints are: {', '.join(self.names)}") from None
 
-    @property
+    @functools.cached_property
     def euler_orders(self) -> tuple[str, ...]:
-        """Per joint, the intrinsic Euler order of its rotation channels.
+        """Per joint, the intrinsic Euler order of its rotation channels (worked out once per skeleton:
+        callers index it per joint, which for 10,000 joints made ``info`` quadratic).
 
         Joints with fewer than three rotation channels get the missing axes
         appended (their angles are zero in the file).

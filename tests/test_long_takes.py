@@ -91,7 +91,7 @@ def test_the_baselines_are_the_same_in_any_block_size(method, monkeypatch):
 
 
 @pytest.mark.slow  # about 10 s of CPU per format
-@pytest.mark.parametrize("suffix", [".bvh", ".glb"])
+@pytest.mark.parametrize("suffix", [".bvh", ".glb", ".gltf"])  # .usda, .usdc: tests/test_usd_scale.py
 def test_a_100k_frame_take_round_trips(suffix, tmp_path):
     """100,000 frames of 31 joints (at 120 fps: 14 minutes, beyond the times 32-bit floats hold to a
     frame's thousandth): read back as written (BVH: to its 12 digits, glTF: to float32); a BVH written

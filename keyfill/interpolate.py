@@ -41,10 +41,11 @@ VELOCITY_FRAMES = 3.0
 BLOCK = 4096
 
 
-def in_blocks(num_frames: int, evaluate) -> tuple[np.ndarray, np.ndarray]:
+def in_blocks(num_frames: int, evaluate, out: tuple[np.ndarray, np.ndarray] | None = None):
     """``(rotations (F, ...), positions (F, ...))`` made :data:`BLOCK` frames at a time by
-    ``evaluate(first, end) -> (rotations, positions)`` of the frames ``first .. end - 1``."""
-    rot = pos = None
+    ``evaluate(first, end) -> (rotations, positions)`` of the frames ``first .. end - 1``, into ``out`` when
+    given (an ``evaluate`` that reads the same frames of ``out`` may so work in place), else new arrays."""
+    rot, pos = out if out is not None else (None, None)
     for a in range(0, max(num_frames, 1), BLOCK):
         b = min(num_frames, a + BLOCK)
         r, p = evaluate(a, b)

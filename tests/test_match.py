@@ -284,3 +284,24 @@ def test_the_tree_finds_the_same_neighbours_by_brute_force_and_by_scipy(monkeypa
     by_tree = tree.query(queries, 32)
     assert tree.tree is not None
     assert np.array_equal(by_brute, by_tree)
+
+
+def test_the_fallback_is_the_whole_spline_made_gap_by_gap():
+    """fall_back makes only the unfamiliar gaps' pieces of the cubic spline (from the keys around each): the
+    same bits as the spline through every key, whichever gaps (the first and last included)."""
+    from test_long_takes import long_motion
+
+    from keyfill.learn.library.guard import fall_back
+
+    motion = long_motion(600, seed=4)
+    keys = Keys(np.array([0, 17, 50, 61, 130, 200, 290, 333, 400, 470, 599]))
+    spline = interpolate.cubic(motion, keys)
+    rng = np.random.default_rng(1)
+    for _ in range(4):
+        unfamiliar = rng.random(len(keys.frames) - 1) < 0.5
+        unfamiliar[[0, -1]] = True
+        out = fall_back(motion, motion, keys, unfamiliar)
+        for g, (a, b) in enumerate(zip(keys.frames[:-1], keys.frames[1:])):
+            source = spline if unfamiliar[g] else motion
+            assert np.array_equal(out.rotations[a + 1: b], source.rotations[a + 1: b])
+            assert np.array_equal(out.positions[a + 1: b], source.positions[a + 1: b])

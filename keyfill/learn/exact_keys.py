@@ -24,11 +24,12 @@ from keyfill.interpolate import in_blocks, segment_coordinates
 from keyfill.motion import Keys, Motion
 
 
-def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict]:
+def snap_to_keys(pred: Motion, source: Motion, keys: Keys, in_place: bool = False) -> tuple[Motion, dict]:
     """Correct ``pred`` so that its frames at ``keys`` equal ``source``'s.
 
     Args:
-        pred: the predicted motion, ``F`` frames.
+        pred: the predicted motion, ``F`` frames; with ``in_place``, its arrays become the result's (for a
+            caller that made them and lets go of ``pred``: a long take needs no second copy).
         source: the motion whose key frames are the truth (same skeleton, ``F`` frames; only its key
             frames are read).
         keys: key frames (at least 2); partial keys correct only the channels they give.
@@ -57,7 +58,7 @@ def snap_to_keys(pred: Motion, source: Motion, keys: Keys) -> tuple[Motion, dict
         corr = R.quat_slerp(res_rot[ss], res_rot[ss + 1], np.broadcast_to(w, res_rot[ss].shape[:2]))
         return R.quat_normalize(R.quat_mul(corr, pred.rotations[a:b])), pos
 
-    rot, pos = in_blocks(pred.num_frames, frames)
+    rot, pos = in_blocks(pred.num_frames, frames, (pred.rotations, pred.positions) if in_place else None)
     report = {"key_residual_position": float(np.abs(res_pos).max(initial=0.0)),
               "key_residual_rotation_rad": float(angle.max(initial=0.0))}
     if keys.partial:

@@ -535,7 +535,7 @@ def complete_with(model: GanModel, motion, keys, options, path):
     if options.dna is not None:
         info["dna"] = options.dna
     if options.exact_keys:
-        filled, report = snap_to_keys(filled, motion, keys)
+        filled, report = snap_to_keys(filled, motion, keys, in_place=True)  # filled: ours
         info.update(report)
     return Completion(filled, info)
 

@@ -350,7 +350,7 @@ def _finish(completed, motion, keys, options):
     filled, info = completed
     info = {"model": str(options.model or model_path(options).name), **info, "exact_keys": bool(options.exact_keys)}
     if options.exact_keys:
-        filled, report = snap_to_keys(filled, motion, keys)
+        filled, report = snap_to_keys(filled, motion, keys, in_place=True)  # filled: ours
         info.update(report)
     return Completion(filled, info)
 

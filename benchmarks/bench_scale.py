@@ -25,6 +25,10 @@ recorded in ``benchmarks/results/scale.json`` (``results.py``; not with ``--no-r
 
     .venv/bin/python benchmarks/bench_scale.py                              # 1k..1M, every row (about an hour)
     .venv/bin/python benchmarks/bench_scale.py --frames 1000,10000,100000 --no-record   # a quick look
+    .venv/bin/python benchmarks/bench_scale.py --methods transformer,gan --formats bvh --no-convert --merge
+
+``--merge`` measures only the rows asked for and puts them into the existing record in place of its own
+(each row names the ``commit`` it was measured at; the record's ``command`` lists the runs merged).
 """
 
 from __future__ import annotations
@@ -138,8 +142,9 @@ def startup(repeat: int, tmp: Path) -> dict | None:
     return {"frames": 30, "seconds": seconds, "repeat": repeat}
 
 
-def measure(counts: list[int], repeat: int, methods: list[str], formats: list[str], tmp: Path) -> dict:
-    """The figures of the module docstring."""
+def measure(counts: list[int], repeat: int, methods: list[str], formats: list[str], tmp: Path,
+            convert: bool = True, info: bool = True) -> dict:
+    """The figures of the module docstring (``convert``, ``info``: with those rows)."""
     kf = keyfill_command()
     joints = 0
     for n in counts:
@@ -148,23 +153,24 @@ def measure(counts: list[int], repeat: int, methods: list[str], formats: list[st
             if fmt != "bvh":
                 subprocess.run(kf + ["convert", str(tmp / f"{n}.bvh"), str(tmp / f"{n}.{fmt}")], check=True)
     rows = {}
+    head = results.commit()[0]
 
     def add(name, cmd_for):
         print(name, file=sys.stderr, flush=True)
-        rows[name] = fitted(measure_row(cmd_for, counts, repeat), joints)
+        rows[name] = {**fitted(measure_row(cmd_for, counts, repeat), joints), "commit": head}
 
     for method in methods:
         words = method.split()
         add(f"complete {method}", lambda n, w=words: kf + ["complete", str(tmp / f"{n}.bvh"), "-o",
                                                            str(tmp / f"out_{n}.bvh"), "--method", *w,
                                                            "--key-every", str(KEY_EVERY), "--force"])
-    for a, b in itertools.permutations(formats, 2):
+    for a, b in itertools.permutations(formats, 2) if convert else ():
         add(f"convert {a} to {b}", lambda n, a=a, b=b: kf + ["convert", str(tmp / f"{n}.{a}"),
                                                              str(tmp / f"conv_{n}.{b}"), "--force"])
-    for fmt in formats:
+    for fmt in formats if info else ():
         add(f"info {fmt}", lambda n, f=fmt: kf + ["info", str(tmp / f"{n}.{f}")])
     return {"frames": counts, "joints": joints, "key_every": KEY_EVERY, "repeat": repeat, "rows": rows,
-            "startup": startup(max(repeat, 5), tmp)}
+            "startup": startup(max(repeat, 5), tmp) if methods else None}
 
 
 def plot(figures: dict, path: Path) -> None:
@@ -194,6 +200,19 @@ def plot(figures: dict, path: Path) -> None:
     fig.savefig(path)
 
 
+def merged(figures: dict) -> dict:
+    """The existing record's figures with the rows (and the start-up, when measured) of ``figures`` in place
+    of its own; the frame counts must be the same."""
+    old = results.read_records().get("scale")
+    if old is None or old["figures"]["frames"] != figures["frames"]:
+        raise SystemExit("bench_scale: --merge needs a record of the same frame counts in benchmarks/results/")
+    out = dict(old["figures"], rows={**old["figures"]["rows"], **figures["rows"]})
+    out["merged"] = [*old["figures"].get("merged", [old["command"]]), results.command_line(sys.argv)]
+    if figures.get("startup"):
+        out["startup"] = figures["startup"]
+    return out
+
+
 def goals(figures: dict) -> list[dict]:
     """Issue 44's goals: every row's exponent and memory ratio, and the two start-up times."""
     rows = figures["rows"]
@@ -220,6 +239,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="runs per row below 100k frames (the median)")
     ap.add_argument("--methods", default=",".join(METHODS), help="complete's methods (with their options)")
     ap.add_argument("--formats", default=",".join(FORMATS), help="formats for convert and info")
+    ap.add_argument("--no-convert", action="store_true", help="measure no convert rows")
+    ap.add_argument("--no-info", action="store_true", help="measure no info rows")
+    ap.add_argument("--merge", action="store_true", help="put the rows measured into the existing record")
     ap.add_argument("--json", action="store_true", help="print the record as JSON")
     results.add_option(ap)
     args = ap.parse_args(argv)
@@ -227,10 +249,13 @@ def main(argv: list[str]) -> int:
     counts = sorted(int(n) for n in args.frames.split(","))
     with tempfile.TemporaryDirectory(prefix="keyfill-scale-") as tmp:
         try:
-            figures = measure(counts, args.repeat, args.methods.split(","), args.formats.split(","), Path(tmp))
+            figures = measure(counts, args.repeat, [m for m in args.methods.split(",") if m],
+                              args.formats.split(","), Path(tmp), not args.no_convert, not args.no_info)
         except Skipped as e:
             print(f"bench_scale: skipped: {e}", file=sys.stderr)
             return 0
+    if args.merge:
+        figures = merged(figures)
     if not args.no_record:
         plot(figures, PLOT)
         figures["plot"] = results.repo_path(str(PLOT))

@@ -536,6 +536,9 @@ def scale(f: dict) -> list[str]:
     header = ["command", *[f"CPU s, {int(n):,} frames" for n in counts], "exponent", "fixed MiB",
               f"peak MiB, {top}", f"memory (x the motion's {num(next(iter(f['rows'].values()))['motion_mib'], 0)} MiB)"]
     lines += table(header, rows)
+    if f.get("merged"):
+        lines += ["", "Rows re-measured later replace the first run's (each row's `commit` in the record says when): "
+                  + "; ".join(f"`{c}`" for c in f["merged"]) + "."]
     start = f.get("startup")
     if start:
         lines += ["", f"Start-up: `keyfill complete` of a {start['frames']}-frame human BVH, keys every 15, a new "

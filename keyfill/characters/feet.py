@@ -473,7 +473,7 @@ def _skating(feet: np.ndarray, labels: np.ndarray, up: int, fps: float) -> float
 
 def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | None = None,
               ground: float | None = None, settings: FootSettings = FootSettings(),
-              labels: np.ndarray | None = None) -> tuple[Motion, dict]:
+              labels: np.ndarray | None = None, in_place: bool = False) -> tuple[Motion, dict]:
     """``motion`` with its feet held still in ground contact (the module docstring), and a report.
 
     Args:
@@ -485,6 +485,8 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
         settings: thresholds, easing and reach (:class:`FootSettings`).
         labels: ``(F, n)`` bool contacts to use (the columns of :func:`contact_joints`); default
             :func:`contacts` of the motion.
+        in_place: lock in ``motion``'s own arrays (which the result then holds) instead of copies: for a
+            caller that made them and lets ``motion`` go (a long take needs no second copy).
 
     Returns:
         ``(locked motion, report)``. The report: ``skating_before`` and ``skating_after``, the mean horizontal
@@ -538,7 +540,8 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     shift = -drop[:, None] * np.eye(3)[up]  # (F, 3) along the up axis
     changed = np.any(offsets != 0, axis=-1) | (drop > 0)[:, None]  # (F, 2)
     changed[key_frames] = False
-    rotations, positions = motion.rotations.copy(), motion.positions.copy()
+    rotations, positions = (motion.rotations, motion.positions) if in_place else (motion.rotations.copy(),
+                                                                                  motion.positions.copy())
     if np.any(drop > 0):
         mover = _translated_joint(sk, rig.roles.hips)
         parent = sk.parents[mover]

@@ -282,7 +282,7 @@ def complete(motion: Motion, keys: Keys, method: str = "cubic", options: Complet
     else:
         result = m.function()(motion, keys, options)
     result = guarded(m, motion, keys, options, result)
-    result = with_feet(m, result, keys, options)
+    result = with_feet(m, result, keys, options, motion)
     result.info = reported(m, motion, keys, options, result)
     return result
 
@@ -385,14 +385,17 @@ def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, re
     return {"method": m.name, "keys": keys.to_list(), "frames": motion.num_frames, **info}
 
 
-def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOptions) -> Completion:
+def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOptions, source: Motion) -> Completion:
     """``result`` with its feet locked (:func:`keyfill.characters.feet.lock_feet`) when ``options.feet`` is
     ``"lock"``, or is None and the method's default (:attr:`Method.feet`) is; ``info`` then gives the foot
     skating (cm/s) before and after. The default is ``"free"`` for the learned methods and splines: measured
     on held-out styles, locking lowers their foot skating by 5-15 % only and can raise the gap error by up to
-    19 % (docs/feet.md); ``"lock"`` for ``match``, whose real steps it keeps planted (docs/match.md)."""
+    19 % (docs/feet.md); ``"lock"`` for ``match``, whose real steps it keeps planted (docs/match.md). The
+    feet are locked in ``result``'s own arrays unless they may be ``source``'s (the input's) too."""
     if (options.feet or m.feet) != "lock":
         return result
+    import numpy as np
+
     from keyfill.characters.feet import lock_feet
     from keyfill.characters.humanoid import read_rig_map
     from keyfill.characters.retarget import make_rig
@@ -402,7 +405,10 @@ def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOption
         rig = make_rig(result.motion.skeleton, rig_map=rig_map)
     except DataError as e:
         raise DataError(f"feet lock needs a skeleton with legs: {e}", params=("feet",) + e.params) from None
-    locked, report = lock_feet(result.motion, rig, keys, ground=options.ground)
+    out = result.motion
+    own = not any(np.may_share_memory(a, b) for a in (out.rotations, out.positions)
+                  for b in (source.rotations, source.positions))
+    locked, report = lock_feet(out, rig, keys, ground=options.ground, in_place=own)
     cm = 100.0 * result.motion.skeleton.meters_per_unit
     before, after = report["skating_before"], report["skating_after"]
     result.info.update({"feet": "lock", "foot_skating_cm_s": {
@@ -516,7 +522,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
             try:
                 bridged = _on_model_rig(m, motion, keys, options)
                 if bridged is not None:
-                    bridged = with_feet(m, guarded(m, motion, keys, options, bridged), keys, options)
+                    bridged = with_feet(m, guarded(m, motion, keys, options, bridged), keys, options, motion)
                     bridged.info = reported(m, motion, keys, options, bridged)
             except KeyfillError as e:
                 bridged = e
@@ -537,7 +543,7 @@ def complete_many(jobs: list[tuple[Motion, Keys]], method: str = "cubic",
     for (i, motion, keys), out in zip(ready, outs):
         if isinstance(out, Completion):
             try:
-                out = with_feet(m, guarded(m, motion, keys, options, out), keys, options)
+                out = with_feet(m, guarded(m, motion, keys, options, out), keys, options, motion)
             except KeyfillError as e:
                 results[i] = e
                 continue

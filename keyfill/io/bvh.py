@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from keyfill import limits, progress
-from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError
 from keyfill.io.bvh_channels import channels_to_pose, pose_to_channels
-from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton, check_channels
+from keyfill.io.bvh_follow import follow
+from keyfill.motion import Motion, Skeleton, check_channels
 
 NUMBER_FORMAT = "%.12g"
 _MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
@@ -533,93 +533,15 @@ def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
     return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, values[0].tolist())), varying
 
 
-#: a frame's rotation is "unchanged" from the template's when they differ by less than this (radians)
-SAME_ROTATION_RAD = 1e-9
-
-
 def follow_template(values: np.ndarray, motion: Motion, template: str | Path) -> np.ndarray:
-    """``values`` (``(F, C)`` channels of ``motion``, :func:`pose_to_channels`; changed in place and returned)
-    with the Euler angles of the BVH file ``template`` (e.g. the input ``motion`` was completed from) where
-    they can be kept.
-
-    At each frame where a joint's rotation is unchanged from the template's (within :data:`SAME_ROTATION_RAD`;
-    only the keys are compared when ``motion`` records keys, as a completion does), its rotation channels take
-    the template's own values (``-177.333`` stays
-    ``-177.333``, not ``182.667``), and so do position channels equal to within 1e-12 of the file's scale.
-    The frames after such a frame, up to the next one, are shifted by the whole turns per channel that put
-    them next to it (the frames before the first, next to the first): still continuous, and unwrapped
-    towards their neighbours. A template of another channel layout, or one that cannot be read, changes
-    nothing. The template is streamed a chunk of rows at a time (:class:`_Follower`): never held whole;
-    one that stops being readable part way (changed while it is read) leaves the frames after as they
-    were: every frame still holds its own rotation.
-    """
-    sk = motion.skeleton
+    """``values`` (``(F, C)`` channels of ``motion``; changed in place and returned) with the numbers of the BVH
+    file ``template`` where they hold the same rotations (:func:`keyfill.io.bvh_follow.follow`, streaming the
+    file); a template that cannot be read changes nothing."""
     try:
-        tsk, chunks = _template_chunks(Path(template))
-        if tsk.names != sk.names or tsk.channels != sk.channels or not len(values):
-            return values
-        follower = _Follower(values, motion)
-        for row, tvalues in chunks:
-            if row >= len(values):
-                break
-            follower.chunk(row, tvalues[: len(values) - row])
+        skeleton, chunks = _template_chunks(Path(template))
+        return follow(values, motion, skeleton, chunks)
     except (OSError, FormatError):
-        pass
-    return values
-
-
-class _Follower:
-    """:func:`follow_template`'s work on one chunk of the template's rows at a time (in order), changing
-    ``values`` in place; per joint it carries the whole turns of its last frame that held the template's
-    rotation to the chunks after it."""
-
-    def __init__(self, values: np.ndarray, motion: Motion):
-        sk = motion.skeleton
-        self.values, self.motion, self.skeleton = values, motion, sk
-        self.scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
-        self.joints = []  # per joint: (j, rotation columns, position columns)
-        col = 0
-        for j, chans in enumerate(sk.channels):
-            cols = np.arange(col, col + len(chans))
-            col += len(chans)
-            self.joints.append((j, cols[[c not in POSITION_CHANNELS for c in chans]],
-                                cols[[c in POSITION_CHANNELS for c in chans]]))
-        self.turns: dict[int, np.ndarray] = {}  # joint -> (r,) degrees: the turns of its last anchor so far
-
-    def chunk(self, r0: int, t: np.ndarray) -> None:
-        """Follow the template's rows ``r0 .. r0 + len(t) - 1`` (``t``: their ``(n, C)`` channel values)."""
-        values, motion, r1 = self.values, self.motion, r0 + len(t)
-        keys = motion.keys
-        # the frames that may hold the template's rotations: a completion's keys, else every frame
-        maybe = np.arange(r0, r1) if keys is None else keys.frames[(keys.frames >= r0) & (keys.frames < r1)]
-        same = np.zeros((0, self.skeleton.num_joints), dtype=bool)
-        if len(maybe):
-            trot, _ = channels_to_pose(t[maybe - r0], self.skeleton)
-            same = R.quat_angle(motion.rotations[maybe], trot) < SAME_ROTATION_RAD  # (k, J)
-        frames = np.arange(r0, r1)
-        for j, rot, pos in self.joints:
-            if len(pos):
-                close = np.abs(values[r0:r1, pos] - t[:, pos]) <= 1e-12 * self.scale
-                values[r0:r1, pos] = np.where(close, t[:, pos], values[r0:r1, pos])
-            if not len(rot):
-                continue
-            anchors = maybe[same[:, j]]
-            v = values[r0:r1, rot]
-            if not len(anchors):
-                if j in self.turns:
-                    values[r0:r1, rot] = v + self.turns[j]
-                continue  # else: no anchor yet; these frames take the first anchor's turns when it comes
-            turns = 360.0 * np.round((t[anchors - r0][:, rot] - v[anchors - r0]) / 360.0)  # (A, r)
-            segment = np.searchsorted(anchors, frames, side="right") - 1
-            shift = turns[np.maximum(segment, 0)]
-            if j in self.turns:
-                shift[segment < 0] = self.turns[j]
-            elif r0:  # the frames before this joint's first anchor, in earlier chunks
-                values[:r0, rot] += turns[0]
-            v = v + shift
-            v[anchors - r0] = t[anchors - r0][:, rot]
-            values[r0:r1, rot] = v
-            self.turns[j] = turns[-1]
+        return values
 
 
 def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None):

@@ -59,13 +59,13 @@ def test_the_bandai_distribution_names_each_model_folder_with_its_licence_and_ca
 
 
 def test_installed_reads_entry_points_and_leaves_out_broken_ones(monkeypatch, tmp_path):
-    import importlib.metadata
-
     eps = [EntryPoint("good", "tempfile:tempdir", installed_models.GROUP),
            EntryPoint("broken", "no_such_module_here:X", installed_models.GROUP),
            EntryPoint("not-a-path", "os:getcwd", installed_models.GROUP)]  # a function, not a path
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
-    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: [e for e in eps if e.group == group])
+    # the entry points as keyfill reads them (entry_points.txt files, without importlib.metadata)
+    monkeypatch.setattr(installed_models, "entry_points",
+                        lambda group: [(e.name, e.value) for e in eps if e.group == group])
     found = installed_models.installed.__wrapped__()
     assert found == {"good": tmp_path}
 

@@ -269,7 +269,7 @@ def tracks_of(doc: Document, anim: dict, a: int, rig: Rig) -> list[Track]:
     them, and let go: :meth:`Track.values` reads them again where they are used)."""
     label, samplers = doc.label, anim.get("samplers", [])
     index = {n: j for j, n in enumerate(rig.nodes)}
-    tracks, seen = [], set()
+    tracks, seen, times_of = [], set(), {}
     for c, channel in enumerate(anim.get("channels", [])):
         target = channel.get("target", {})
         node, path = target.get("node"), target.get("path")
@@ -287,7 +287,10 @@ def tracks_of(doc: Document, anim: dict, a: int, rig: Rig) -> list[Track]:
             raise FormatError(f"animation {a}'s sampler {s} has interpolation {interp!r}; expected "
                               f"{', '.join(INTERPOLATIONS)}", label)
         what = f"animation {a} sampler {s}"
-        times = read_accessor(doc, sampler.get("input"), what + " input", ("SCALAR",), floats_only=True)[:, 0]
+        if sampler.get("input") not in times_of:  # samplers share their times (keyfill's: one accessor for all)
+            times_of[sampler.get("input")] = read_accessor(doc, sampler.get("input"), what + " input", ("SCALAR",),
+                                                           floats_only=True)[:, 0]
+        times = times_of[sampler.get("input")]
         values = read_accessor(doc, sampler.get("output"), what + " output",
                                ("VEC4",) if path == "rotation" else ("VEC3",), floats_only=path != "rotation")
         per_key = 3 if interp == "CUBICSPLINE" else 1
@@ -303,7 +306,7 @@ def tracks_of(doc: Document, anim: dict, a: int, rig: Rig) -> list[Track]:
 
 def guess_fps(tracks: list[Track]) -> float:
     """One over the smallest step between sample times, snapped to a whole rate (or a NTSC one) when close."""
-    steps = [np.diff(t)[np.diff(t) > 1e-6] for t in (tr.times for tr in tracks) if len(t) > 1]
+    steps = [np.diff(t)[np.diff(t) > 1e-6] for t in {id(tr.times): tr.times for tr in tracks}.values() if len(t) > 1]
     steps = [s.min() for s in steps if len(s)]
     if not steps:
         return 30.0
@@ -413,12 +416,16 @@ def read(path: str | Path, label=None, skin: str | int | None = None, animation:
     pos = np.broadcast_to(rig.rest_pos, (num_frames, len(rig.nodes), 3)).copy()
     sampled: set[int] = set()
     on_grid = True
+    placed: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per times array (tracks share them): frames, tolerance
     for tr in tracks:
-        x = (tr.times - start) * fps
-        tol = grid_tolerance(tr.times, fps)
-        near = np.abs(x - np.round(x)) <= tol
-        on_grid &= bool(near.all())
-        sampled.update(np.round(x[near]).astype(np.int64).tolist())
+        if id(tr.times) not in placed:
+            x = (tr.times - start) * fps
+            tol = grid_tolerance(tr.times, fps)
+            near = np.abs(x - np.round(x)) <= tol
+            on_grid &= bool(near.all())
+            sampled.update(np.round(x[near]).astype(np.int64).tolist())
+            placed[id(tr.times)] = x, tol
+        x, tol = placed[id(tr.times)]
         values = resample(replace(tr, times=x), frames, 1.0 / fps, tol)
         if tr.path == "scale":
             dev = np.abs(values - 1).max(axis=1)

@@ -47,8 +47,9 @@ def test_the_page_is_what_the_records_give():
 
 def test_the_page_stays_short():
     # 450 since issue 31 (each gan model is measured on two held-out sets; the realism tables are one row per method);
-    # 500 since issue 42 (match: its quality, variety, guard and speed tables)
-    assert len(make_page.PAGE.read_text().splitlines()) <= 500
+    # 500 since issue 42 (match: its quality, variety, guard and speed tables); 560 since issue 44 (every command
+    # at four lengths: 30 rows, and the plot)
+    assert len(make_page.PAGE.read_text().splitlines()) <= 560
 
 
 def test_a_changed_figure_is_caught(copy):

@@ -22,7 +22,7 @@ and XZ centring need that). ``fold_root=None`` folds when the top joint is
 static with a single child.
 
 Loading 2,500 Bandai clips takes about 20 s; the arrays are cached under
-:func:`cache_dir` (``KEYFILL_CACHE``, else ``~/.cache/keyfill``; keyed by the
+:func:`keyfill.files.cache_dir` (``KEYFILL_CACHE``, else ``~/.cache/keyfill``; keyed by the
 files' paths, sizes and modification times; about 240 MB for dataset-2), so
 later loads take about a second. Writing an entry is told as a
 :func:`keyfill.progress.note`.
@@ -50,6 +50,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError, ModelError
+from keyfill.files import cache_dir
 from keyfill.learn.mirror import Mirror, find_mirror, mirror_pairs  # noqa: F401 (their old home: still importable here)
 from keyfill.motion import Motion, Skeleton
 from keyfill.progress import note
@@ -100,17 +101,6 @@ def data_dir() -> Path:
     import platformdirs
 
     return Path(platformdirs.user_data_dir("keyfill"))
-
-
-def cache_dir() -> Path:
-    """The one folder keyfill caches in (preprocessed corpora; the marks of verified motion libraries):
-    ``KEYFILL_CACHE`` when it is set and not empty, else the user's cache folder (``platformdirs``:
-    ``$XDG_CACHE_HOME/keyfill`` or ``~/.cache/keyfill`` on Linux). Never inside the package; deleting it is safe."""
-    if os.environ.get("KEYFILL_CACHE"):
-        return Path(os.environ["KEYFILL_CACHE"])
-    import platformdirs
-
-    return Path(platformdirs.user_cache_dir("keyfill"))
 
 
 def locate(name: str) -> Path:
@@ -311,7 +301,7 @@ def load_corpus(
         paths: files or folders (searched recursively for ``*.bvh``).
         pattern: keep only files whose name matches this shell pattern.
         fold: fold the top joint into its child (``None``: when it is static).
-        cache: read the preprocessed arrays from :func:`cache_dir`, and write
+        cache: read the preprocessed arrays from :func:`keyfill.files.cache_dir`, and write
             them there when reading the files took more than a second.
         progress: optional wrapper for the file iterator (e.g. a tqdm bar).
 

@@ -40,13 +40,12 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import results
 from bench_bvh_io import Skipped, _split_clip, concatenated_bvh
-from bench_complete import WALK, keyfill_command
+from bench_complete import keyfill_command, learned_startup
 
 ROOT = Path(__file__).resolve().parents[1]
 PLOT = ROOT / "docs" / "img" / "scale.png"
@@ -120,28 +119,6 @@ def fitted(row: dict, joints: int) -> dict:
     return row
 
 
-def startup(repeat: int, tmp: Path) -> dict | None:
-    """Median wall seconds of ``complete`` of the 30-frame human file (keys every 15) per method, None without it."""
-    from keyfill import io
-
-    if not WALK.is_file():
-        return None
-    src = tmp / "walk30.bvh"
-    io.save(io.load(WALK).frames(slice(0, 30)), src)
-    seconds = {}
-    for method in STARTUP_GOALS:
-        cmd = keyfill_command() + ["complete", str(src), "-o", str(tmp / f"s_{method}.bvh"), "--method", method,
-                                   "--key-every", "15", "--force"]
-        subprocess.run(cmd, check=True, capture_output=True)  # the warm-up
-        walls = []
-        for _ in range(repeat):
-            start = time.perf_counter()
-            subprocess.run(cmd, check=True, capture_output=True)
-            walls.append(time.perf_counter() - start)
-        seconds[method] = round(statistics.median(walls), 3)
-    return {"frames": 30, "seconds": seconds, "repeat": repeat}
-
-
 def measure(counts: list[int], repeat: int, methods: list[str], formats: list[str], tmp: Path,
             convert: bool = True, info: bool = True) -> dict:
     """The figures of the module docstring (``convert``, ``info``: with those rows)."""
@@ -171,6 +148,13 @@ def measure(counts: list[int], repeat: int, methods: list[str], formats: list[st
         add(f"info {fmt}", lambda n, f=fmt: kf + ["info", str(tmp / f"{n}.{f}")])
     return {"frames": counts, "joints": joints, "key_every": KEY_EVERY, "repeat": repeat, "rows": rows,
             "startup": startup(max(repeat, 5), tmp) if methods else None}
+
+
+def startup(repeat: int, tmp: Path) -> dict | None:
+    """``bench_complete.learned_startup``'s medians (cubic, the shipped transformer and gan on the 30-frame
+    human file, new processes), with ``repeat``; None without the file."""
+    figures = learned_startup(repeat, tmp)
+    return None if figures is None else {**figures, "repeat": repeat}
 
 
 def plot(figures: dict, path: Path) -> None:

@@ -629,7 +629,8 @@ def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: 
             jobs.append([dataclasses.replace(it, write=t) for it, t in zip(part, todo)])
     settled = [outcomes[it.src] for it in items if it.src in outcomes]
     if settled and on_chunk is not None:
-        on_chunk(settled)
+        with interrupts_deferred():
+            on_chunk(settled)
     dirty: set[str] = set()
     pace = {"last": time.perf_counter(), "cost": 0.0}
 
@@ -681,10 +682,12 @@ def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: 
                         raise
                     except Exception as e:  # noqa: BLE001 (a worker that died: its inputs failed, the others go on)
                         results = [failure(it, e) for it in job]
-                    reported = [settle(it, res) for it, res in zip(job, results) if it.write]
+                    # settled and reported together: a signal in between would leave the caller's count short
+                    with interrupts_deferred():
+                        reported = [settle(it, res) for it, res in zip(job, results) if it.write]
+                        if on_chunk is not None:
+                            on_chunk(reported)
                     save_records()
-                    if on_chunk is not None:
-                        on_chunk(reported)
         except BaseException:
             with interrupts_deferred():  # a second Ctrl-C does not cut the clean-up short
                 executor.close(cancel=True)
@@ -696,8 +699,8 @@ def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: 
                 for folder in sorted({Path(it.dst).parent for job in sent for it in job}):
                     remove_stale(folder)  # of the stopped workers (their processes are gone)
                 save_records(always=True)
-            if finished and on_chunk is not None:
-                on_chunk(finished)
+                if finished and on_chunk is not None:
+                    on_chunk(finished)
             raise
         save_records(always=True)
         executor.close()

@@ -28,6 +28,11 @@ from keyfill.kinematics import fk
 MAX_DEPTH = 1000
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+#: the rotation channels of a joint that has none to keep: the order of mocap BVH (CMU, LaFAN1, Bandai)
+FULL_ROTATIONS = ("Zrotation", "Xrotation", "Yrotation")
+#: the channels of a root (or a translating joint) and of any other joint where a file records no BVH layout
+FULL_ROOT_CHANNELS = POSITION_CHANNELS + FULL_ROTATIONS
+FULL_CHANNELS = FULL_ROTATIONS
 _CANONICAL = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 
 
@@ -207,6 +212,36 @@ class Skeleton:
 
     def replace(self, **changes) -> Skeleton:
         return dataclasses.replace(self, **changes)
+
+    @property
+    def has_full_layout(self) -> bool:
+        """Whether every joint has three rotation channels and zero or three position channels, and every root
+        three: the BVH layout that Blender's importer, bvhio and pymotion all take (Blender refuses a joint
+        with fewer than three rotation channels)."""
+        for chans, parent in zip(self.channels, self.parents):
+            n_pos = sum(c in POSITION_CHANNELS for c in chans)
+            if sum(c in ROTATION_CHANNELS for c in chans) != 3 or n_pos not in (0, 3) or (parent < 0 and n_pos != 3):
+                return False
+        return True
+
+    def full_layout(self, translating: Iterable[int] = ()) -> Skeleton:
+        """This skeleton with the channel layout of :attr:`has_full_layout`, holding the same motion.
+
+        A joint keeps its rotation order, completed with the missing axes (whose
+        angles it never had, so they are zero: :attr:`euler_orders`); a joint
+        without rotation channels gets :data:`FULL_ROTATIONS`. Roots, joints
+        with any position channel and the joints ``translating`` (indices) get
+        ``Xposition Yposition Zposition`` first (an axis without a channel
+        before holds the OFFSET's value).
+        """
+        translating = set(translating)
+        channels = []
+        for j, (chans, parent, order) in enumerate(zip(self.channels, self.parents, self.euler_orders)):
+            has_rotation = any(c in ROTATION_CHANNELS for c in chans)
+            rotations = tuple(f"{axis}rotation" for axis in order) if has_rotation else FULL_ROTATIONS
+            moves = parent < 0 or j in translating or any(c in POSITION_CHANNELS for c in chans)
+            channels.append((POSITION_CHANNELS if moves else ()) + rotations)
+        return self.replace(channels=tuple(channels))
 
 
 #: what a keyed joint gives at a key (:attr:`Keys.given`): its local channels, its 3-D position, or the

@@ -112,7 +112,8 @@ def lamp_skeleton(dims: Dimensions = DIMENSIONS) -> Skeleton:
 
 
 def is_lamp(skeleton: Skeleton) -> bool:
-    """True when ``skeleton`` has the lamp's joints, hierarchy and channel layout.
+    """True when ``skeleton`` has the lamp's joints, hierarchy and channel layout (:data:`CHANNELS`, or its
+    :meth:`~keyfill.motion.Skeleton.full_layout`, which BVH outputs for Blender have).
 
     Link lengths may differ from :data:`DIMENSIONS` (a lamp of another size is
     still a lamp); the variables do not depend on them.
@@ -120,7 +121,7 @@ def is_lamp(skeleton: Skeleton) -> bool:
     return (
         skeleton.names == JOINTS
         and tuple(int(p) for p in skeleton.parents) == PARENTS
-        and skeleton.channels == CHANNELS
+        and skeleton.channels in (CHANNELS, skeleton.replace(channels=CHANNELS).full_layout().channels)
         and skeleton.up_axis == "Y"
     )
 

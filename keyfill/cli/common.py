@@ -181,6 +181,16 @@ def up_axis_option(f):
              "metadata (USD upAxis; glTF outputs are turned Y-up). Files that record their axis keep their own.")(f)
 
 
+def bvh_layout_option(f):
+    """``--bvh-layout``: the channel layout of BVH outputs (:data:`keyfill.io.bvh_channels.LAYOUTS`)."""
+    return click.option(
+        "--bvh-layout", type=click.Choice(["auto", "source", "full"]),
+        help="Channel layout of BVH outputs: source keeps each joint's own channels (lossless from a BVH); full "
+             "writes three rotation channels on every joint and Xposition Yposition Zposition on roots and "
+             "translating joints, which every reader takes (Blender refuses joints with fewer than three "
+             "rotation channels); auto (the default) keeps a BVH input's layout and writes the others full.")(f)
+
+
 def keys_options(f):
     """``--keys`` and ``--key-every`` options."""
     f = click.option(

@@ -10,6 +10,7 @@ from keyfill.cli.common import (
     Choice,
     apply_partial_keys,
     batch_options,
+    bvh_layout_option,
     emit_json,
     in_format_option,
     input_format,
@@ -73,11 +74,12 @@ from keyfill.learn.registry import ALIASES, METHODS
 @click.option("--format", "fmt", type=FORMAT_CHOICE, help="Output format (needed when the output is '-').")
 @in_format_option
 @up_axis_option
+@bvh_layout_option
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
-             device, dna, dna_count, rig_map, feet, ground, library, guard, runtime, fmt, in_fmt, up_axis, workers,
-             scheduler, connect_timeout, force, batch_size, as_json):
+             device, dna, dna_count, rig_map, feet, ground, library, guard, runtime, fmt, in_fmt, up_axis, bvh_layout,
+             workers, scheduler, connect_timeout, force, batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -163,7 +165,9 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
         if key_joints or key_positions or key_plane:
             raise UsageError("partial keys (--key-joints, --key-positions, --key-plane) take one file at a time")
 
-        spec = CompleteSpec(method, options, keys_text, key_every)
+        if bvh_layout is not None and fmt is not None:
+            io.check_bvh_layout(bvh_layout, fmt)
+        spec = CompleteSpec(method, options, keys_text, key_every, bvh_layout=bvh_layout)
         return run_batch(inputs, dst, fmt, "keyfill.learn.batch:complete_chunk", spec, workers, scheduler,
                          connect_timeout, force, batch_size, as_json, "completed", check=lambda: check_method(spec))
     if len(inputs) != 1:
@@ -174,6 +178,8 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
 
     dna_files = [] if dna is None else [dna, dna.rpartition(":")[0]]  # FILE or FILE:FRAMES
     fmt = output_format(dst, fmt)  # a misnamed output is refused before any work
+    if bvh_layout is not None:
+        io.check_bvh_layout(bvh_layout, io.format_of(dst, fmt))
     refuse_overwriting_input(dst, [src, *dna_files], force)
     refuse_read_only(dst, force)
     motion = io.load(src, input_format(src, in_fmt), up_axis=up_axis)
@@ -182,7 +188,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     result = run(motion, keys, method, options)
     frames = motion.num_frames
     del motion  # the input's arrays are not needed to write the result (a long take: half the memory)
-    io.save(result.motion, dst, fmt, source=src)
+    io.save(result.motion, dst, fmt, source=src, bvh_layout=bvh_layout)
     say_guard(src, result.info)
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})

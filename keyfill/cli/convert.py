@@ -7,6 +7,7 @@ import click
 from keyfill.cli.common import (
     FORMAT_CHOICE,
     batch_options,
+    bvh_layout_option,
     emit_json,
     in_format_option,
     input_format,
@@ -29,19 +30,22 @@ from keyfill.cli.common import (
 @in_format_option
 @meters_per_unit_option
 @up_axis_option
+@bvh_layout_option
 @click.option("--curves", is_flag=True,
               help="Fit editable Bezier curves through the keys and write a curves file (USD only).")
 @keys_options
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, curves, keys_text, key_every, workers, scheduler,
-            connect_timeout, force, batch_size, as_json):
+def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, curves, keys_text, key_every, workers,
+            scheduler, connect_timeout, force, batch_size, as_json):
     """Convert a motion file between BVH, USD (.usda, .usdc, .usd) and glTF (.glb, .gltf).
 
     Formats come from the suffixes; '-' reads standard input or writes
     standard output (then give --in-format / --format). BVH -> USD -> BVH and
     BVH -> glTF -> BVH keep the joint names, channel layouts, Euler orders and
-    End Sites; glTF -> glTF keeps the meshes and materials of SRC. The output
+    End Sites; glTF -> glTF keeps the meshes and materials of SRC. A BVH
+    written from USD or glTF gets the layout every reader takes unless the
+    file records a full BVH layout (--bvh-layout; docs/formats.md). The output
     is written atomically: on any error no file appears (docs/formats.md).
 
     With --curves, DST becomes a curves file for `keyfill edit-tangents`:
@@ -65,6 +69,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, curves, keys_t
       cat walk.bvh | keyfill convert - - --format usda > walk.usda
       keyfill convert capture.bvh capture.usda --meters-per-unit 0.0254     (inches: metersPerUnit 0.0254)
       keyfill convert blender_export.bvh shot.usda --up-axis Z               (upAxis Z)
+      keyfill convert edge_layout.bvh for_blender.bvh --bvh-layout full      (3 rotation channels per joint)
       keyfill convert mocap/ -o usd/ --format usdc --workers 2
     """
     from keyfill import io
@@ -75,7 +80,9 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, curves, keys_t
                 or meters_per_unit is not None or up_axis is not None:
             raise UsageError("-o OUTDIR converts motion files by their suffixes; --curves, --keys, --key-every, "
                              "--in-format, --meters-per-unit and --up-axis take one SRC and DST")
-        return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", None, workers, scheduler,
+        if bvh_layout is not None and fmt is not None:
+            io.check_bvh_layout(bvh_layout, fmt)
+        return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", bvh_layout, workers, scheduler,
                          connect_timeout, force, batch_size, as_json, "converted")
     if len(paths) == 1:
         raise click.UsageError("Missing argument 'DST' (or, for many files, -o OUTDIR/)")
@@ -87,6 +94,10 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, curves, keys_t
 
     if not curves:  # a misnamed output is refused before any work (--curves checks its own below)
         fmt = output_format(dst, fmt)
+        if bvh_layout is not None:
+            io.check_bvh_layout(bvh_layout, io.format_of(dst, fmt))
+    elif bvh_layout is not None:
+        raise UsageError("--bvh-layout lays out BVH outputs; --curves writes a USD curves file")
     refuse_overwriting_input(dst, [src], force)
     refuse_read_only(dst, force)
 
@@ -102,7 +113,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, curves, keys_t
     elif keys_text is not None or key_every is not None:
         raise UsageError("--keys and --key-every choose the keys of --curves; add --curves")
     else:
-        io.save(motion, dst, fmt, source=src)
+        io.save(motion, dst, fmt, source=src, bvh_layout=bvh_layout)
     if as_json and dst != "-":
         emit_json({"input": src, "output": dst, "frames": motion.num_frames, "joints": motion.num_joints})
     elif dst != "-":

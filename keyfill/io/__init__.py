@@ -117,6 +117,17 @@ def format_of(path: str | os.PathLike, format: str | None = None, reading: bool 
     return SUFFIXES[suffix]
 
 
+def check_bvh_layout(layout: str, fmt: str) -> None:
+    """Refuse a BVH ``layout`` that is not one of :data:`~keyfill.io.bvh_channels.LAYOUTS`, or that is given for
+    an output of format ``fmt`` other than BVH (it would change nothing); the error names ``bvh_layout``."""
+    from keyfill.io.bvh_channels import LAYOUTS
+
+    if layout not in LAYOUTS:
+        raise UsageError(f"unknown BVH layout {layout!r}; expected {listing(LAYOUTS)}", params="bvh_layout")
+    if FORMATS[fmt].family != "bvh":
+        raise UsageError(f"bvh_layout lays out BVH outputs; this output is {fmt}", params="bvh_layout")
+
+
 def _function(target: str):
     module, name = target.split(":")
     return getattr(importlib.import_module(module), name)
@@ -205,7 +216,7 @@ def _read(path, format):
 
 
 def save(motion: Motion, path: str | os.PathLike, format: str | None = None, source: str | os.PathLike | None = None,
-         **options) -> None:
+         bvh_layout: str | None = None, **options) -> None:
     """Write ``motion`` atomically (``"-"``: standard output, with ``format``).
 
     ``source``: the file ``motion`` came from; when it is of the output's
@@ -217,9 +228,14 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
     writes that file beside the output, atomically too: its writer gets
     ``sidecar=(temporary path, final file name)``, or ``sidecar=None`` on
     standard output, where it embeds what the sidecar would hold.
+    ``bvh_layout``: the channel layout of a BVH output (``auto``, ``source`` or ``full``:
+    :data:`keyfill.io.bvh_channels.LAYOUTS`; None: ``auto``); a :class:`UsageError` for other outputs.
     """
     fmt = format_of(path, format)
     spec = FORMATS[fmt]
+    if bvh_layout is not None:
+        check_bvh_layout(bvh_layout, fmt)
+        options["layout"] = bvh_layout
     write = _function(spec.writer)
     source_suffix = Path(source).suffix.lower() if source is not None and str(source) != STDIO else None
     if spec.template and source_suffix in SUFFIXES and FORMATS[SUFFIXES[source_suffix]].family == spec.family:

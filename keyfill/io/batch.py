@@ -712,8 +712,17 @@ def _run(items: list[Item], fn: Callable, spec, workers: int | None, scheduler: 
 # --- convert ----------------------------------------------------------------------------------------
 
 
-def convert_chunk(chunk: list[Item], spec=None) -> list[dict]:
-    """Job function of ``keyfill convert IN... -o OUTDIR/``: read each input, write its output."""
+def bvh_layout(dst: str, layout: str | None) -> str | None:
+    """The ``bvh_layout`` for :func:`keyfill.io.save` of the output ``dst`` of a batch given ``--bvh-layout
+    layout``: the layout for a BVH output, None for the others (a batch may write several formats)."""
+    from keyfill import io
+
+    return layout if layout is not None and io.FORMATS[io.format_of(dst)].family == "bvh" else None
+
+
+def convert_chunk(chunk: list[Item], spec: str | None = None) -> list[dict]:
+    """Job function of ``keyfill convert IN... -o OUTDIR/``: read each input, write its output; ``spec``: the
+    layout of BVH outputs (``--bvh-layout``; None: auto)."""
     from keyfill import io
 
     out = []
@@ -723,7 +732,7 @@ def convert_chunk(chunk: list[Item], spec=None) -> list[dict]:
             continue
         try:
             motion = io.load(it.src)
-            io.save(motion, it.dst, source=it.src)
+            io.save(motion, it.dst, source=it.src, bvh_layout=bvh_layout(it.dst, spec))
             out.append({"input": it.src, "output": it.dst, "status": "done", "frames": motion.num_frames,
                         "joints": motion.num_joints})
         except (KeyfillError, OSError) as e:

@@ -32,7 +32,7 @@ import numpy as np
 
 from keyfill import limits, progress
 from keyfill.errors import DataError, FormatError
-from keyfill.io.bvh_channels import channels_to_pose, pose_to_channels
+from keyfill.io.bvh_channels import channels_to_pose, output_layout, pose_to_channels
 from keyfill.io.bvh_follow import follow
 from keyfill.motion import Motion, Skeleton, check_channels
 
@@ -584,13 +584,28 @@ def dumps(motion: Motion) -> str:
     return "".join(_pieces(motion))
 
 
-def write(motion: Motion, path: str | Path, template: str | Path | None = None) -> None:
+def write(motion: Motion, path: str | Path, template: str | Path | None = None, layout: str = "auto") -> None:
     """Write ``motion`` to ``path`` as BVH (not atomic; see :func:`keyfill.io.save`).
 
     ``template``: the BVH file ``motion`` came from; frames whose rotations it
     holds unchanged keep its own channel values (:func:`follow_template`).
+    ``layout`` (:data:`~keyfill.io.bvh_channels.LAYOUTS`): ``source`` writes
+    each joint's own channels; ``full`` three rotation channels on every joint
+    and three position channels on roots and translating joints, the layout
+    every reader takes (Blender refuses fewer than three rotation channels);
+    ``auto`` keeps the layout of a BVH ``template`` and of a skeleton already
+    full, and writes the others (the lamp's, from USD or glTF) full.
     The motion lines are formatted and written a block at a time, so writing
     needs little memory beyond the motion's channel values.
     """
+    laid_out = output_layout(motion, layout, from_bvh=template is not None)
+    if laid_out is not motion:  # a template in another layout has no values to follow
+        motion, template = laid_out, None
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.writelines(_pieces(motion, template=template))
+        try:
+            f.writelines(_pieces(motion, template=template))
+        except DataError as e:  # a motion its channels cannot hold (before any motion line is written)
+            if layout == "full":
+                raise
+            raise DataError(f"{e}; bvh_layout full gives every joint three rotation channels, and position "
+                            "channels to joints that move", params="bvh_layout") from None

@@ -13,6 +13,27 @@ from keyfill import rotations as R
 from keyfill.errors import DataError
 from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton
 
+#: a BVH output's channel layout: ``source``: each joint's own channels (lossless from a BVH), ``full``: the
+#: layout every reader takes (:meth:`Skeleton.full_layout`), ``auto``: ``source`` where that is already full or
+#: the source was a BVH file
+LAYOUTS = ("auto", "source", "full")
+
+
+def output_layout(motion: Motion, layout: str, from_bvh: bool) -> Motion:
+    """``motion`` with the channel layout a BVH output of ``layout`` (:data:`LAYOUTS`) writes (itself when that
+    is its own); ``from_bvh``: the motion came from a BVH file (whose layout ``auto`` keeps). The full layout
+    gives position channels to the joints that move away from their OFFSET too."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown BVH layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    sk = motion.skeleton
+    if layout == "source" or (layout == "auto" and from_bvh):
+        return motion
+    scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
+    translating = [j for j in range(sk.num_joints) if motion.num_frames
+                   and np.abs(motion.positions[:, j] - sk.offsets[j]).max() > 1e-6 * scale]
+    full = sk.full_layout(translating)
+    return motion if full.channels == sk.channels else motion.replace(skeleton=full)
+
 
 def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384) -> tuple[np.ndarray, np.ndarray]:
     """BVH channel values ``(F, C)`` (degrees, file units) -> ``(rotations (F,J,4), positions (F,J,3))``.

@@ -47,14 +47,12 @@ from keyfill import limits, progress
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError, KeyfillError
 from keyfill.io.gltf_buffers import Document, load_document, read_accessor
-from keyfill.motion import POSITION_CHANNELS, Keys, Motion, Skeleton
+from keyfill.motion import FULL_CHANNELS, FULL_ROOT_CHANNELS, Keys, Motion, Skeleton
 
 EXTRAS = "keyfill"
 #: rotation that turns a Z-up world into glTF's Y-up one (-90 degrees about X), w-x-y-z
 Z_TO_Y = np.array([np.sqrt(0.5), -np.sqrt(0.5), 0.0, 0.0])
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
-DEFAULT_ROOT_CHANNELS = POSITION_CHANNELS + ("Zrotation", "Xrotation", "Yrotation")
-DEFAULT_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
 #: a sample time within this many frames of a frame is on that frame
 ON_GRID = 1e-3
 
@@ -463,7 +461,7 @@ def _skeleton(layout: dict, rig: Rig, rest, rot, pos, mpu: float, up: str, label
         raise FormatError(f"extras.{EXTRAS}.channels must be {J} strings, one per joint", label)
     if channels is None:
         moving = np.abs(pos - rest).max(axis=(0, 2), initial=0.0) > 1e-6 * max(1.0, np.abs(rest).max())
-        channels = [DEFAULT_ROOT_CHANNELS if rig.parents[j] < 0 or moving[j] else DEFAULT_CHANNELS for j in range(J)]
+        channels = [FULL_ROOT_CHANNELS if rig.parents[j] < 0 or moving[j] else FULL_CHANNELS for j in range(J)]
     else:
         channels = [tuple(c.split()) for c in channels]
     ends = layout.get("endSites", [])

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from keyfill.errors import FormatError, KeyfillError
-from keyfill.io.batch import Item, failure
+from keyfill.io.batch import Item, bvh_layout, failure
 from keyfill.learn.completion import CompleteOptions
 
 
@@ -28,6 +28,8 @@ class CompleteSpec:
     keys_text: str | None = None
     key_every: int | None = None
     fmt: str | None = None
+    #: the layout of BVH outputs (``--bvh-layout``; None: auto)
+    bvh_layout: str | None = None
 
     def recipe(self) -> dict:
         """What shapes every output of the batch, for the output folder's record (:mod:`keyfill.io.batch`): the
@@ -41,7 +43,7 @@ class CompleteSpec:
         recipe = {"command": "complete", "method": m.name, "keys": self.keys_text, "key_every": self.key_every,
                   "seed": o.seed, "exact_keys": o.exact_keys, "feet": o.feet, "ground": o.ground,
                   "rig_map": None if o.rig_map is None else file_sha256(o.rig_map), "dna_count": o.dna_count,
-                  "format": self.fmt}
+                  "format": self.fmt, **({"bvh_layout": self.bvh_layout} if self.bvh_layout else {})}
         if o.dna is not None:
             path, frames = o.dna, None
             if not os.path.exists(path) and ":" in path:
@@ -133,7 +135,7 @@ def complete_chunk(chunk: list[Item], spec: CompleteSpec) -> list[dict | None]:
         if not it.write:
             continue
         try:
-            io.save(result.motion, it.dst, spec.fmt, source=it.src)  # as a single completion writes it
+            io.save(result.motion, it.dst, spec.fmt, source=it.src, bvh_layout=bvh_layout(it.dst, spec.bvh_layout))  # as a single completion writes it
         except (KeyfillError, OSError) as e:
             outcomes[i] = failure(it, e if isinstance(e, KeyfillError) else FormatError(str(e)))
             continue

@@ -7,7 +7,8 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.keyfill-installed
-# Blender's bpy wheel (for `make test-interop`) lives in its own venv: it pins its own numpy.
+# Blender's bpy wheel (for `make test-interop`) lives in its own venv: it pins its own numpy. pymotion, the
+# other BVH reader the interop suite checks against, needs only numpy and shares it.
 BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
@@ -226,9 +227,9 @@ $(MODELS)/bandai-transformer-4/weights.safetensors: $(MODELS)/base/bandai-transf
 
 transformer-model-4: $(MODELS)/bandai-transformer-4/weights.safetensors
 
-$(BLENDER_STAMP):
+$(BLENDER_STAMP): Makefile
 	$(PYTHON) -m venv $(BLENDER_VENV)
-	$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check bpy==5.0.1
+	$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check bpy==5.0.1 upc-pymotion==0.3.4
 	@touch $(BLENDER_STAMP)
 
 test-interop: $(STAMP) $(BLENDER_STAMP)

@@ -147,3 +147,20 @@ def test_an_unknown_layout_is_refused(capsys, tmp_path):
     with pytest.raises(Exception, match="unknown BVH layout 'blender'"):
         io.save(io.load(EDGES), tmp_path / "y.bvh", bvh_layout="blender")
     assert not list(tmp_path.iterdir())
+
+
+def test_bvhio_reads_the_lamp_written_full(capsys, tmp_path):
+    """bvhio (float32) gives the lamp's world positions from keyfill's full-layout BVH (Blender and pymotion do
+    too: tests/test_interop.py, -m interop)."""
+    bvhio = pytest.importorskip("bvhio")
+    out = tmp_path / "lamp.bvh"
+    assert run(capsys, "convert", LAMP, out)[0] == 0
+    motion = io.load(out)
+    root = bvhio.readAsHierarchy(str(out))
+    joints = {joint.Name: joint for joint, _, _ in root.layout()}
+    theirs = np.empty((motion.num_frames, motion.num_joints, 3))
+    for f in range(motion.num_frames):
+        root.loadPose(f)
+        theirs[f] = [tuple(joints[n].PositionWorld) for n in motion.skeleton.names]
+    height = float(np.ptp(motion.skeleton.rest_world_positions()[:, 1]))
+    assert np.abs(theirs - motion.world_positions()).max() < 1e-5 * height

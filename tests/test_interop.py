@@ -23,7 +23,7 @@ from keyfill import io
 from keyfill.motion import Motion
 
 sys.path.insert(0, str(Path(__file__).parent / "interop"))
-from blender_check import blender_deviation, blender_missing
+from blender_check import blender_deviation, blender_missing, pymotion_world_positions
 
 #: bvhio reads one ROOT per file, so the local edge-layout fixtures are not for it
 LOCAL_FIXTURES = ["cmu_02_03_cgspeed_first4frames.bvh", "bvhtoolbox_test_freebvh_mixamo.bvh"]
@@ -131,3 +131,40 @@ def test_blender_comparison_can_fail(blender, suffix, tmp_path):
     per_frame, h, _ = blender_deviation(motion.replace(rotations=rot), tmp_path, suffix, expected=motion)
     assert per_frame[5] > 100 * BLENDER_TOL * h
     assert np.delete(per_frame, 5).max() < BLENDER_TOL * h
+
+
+# --- every BVH layout keyfill writes, in Blender and pymotion (pytest -m interop) ---------------------
+
+#: (case, source, --bvh-layout): the lamp from its USD (one rotation channel per joint recorded; auto writes it
+#: full), the edge layouts (two roots, 0 to 6 channels) forced full, and mocap (already full) kept as it is
+BVH_LAYOUTS = [
+    ("lamp-auto", Path(__file__).parents[1] / "examples" / "lamp" / "truth.usda", None),
+    ("edges-full", DATA / "edge_layouts_crlf.bvh", "full"),
+    ("cmu-source", DATA / "cmu_02_03_cgspeed_first4frames.bvh", "source"),
+]
+#: the issue's bound for every layout, relative to the skeleton's height
+LAYOUT_TOL = 1e-5
+
+
+@pytest.mark.interop
+@pytest.mark.parametrize("case, source, layout", BVH_LAYOUTS, ids=[c[0] for c in BVH_LAYOUTS])
+def test_blender_and_pymotion_import_every_bvh_layout_keyfill_writes(blender, case, source, layout, tmp_path):
+    motion = io.load(source)
+    per_frame, h, result = blender_deviation(motion, tmp_path, ".bvh", bvh_layout=layout)
+    assert result["frames"] == motion.num_frames
+    assert per_frame.max() < LAYOUT_TOL * h, f"Blender deviates by {per_frame.max() / h:.2g} of the height"
+    written = io.load(tmp_path / "motion.bvh")
+    assert written.skeleton.has_full_layout
+    theirs = pymotion_world_positions(tmp_path / "motion.bvh")
+    assert theirs["names"] == list(motion.skeleton.names)
+    assert np.abs(np.asarray(theirs["positions"]) - motion.world_positions()).max() < LAYOUT_TOL * h
+
+
+@pytest.mark.interop
+def test_blender_and_pymotion_refuse_the_lamps_own_layout(blender, tmp_path):
+    """Why auto writes the lamp full: its own layout (one rotation channel per joint) stops both readers."""
+    motion = io.load(BVH_LAYOUTS[0][1])
+    with pytest.raises(RuntimeError, match="Blender failed"):
+        blender_deviation(motion, tmp_path, ".bvh", bvh_layout="source")
+    with pytest.raises(RuntimeError, match="pymotion failed"):
+        pymotion_world_positions(tmp_path / "motion.bvh")

@@ -42,8 +42,8 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, cu
 
     Formats come from the suffixes; '-' reads standard input or writes
     standard output (then give --in-format / --format). BVH -> USD -> BVH and
-    BVH -> glTF -> BVH keep the joint names, channel layouts, Euler orders and
-    End Sites; glTF -> glTF keeps the meshes and materials of SRC. A BVH
+    BVH -> glTF -> BVH keep the joint names, channel layouts (--bvh-layout
+    source for one that is not full), Euler orders and End Sites; glTF -> glTF keeps the meshes and materials of SRC. A BVH
     written from USD or glTF gets the layout every reader takes unless the
     file records a full BVH layout (--bvh-layout; docs/formats.md). The output
     is written atomically: on any error no file appears (docs/formats.md).

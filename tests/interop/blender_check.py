@@ -23,8 +23,9 @@ from keyfill.motion import Motion
 ROOT = Path(__file__).resolve().parents[2]
 BLENDER_PYTHON = ROOT / ".venv-blender" / "bin" / "python"
 SCRIPT = Path(__file__).with_name("blender_world_positions.py")
+PYMOTION_SCRIPT = Path(__file__).with_name("pymotion_world_positions.py")
 #: how to install the side venv (also quoted in skip messages)
-INSTALL = "`make test-interop`, which installs bpy==5.0.1 there"
+INSTALL = "`make test-interop`, which installs bpy==5.0.1 and upc-pymotion there"
 
 
 def blender_missing() -> str | None:
@@ -32,12 +33,12 @@ def blender_missing() -> str | None:
     if not BLENDER_PYTHON.exists():
         return f"no Blender venv at {BLENDER_PYTHON.parent.parent} (create it with: {INSTALL})"
     probe = subprocess.run(
-        [str(BLENDER_PYTHON), "-c", "import bpy; print(bpy.app.version_string)"],
+        [str(BLENDER_PYTHON), "-c", "import bpy, pymotion; print(bpy.app.version_string)"],
         capture_output=True, text=True, timeout=120, check=False,
     )
     if probe.returncode != 0:
         last = (probe.stderr.strip().splitlines() or ["no output"])[-1]
-        return f"bpy does not import in {BLENDER_PYTHON}: {last} (install it with: {INSTALL})"
+        return f"bpy or pymotion does not import in {BLENDER_PYTHON}: {last} (install them with: {INSTALL})"
     return None
 
 
@@ -66,13 +67,25 @@ def bone_names(motion: Motion, fmt: str) -> list[str]:
     return [p.rsplit("/", 1)[-1] for p in joint_paths(motion.skeleton)]
 
 
+def pymotion_world_positions(path: Path) -> dict:
+    """Run pymotion (in Blender's venv) on the BVH file ``path``; the JSON result of
+    ``pymotion_world_positions.py``."""
+    out = Path(str(path) + ".pymotion.json")
+    proc = subprocess.run([str(BLENDER_PYTHON), str(PYMOTION_SCRIPT), str(path), "--out", str(out)],
+                          capture_output=True, text=True, timeout=600, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"pymotion failed on {path} (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
+    return json.loads(out.read_text())
+
+
 def blender_deviation(
-    motion: Motion, folder: Path, suffix: str, expected: Motion | None = None
+    motion: Motion, folder: Path, suffix: str, expected: Motion | None = None, bvh_layout: str | None = None
 ) -> tuple[np.ndarray, float, dict]:
     """Write ``motion`` as ``folder/motion<suffix>`` with keyfill, import it in Blender, compare.
 
     Blender's bone heads are compared with the world joint positions of
-    ``expected`` (default: ``motion`` itself).
+    ``expected`` (default: ``motion`` itself). ``bvh_layout``: the layout of a BVH file
+    (:func:`keyfill.io.save`).
 
     Returns ``(per_frame, height, blender_result)``: per frame ``(F,)``, the
     largest distance between a Blender bone head and keyfill's world joint
@@ -81,7 +94,7 @@ def blender_deviation(
     """
     expected = motion if expected is None else expected
     path = Path(folder) / f"motion{suffix}"
-    io.save(motion, path)
+    io.save(motion, path, bvh_layout=bvh_layout if suffix == ".bvh" else None)
     sk = motion.skeleton
     result = blender_world_positions(path, sk.meters_per_unit)
     fmt = {".bvh": "bvh", ".glb": "gltf", ".gltf": "gltf"}.get(suffix, "usd")

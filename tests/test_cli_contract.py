@@ -175,7 +175,7 @@ def test_workers_out_of_range_are_refused_for_one_file_as_for_a_batch(walks, cap
     (("complete", "walk.bvh", "--key-every", "3", "-o", "o.bvh", "--method", "cubc"), "Did you mean 'cubic'?"),
     (("compelte", "walk.bvh"), "No such command 'compelte'. Did you mean 'complete'?"),
     (("train", "transfomer", "x"), "No such command 'transfomer'. Did you mean 'transformer'?"),
-    (("convert", "walk.bvh", "o.usda", "--format", "usdx"), "(Did you mean one of: 'usd', 'usda', 'usdc'?)"),
+    (("convert", "walk.bvh", "o.usda", "--format", "usdx"), "(Did you mean one of: 'usd', 'usdc', 'usdz'?)"),
     (("complete", "walk.bvh", "--key-evry", "3", "-o", "o.bvh"), "Did you mean one of: '--key-every'"),
 ])
 def test_a_mistyped_command_method_or_option_is_told_what_it_may_mean(walks, capsys, args, line):

@@ -41,12 +41,12 @@ def test_library_errors_name_parameters_and_the_cli_its_flags(capsys, tmp_path, 
     assert e.value.params == ("chunk",)
     code, _, err = run(capsys, "convert", MIXAMO, "-o", tmp_path / "out/", "--batch-size", "0")
     assert code == 2 and err == "keyfill: error: --batch-size must be at least 1, got 0\n"
-    with pytest.raises(UsageError, match=r"^writing '-' needs format \(bvh, usda, usdc, usd, glb or gltf\)$"):
+    with pytest.raises(UsageError, match=r"^writing '-' needs format \(bvh, usda, usdc, usd, usdz, glb or gltf\)$"):
         io.format_of("-")
     monkeypatch.setattr("sys.stdin", TextIOWrapper(BytesIO(b"not a motion file")))
     code, _, err = run(capsys, "info", "-")
     assert code == 2 and err == ("keyfill: error: cannot tell the format of standard input from its first bytes; "
-                                 "give --in-format (bvh, usda, usdc, usd, glb or gltf)\n")
+                                 "give --in-format (bvh, usda, usdc, usd, usdz, glb or gltf)\n")
     (tmp_path / "notes.txt").write_text("x")
     with pytest.raises(UsageError, match="; give format$"):
         batch.plan([tmp_path / "notes.txt"], tmp_path / "o")

@@ -52,18 +52,28 @@ class Format:
     #: the file records its up axis (USD ``upAxis``; glTF is Y-up, or says otherwise in its extras); BVH does not
     #: (assumed Y)
     axes: bool = True
+    #: the writer takes ``relative=``: False where the output has no folder (standard output), so that the asset
+    #: paths it keeps from a template are written absolute instead of relative to the output's folder
+    asset_paths: bool = False
+    #: ``"module:function"``, ``function(path) -> list of words`` ("2 meshes", "1 material"): what a file of this
+    #: format holds beyond the motion, for the note that an output of another family does not carry it
+    contents: str | None = None
 
 
-_USD = ("keyfill.io.usd_curves:read_motion", "keyfill.io.usd:write")
-_GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.io.gltf_write:write", "template": True}
+_USD = {"family": "usd", "reader": "keyfill.io.usd_curves:read_motion", "writer": "keyfill.io.usd_stage:write",
+        "template": True, "asset_paths": True}
+_GLTF = {"family": "gltf", "reader": "keyfill.io.gltf:read", "writer": "keyfill.io.gltf_write:write", "template": True,
+         "contents": "keyfill.io.carried:gltf"}
 #: format name -> :class:`Format`, in the order messages list them
 FORMATS = {f.name: f for f in (
     Format("bvh", "bvh", "keyfill.io.bvh:read", "keyfill.io.bvh:write", (".bvh",), "BVH motion capture text",
            magic=b"HIERARCHY", units=False, template=True, named=False, axes=False),
-    Format("usda", "usd", *_USD, (".usda",), "USD text (UsdSkel)", magic=b"#usda"),
-    Format("usdc", "usd", *_USD, (".usdc",), "USD binary crate (UsdSkel)",
-           magic=b"PXR-USDC"),
-    Format("usd", "usd", *_USD, (".usd",), "USD, text or crate (written as crate)"),
+    Format("usda", suffixes=(".usda",), description="USD text (UsdSkel)", magic=b"#usda", **_USD),
+    Format("usdc", suffixes=(".usdc",), description="USD binary crate (UsdSkel)", magic=b"PXR-USDC", **_USD),
+    Format("usd", suffixes=(".usd",), description="USD, text or crate (written as crate)", **_USD),
+    Format("usdz", suffixes=(".usdz",), description="USD package: a zip of a crate layer and its files (textures)",
+           magic=b"PK\x03\x04", **{**_USD, "reader": "keyfill.io.usd_stage:read_usdz",
+                                     "writer": "keyfill.io.usd_stage:write_usdz"}),
     Format("glb", suffixes=(".glb",), description="glTF 2.0 binary (skin + animation)", magic=b"glTF",
            **_GLTF),
     Format("gltf", suffixes=(".gltf",), description="glTF 2.0 JSON with a .bin beside it (embedded on standard output)",
@@ -215,13 +225,26 @@ def _read(path, format):
     return fmt, read(p)
 
 
+def _note_left_behind(source: Path, words: list[str], spec: Format) -> None:
+    """One note that what ``source`` holds beyond the motion (``words``) is not in the output."""
+    if words:
+        from keyfill import progress
+
+        family = {"usd": "USD", "gltf": "glTF", "bvh": "BVH"}.get(spec.family, spec.family)
+        progress.note(f"{source.name}: its {listing(words, 'and')} are not carried into {family} (only the "
+                      "skeleton and its animation are)")
+
+
 def save(motion: Motion, path: str | os.PathLike, format: str | None = None, source: str | os.PathLike | None = None,
          bvh_layout: str | None = None, **options) -> None:
     """Write ``motion`` atomically (``"-"``: standard output, with ``format``).
 
     ``source``: the file ``motion`` came from; when it is of the output's
     family and the format keeps a :attr:`Format.template`, what it holds
-    beyond the motion is kept (a glTF character's meshes and materials).
+    beyond the motion is kept (a glTF character's meshes and materials, a USD
+    shot's stage: see :mod:`keyfill.io.usd_stage`, and ``usd_layer=``); when it
+    is of another family, a :func:`keyfill.progress.note` says what it held
+    that the output does not carry (:attr:`Format.contents`).
     ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key
     files). A :attr:`Format.named` format's animation is named after the output
     file's stem (on standard output the source's, if any). A format with a :attr:`Format.sidecar`
@@ -238,8 +261,13 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
         options["layout"] = bvh_layout
     write = _function(spec.writer)
     source_suffix = Path(source).suffix.lower() if source is not None and str(source) != STDIO else None
-    if spec.template and source_suffix in SUFFIXES and FORMATS[SUFFIXES[source_suffix]].family == spec.family:
+    came_from = FORMATS[SUFFIXES[source_suffix]] if source_suffix in SUFFIXES else None
+    if spec.template and came_from is not None and came_from.family == spec.family:
         options["template"] = Path(source)
+    elif came_from is not None and came_from.family != spec.family and came_from.contents:
+        _note_left_behind(Path(source), _function(came_from.contents)(Path(source)), spec)
+    if spec.asset_paths and str(path) == STDIO:
+        options["relative"] = False
     if spec.named:
         named_after = source if str(path) == STDIO else path
         options.setdefault("name", None if named_after is None or str(named_after) == STDIO else Path(named_after).stem)

@@ -130,7 +130,8 @@ def _matrices(Gf, Vt, rot: np.ndarray, pos: np.ndarray):
 
 def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str = "Root",
           name: str | None = None) -> None:
-    """Write ``motion`` to a USD file (format from the suffix).
+    """Write ``motion`` to a new USD file (format from the suffix); :func:`keyfill.io.save` writes through
+    :func:`keyfill.io.usd_stage.write`, which keeps the stage of a USD source instead.
 
     Args:
         sparse: author time samples only at ``motion.keys`` (a keyframe file);
@@ -147,7 +148,7 @@ def write(motion: Motion, path: str | Path, sparse: bool = False, root_name: str
 def stage_of(motion: Motion, sparse: bool = False, root_name: str = "Root", name: str | None = None):
     """The in-memory ``Usd.Stage`` that :func:`write` (same arguments) exports; a curves file
     (:func:`keyfill.io.usd_curves.write`) adds its curves to it before it is written."""
-    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
+    Gf, _Sdf, Usd, UsdGeom, UsdSkel, Vt = _pxr()
     sk = motion.skeleton
     limits.check_values(motion)
     stage = Usd.Stage.CreateInMemory()
@@ -172,6 +173,21 @@ def stage_of(motion: Motion, sparse: bool = False, root_name: str = "Root", name
     skel.CreateBindTransformsAttr(_matrices(Gf, Vt, world_rot, world_pos))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
 
+    skel.GetPrim().SetCustomDataByKey(CUSTOM_KEY, custom_of(motion))
+
+    anim.CreateJointsAttr(paths)
+    t_attr = anim.CreateTranslationsAttr()
+    r_attr = anim.CreateRotationsAttr()
+    s_attr = anim.CreateScalesAttr()
+    s_attr.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * sk.num_joints))
+    write_samples(stage.GetRootLayer(), t_attr.GetPath(), r_attr.GetPath(), motion, written_frames(motion, sparse))
+    return stage
+
+
+def custom_of(motion: Motion) -> dict:
+    """The Skeleton's ``customData["keyfill"]`` for ``motion``: what USD has no place for (module docstring)."""
+    Gf, _Sdf, _Usd, _UsdGeom, _UsdSkel, Vt = _pxr()
+    sk = motion.skeleton
     custom = {
         "names": Vt.StringArray(list(sk.names)),
         "channels": Vt.StringArray([" ".join(c) for c in sk.channels]),
@@ -183,28 +199,32 @@ def stage_of(motion: Motion, sparse: bool = False, root_name: str = "Root", name
         if motion.keys.partial:
             custom["keyGiven"] = motion.keys.given
             custom["keyMask"] = Vt.IntArray(motion.keys.joint_mask(sk.num_joints).astype(int).ravel().tolist())
-    skel.GetPrim().SetCustomDataByKey(CUSTOM_KEY, custom)
+    return custom
 
-    anim.CreateJointsAttr(paths)
-    t_attr = anim.CreateTranslationsAttr()
-    r_attr = anim.CreateRotationsAttr()
-    s_attr = anim.CreateScalesAttr()
-    s_attr.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * sk.num_joints))
-    frames = np.arange(motion.num_frames)
-    if sparse:
-        if motion.keys is None:
-            raise DataError("a sparse USD file needs keys")
-        frames = motion.keys.frames
-    # Translations that are the same at every written frame (as 32-bit floats) are written once, as the
-    # attribute's default: USD resolves a default at every time, and the rotations' samples still give the
-    # frames (and, in a sparse file, the keys).
+
+def written_frames(motion: Motion, sparse: bool) -> np.ndarray:
+    """The frames a USD file of ``motion`` has samples at: every frame, or with ``sparse`` the keys."""
+    if not sparse:
+        return np.arange(motion.num_frames)
+    if motion.keys is None:
+        raise DataError("a sparse USD file needs keys")
+    return motion.keys.frames
+
+
+def write_samples(layer, t_path, r_path, motion: Motion, frames: np.ndarray, start: float = 0.0) -> None:
+    """Author ``motion``'s translations and rotations at ``frames`` as time samples ``start + frame`` of the
+    attributes at ``t_path`` and ``r_path`` in ``layer`` (their specs exist there and hold no samples yet).
+
+    Translations that are the same at every written frame (as 32-bit floats) are written once, as the
+    attribute's default: USD resolves a default at every time, and the rotations' samples still give the
+    frames (and, in a sparse file, the keys). Samples go straight into the layer, in one change block: the
+    same file as attr.Set per frame, four times faster (no change notice per sample). The 32-bit copies are
+    made a block of frames at a time (little memory beside the layer).
+    """
+    _Gf, Sdf, _Usd, _UsdGeom, _UsdSkel, Vt = _pxr()
     held = _held_translations(motion.positions, frames)
     if held is not None:
-        t_attr.Set(Vt.Vec3fArray.FromNumpy(held))
-    # Samples go straight into the layer, in one change block: the same file as
-    # attr.Set per frame, four times faster (no change notice per sample). The
-    # 32-bit copies are made a block of frames at a time (little memory beside the layer).
-    layer, t_path, r_path = stage.GetRootLayer(), t_attr.GetPath(), r_attr.GetPath()
+        layer.GetAttributeAtPath(t_path).default = Vt.Vec3fArray.FromNumpy(held)
     with progress.task("writing USD", len(frames), " frames") as update, Sdf.ChangeBlock():
         for a in range(0, len(frames), BLOCK):
             chunk = frames[a : a + BLOCK]
@@ -212,10 +232,9 @@ def stage_of(motion: Motion, sparse: bool = False, root_name: str = "Root", name
             pos = _float32(motion.positions[chunk]) if held is None else None
             for k, f in enumerate(chunk.tolist()):
                 if pos is not None:
-                    layer.SetTimeSample(t_path, f, Vt.Vec3fArray.FromNumpy(pos[k]))
-                layer.SetTimeSample(r_path, f, Vt.QuatfArray.FromNumpy(rot[k]))
+                    layer.SetTimeSample(t_path, start + f, Vt.Vec3fArray.FromNumpy(pos[k]))
+                layer.SetTimeSample(r_path, start + f, Vt.QuatfArray.FromNumpy(rot[k]))
             update(len(chunk))
-    return stage
 
 
 def _held_translations(positions: np.ndarray, frames: np.ndarray) -> np.ndarray | None:

@@ -50,7 +50,7 @@ import numpy as np
 
 from keyfill import io
 from keyfill.curves import Control, Curves
-from keyfill.errors import DataError, FormatError, NoSuchFile
+from keyfill.errors import DataError, FormatError, NoSuchFile, UsageError
 from keyfill.files import quiet_stderr
 from keyfill.io import usd
 from keyfill.io.usd_custom import CURVE, CURVES, KNOT, checked
@@ -118,9 +118,13 @@ def save(curves: Curves, path: str | Path) -> None:
     """Write ``curves`` atomically: a curves file for USD suffixes, the baked motion for the other formats."""
     from keyfill.files import atomic_output
 
-    if io.FORMATS[io.format_of(path)].family != "usd":
+    fmt = io.format_of(path)
+    if io.FORMATS[fmt].family != "usd":
         io.save(curves.bake(), path)
         return
+    if fmt == "usdz":  # USD writes no package through Export; a curves file is a layer to edit
+        raise UsageError(f"{path}: a curves file is a USD layer ({io.listing(io.suffixes('usd')[:-1])}), not a "
+                         ".usdz package")
     with atomic_output(path) as tmp:
         write(curves, tmp, name=Path(path).stem)
 

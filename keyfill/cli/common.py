@@ -191,6 +191,16 @@ def bvh_layout_option(f):
              "rotation channels); auto (the default) keeps a BVH input's layout and writes the others full.")(f)
 
 
+def usd_layer_option(f):
+    """``--usd-layer``: what a USD output written from a USD input keeps of it (:mod:`keyfill.io.usd_stage`)."""
+    return click.option(
+        "--usd-layer", type=click.Choice(["stage", "over", "new"]),
+        help="What a USD output of a USD input keeps of it. stage (the default): the input's whole stage (meshes, "
+             "materials, skinning, prim names, metadata) with the new joint samples; over: a small layer that "
+             "sublayers the input and holds only the new joint samples, to layer over the asset (e.g. "
+             "--usd-layer over -o shot_anim.usda); new: a new file of the skeleton and animation alone.")(f)
+
+
 def keys_options(f):
     """``--keys`` and ``--key-every`` options."""
     f = click.option(

@@ -21,6 +21,7 @@ from keyfill.cli.common import (
     run_batch,
     say,
     up_axis_option,
+    usd_layer_option,
 )
 from keyfill.errors import UsageError
 from keyfill.learn.registry import ALIASES, METHODS
@@ -75,11 +76,12 @@ from keyfill.learn.registry import ALIASES, METHODS
 @in_format_option
 @up_axis_option
 @bvh_layout_option
+@usd_layer_option
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_plane, method, model, exact_keys, seed,
              device, dna, dna_count, rig_map, feet, ground, library, guard, runtime, fmt, in_fmt, up_axis, bvh_layout,
-             workers, scheduler, connect_timeout, force, batch_size, as_json):
+             usd_layer, workers, scheduler, connect_timeout, force, batch_size, as_json):
     """Fill in the frames between the keys of IN and write the result.
 
     Keys come from --keys or --key-every, or else from the file itself (the
@@ -126,6 +128,8 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete walk.bvh --keys 0,12,30 --method linear -o walk_lerp.bvh
       keyfill complete walk.bvh --key-every 10 -o - --format bvh | keyfill info -
       keyfill complete character.glb --key-every 10 -o filled.glb       (keeps the meshes of character.glb)
+      keyfill complete shot.usda -o filled.usda                         (keeps the stage of shot.usda)
+      keyfill complete shot.usda --usd-layer over -o shot_anim.usda     (only the animation, over shot.usda)
       keyfill complete hops/ --method arnn -o filled/ --workers 2
       keyfill complete 'clips/*.bvh' --key-every 10 -o filled/ --format usda --scheduler tcp://10.0.0.5:8786
       keyfill complete keys.usda --method arnn --model lamp-arnn.onnx -o filled.usda
@@ -141,6 +145,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
       keyfill complete walk.bvh --key-every 30 --method cubic --feet lock -o walk_planted.bvh
       keyfill complete walk.bvh --key-every 30 --method transformer --feet free -o walk_raw.bvh
     """
+    from keyfill.io import usd_stage
     from keyfill.io.batch import is_batch
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete as run
@@ -162,6 +167,8 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
         if dst == "-" or in_fmt is not None or up_axis is not None:
             raise UsageError("a batch reads files by their suffixes and writes into a folder (-o OUTDIR/); "
                              "'-', --in-format and --up-axis take one file")
+        if usd_layer is not None:
+            raise UsageError("--usd-layer takes one input file and one output, not a batch")
         if key_joints or key_positions or key_plane:
             raise UsageError("partial keys (--key-joints, --key-positions, --key-plane) take one file at a time")
 
@@ -180,6 +187,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     fmt = output_format(dst, fmt)  # a misnamed output is refused before any work
     if bvh_layout is not None:
         io.check_bvh_layout(bvh_layout, io.format_of(dst, fmt))
+    usd_stage.check_option(usd_layer, io.format_of(dst, fmt), src)
     refuse_overwriting_input(dst, [src, *dna_files], force)
     refuse_read_only(dst, force)
     motion = io.load(src, input_format(src, in_fmt), up_axis=up_axis)
@@ -188,7 +196,8 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     result = run(motion, keys, method, options)
     frames = motion.num_frames
     del motion  # the input's arrays are not needed to write the result (a long take: half the memory)
-    io.save(result.motion, dst, fmt, source=src, bvh_layout=bvh_layout)
+    io.save(result.motion, dst, fmt, source=src, bvh_layout=bvh_layout,
+            **({} if usd_layer is None else {"usd_layer": usd_layer}))
     say_guard(src, result.info)
     if as_json:
         emit_json({"input": src, "output": dst, **result.info})

@@ -18,6 +18,7 @@ from keyfill.cli.common import (
     run_batch,
     say,
     up_axis_option,
+    usd_layer_option,
 )
 
 
@@ -31,19 +32,25 @@ from keyfill.cli.common import (
 @meters_per_unit_option
 @up_axis_option
 @bvh_layout_option
+@usd_layer_option
 @click.option("--curves", is_flag=True,
               help="Fit editable Bezier curves through the keys and write a curves file (USD only).")
 @keys_options
 @batch_options
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
-def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, curves, keys_text, key_every, workers,
-            scheduler, connect_timeout, force, batch_size, as_json):
-    """Convert a motion file between BVH, USD (.usda, .usdc, .usd) and glTF (.glb, .gltf).
+def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, usd_layer, curves, keys_text, key_every,
+            workers, scheduler, connect_timeout, force, batch_size, as_json):
+    """Convert a motion file between BVH, USD (.usda, .usdc, .usd, .usdz) and glTF (.glb, .gltf).
 
     Formats come from the suffixes; '-' reads standard input or writes
     standard output (then give --in-format / --format). BVH -> USD -> BVH and
     BVH -> glTF -> BVH keep the joint names, channel layouts (--bvh-layout
-    source for one that is not full), Euler orders and End Sites; glTF -> glTF keeps the meshes and materials of SRC. A BVH
+    source for one that is not full), Euler orders and End Sites; glTF -> glTF
+    keeps the meshes and materials of SRC, and USD -> USD (.usda, .usdc, .usd,
+    .usdz) the whole stage of SRC (meshes, materials, skinning, names) with its
+    joint samples replaced, or with --usd-layer over writes a small layer of
+    the new samples over SRC. From glTF to another format, a note on stderr
+    names the meshes and materials left behind. A BVH
     written from USD or glTF gets the layout every reader takes unless the
     file records a full BVH layout (--bvh-layout; docs/formats.md). The output
     is written atomically: on any error no file appears (docs/formats.md).
@@ -70,16 +77,21 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, cu
       keyfill convert capture.bvh capture.usda --meters-per-unit 0.0254     (inches: metersPerUnit 0.0254)
       keyfill convert blender_export.bvh shot.usda --up-axis Z               (upAxis Z)
       keyfill convert edge_layout.bvh for_blender.bvh --bvh-layout full      (3 rotation channels per joint)
+      keyfill convert shot.usdc shot.usdz                                   (a package, with its textures)
+      keyfill convert shot.usda shot_anim.usda --usd-layer over              (a layer over shot.usda)
       keyfill convert mocap/ -o usd/ --format usdc --workers 2
     """
     from keyfill import io
     from keyfill.errors import UsageError
+    from keyfill.io import usd_stage
 
     if outdir is not None:
         if curves or keys_text is not None or key_every is not None or in_fmt is not None \
                 or meters_per_unit is not None or up_axis is not None:
             raise UsageError("-o OUTDIR converts motion files by their suffixes; --curves, --keys, --key-every, "
                              "--in-format, --meters-per-unit and --up-axis take one SRC and DST")
+        if usd_layer is not None:
+            raise UsageError("--usd-layer takes one input file and one output, not a batch")
         if bvh_layout is not None and fmt is not None:
             io.check_bvh_layout(bvh_layout, fmt)
         return run_batch(paths, outdir, fmt, "keyfill.io.batch:convert_chunk", bvh_layout, workers, scheduler,
@@ -96,6 +108,9 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, cu
         fmt = output_format(dst, fmt)
         if bvh_layout is not None:
             io.check_bvh_layout(bvh_layout, io.format_of(dst, fmt))
+        usd_stage.check_option(usd_layer, io.format_of(dst, fmt), src)
+    elif usd_layer is not None:
+        raise UsageError("--usd-layer chooses what a USD output keeps of a USD input; --curves writes a curves file")
     elif bvh_layout is not None:
         raise UsageError("--bvh-layout lays out BVH outputs; --curves writes a USD curves file")
     refuse_overwriting_input(dst, [src], force)
@@ -113,7 +128,8 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, cu
     elif keys_text is not None or key_every is not None:
         raise UsageError("--keys and --key-every choose the keys of --curves; add --curves")
     else:
-        io.save(motion, dst, fmt, source=src, bvh_layout=bvh_layout)
+        layer = {} if usd_layer is None else {"usd_layer": usd_layer}
+        io.save(motion, dst, fmt, source=src, bvh_layout=bvh_layout, **layer)
     if as_json and dst != "-":
         emit_json({"input": src, "output": dst, "frames": motion.num_frames, "joints": motion.num_joints})
     elif dst != "-":

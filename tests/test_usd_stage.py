@@ -363,3 +363,33 @@ def test_check_layer_and_a_package_name():
     usd_stage.check_layer("stage", None)
     with pytest.raises(UsageError, match="usd_layer over writes the animation as a layer over"):
         usd_stage.check_layer("over", None)
+
+
+@pytest.mark.interop
+@pytest.mark.parametrize("layer", ["stage", "over"])
+def test_blender_imports_the_kept_stage_with_its_mesh_material_and_animation(capsys, shot, tmp_path, layer):
+    """Blender 5.0.1 (``.venv-blender``, ``make test-interop``) imports the completed shot: the skinned mesh with
+    its material and armature modifier, the five bones, the frames 1-21, and bone heads where keyfill puts the
+    joints."""
+    import json
+    import subprocess
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent / "interop"))
+    from blender_check import BLENDER_PYTHON, blender_missing
+
+    why = blender_missing()
+    if why:
+        pytest.skip(why)
+    out = tmp_path / "filled.usda"
+    assert run(capsys, "complete", shot, "--usd-layer", layer, "-o", out)[0] == 0
+    script = Path(__file__).parent / "interop" / "blender_usd_stage.py"
+    proc = subprocess.run([str(BLENDER_PYTHON), str(script), str(out)], capture_output=True, text=True,
+                          timeout=300, check=True)
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got["meshes"] == {"Body": {"materials": ["Skin"], "armature": "Armature",
+                                      "groups": ["Hips", "Spine", "Head"]}}
+    assert got["armatures"] == {"Armature": ["Hips", "Spine", "Head", "LegL", "LegR"]} and got["frames"] == [1, 21]
+    world = io.load(out).world_positions()
+    for frame, heads in got["heads"].items():
+        assert np.abs(np.array(heads) - world[int(frame) - 1]).max() < 1e-6

@@ -1,5 +1,5 @@
 # keyfill: `make demo` and `make test` each create .venv, install keyfill with every extra
-# (train: torch, pinned to 2.13.0, the local CPU build; sim: pybullet; dask; onnx: export) and
+# (train: torch, pinned to 2.13.0, the local CPU build; sim: pybullet; dask; onnx: export; fbx: ufbx, for reading .fbx) and
 # pinned dependencies, and the human models' own distribution (models/bandai, CC BY-NC 4.0, editable:
 # weights retrained into its folders are used at once), and run. `pip install .` alone installs none of
 # the extras and no human model.
@@ -17,7 +17,7 @@ OUT := out/demo
 
 $(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx,train,sim,dask]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx,train,sim,dask,fbx]'
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps -e ./models/bandai
 	@touch $(STAMP)
 

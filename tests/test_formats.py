@@ -23,7 +23,7 @@ def test_every_list_of_formats_is_the_table():
     assert batch.MOTION_SUFFIXES == tuple(io.SUFFIXES)
     assert len(io.SUFFIXES) == sum(len(f.suffixes) for f in io.FORMATS.values())  # no suffix twice
     for name, spec in io.FORMATS.items():
-        assert spec.name == name and all(io.format_of("x" + s) == name for s in spec.suffixes)
+        assert spec.name == name and all(io.format_of("x" + s, reading=True) == name for s in spec.suffixes)
 
 
 def test_the_formats_page_lists_the_table():
@@ -46,7 +46,7 @@ def test_library_errors_name_parameters_and_the_cli_its_flags(capsys, tmp_path, 
     monkeypatch.setattr("sys.stdin", TextIOWrapper(BytesIO(b"not a motion file")))
     code, _, err = run(capsys, "info", "-")
     assert code == 2 and err == ("keyfill: error: cannot tell the format of standard input from its first bytes; "
-                                 "give --in-format (bvh, usda, usdc, usd, usdz, glb or gltf)\n")
+                                 "give --in-format (bvh, usda, usdc, usd, usdz, glb, gltf or fbx)\n")
     (tmp_path / "notes.txt").write_text("x")
     with pytest.raises(UsageError, match="; give format$"):
         batch.plan([tmp_path / "notes.txt"], tmp_path / "o")

@@ -9,7 +9,8 @@ the suffix or from ``format=`` (required for ``-`` as standard output; standard 
 recognised by its first bytes, :func:`sniff`).
 BVH is :mod:`keyfill.io.bvh`; USD is :mod:`keyfill.io.usd` (UsdSkel), read
 through :func:`keyfill.io.usd_curves.read_motion` so that a keyfill curves file
-gives its Bezier curves baked at every frame; glTF 2.0 is :mod:`keyfill.io.gltf`.
+gives its Bezier curves baked at every frame; glTF 2.0 is :mod:`keyfill.io.gltf`; FBX is
+:mod:`keyfill.io.fbx`, read only (its ``writer`` is None: an output named ``.fbx`` is refused before any work).
 Saving is atomic: the file appears complete or not at all (see
 :func:`keyfill.files.atomic_output`).
 """
@@ -35,7 +36,8 @@ class Format:
     name: str
     family: str
     reader: str
-    writer: str
+    #: None for a format keyfill reads but does not write (FBX)
+    writer: str | None
     suffixes: tuple[str, ...]
     description: str
     #: suffix of a second file the writer puts beside the output (a ``.gltf``'s ``.bin``), or None
@@ -78,6 +80,8 @@ FORMATS = {f.name: f for f in (
            **_GLTF),
     Format("gltf", suffixes=(".gltf",), description="glTF 2.0 JSON with a .bin beside it (embedded on standard output)",
            sidecar=".bin", **_GLTF),
+    Format("fbx", "fbx", "keyfill.io.fbx:read", None, (".fbx",), "FBX, binary or ASCII (read only; the fbx extra)",
+           magic=b"Kaydara FBX Binary", template=False, named=False),
 )}
 #: suffix (lower case, with the dot) -> format name
 SUFFIXES = {s: f.name for f in FORMATS.values() for s in f.suffixes}
@@ -100,6 +104,17 @@ def suffixes(family: str | None = None) -> list[str]:
     return [s for name in names(family) for s in FORMATS[name].suffixes]
 
 
+def writable() -> list[str]:
+    """The names of the formats keyfill writes (those with a ``writer``), in table order."""
+    return [f.name for f in FORMATS.values() if f.writer is not None]
+
+
+def _refuse_read_only(path, fmt: str) -> None:
+    if FORMATS[fmt].writer is None:
+        where = "standard output" if str(path) == STDIO else str(path)
+        raise UsageError(f"{where}: {fmt.upper()} is read-only in keyfill; write one of {listing(writable())}")
+
+
 def format_of(path: str | os.PathLike, format: str | None = None, reading: bool = False) -> str:
     """The format name for ``path``: ``format`` when given, else from the suffix.
 
@@ -116,14 +131,19 @@ def format_of(path: str | os.PathLike, format: str | None = None, reading: bool 
         if not reading and named is not None and named != fmt:
             raise UsageError(f"{path}: format {fmt} contradicts the suffix {Path(path).suffix!r} (a {named} file); "
                              f"a {fmt} output is named {listing(FORMATS[fmt].suffixes)}", params="format")
+        if not reading:
+            _refuse_read_only(path, fmt)
         return fmt
     if str(path) == STDIO:
-        raise UsageError(f"{'reading' if reading else 'writing'} '-' needs format ({listing(FORMATS)})",
+        raise UsageError(f"{'reading' if reading else 'writing'} '-' needs format "
+                         f"({listing(FORMATS if reading else writable())})",
                          params="format")
     suffix = Path(path).suffix.lower()
     if suffix not in SUFFIXES:
         raise UsageError(f"{path}: unknown file type {Path(path).suffix or '(no suffix)'!r}; "
                          f"expected {listing(SUFFIXES)}")
+    if not reading:
+        _refuse_read_only(path, SUFFIXES[suffix])
     return SUFFIXES[suffix]
 
 

@@ -1,4 +1,4 @@
-"""Import a BVH, USD or glTF file into Blender and print every bone head's world position per frame.
+"""Import a BVH, USD, glTF or FBX file into Blender and print every bone head's world position per frame.
 
 Runs inside Blender's Python (the ``bpy`` wheel in ``.venv-blender``, which
 cannot share keyfill's venv: it pins numpy<2), so it imports nothing from
@@ -32,6 +32,11 @@ and with keyfill:
   the scene's rate, so the scene's fps is first set to the animation's
   ``extras.keyfill.fps`` (read from the file's JSON here).
 
+* FBX (``bpy.ops.import_scene.fbx``, ``use_anim=True``, no leaf bones ignored, no
+  automatic bone orientation): Blender reads the file's own axes and units
+  (a Y-up file is turned Z-up the same way); ``--scale`` is ignored. The
+  importer keys the animation from its first frame on.
+
 ``positions[i]`` is always the file's frame i (Blender frame ``frame_start + i``).
 
 Bone names are Blender's: the BVH joint names (cut to 63 bytes), or for USD the
@@ -62,8 +67,12 @@ def _gltf_fps(path: Path) -> float:
 
 def _import(path: Path, scale: float) -> str:
     suffix = path.suffix.lower()
-    fmt = "bvh" if suffix == ".bvh" else "gltf" if suffix in (".glb", ".gltf") else "usd"
-    if fmt == "gltf":
+    fmt = ("bvh" if suffix == ".bvh" else "gltf" if suffix in (".glb", ".gltf") else "fbx" if suffix == ".fbx"
+           else "usd")
+    if fmt == "fbx":
+        result = bpy.ops.import_scene.fbx(filepath=str(path), use_anim=True, ignore_leaf_bones=False,
+                                          automatic_bone_orientation=False)
+    elif fmt == "gltf":
         fps = _gltf_fps(path)
         bpy.context.scene.render.fps = round(fps)
         bpy.context.scene.render.fps_base = round(fps) / fps
@@ -134,7 +143,7 @@ def world_positions(path: Path, scale: float) -> dict:
 
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("file", type=Path, help="a .bvh, .usda, .usdc, .usd, .glb or .gltf file")
+    parser.add_argument("file", type=Path, help="a .bvh, .usda, .usdc, .usd, .glb, .gltf or .fbx file")
     parser.add_argument("--scale", type=float, default=0.01, help="BVH only: meters per file unit (default 0.01, cm)")
     parser.add_argument("--out", default="-", help="JSON output file ('-': stdout, the default)")
     args = parser.parse_args(argv)

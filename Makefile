@@ -1,12 +1,14 @@
-# keyfill: `make demo` and `make test` each create .venv, install keyfill with every extra
-# (train: torch, pinned to 2.13.0, the local CPU build; sim: pybullet; dask; onnx: export; fbx: ufbx, for reading .fbx) and
-# pinned dependencies, and the human models' own distribution (models/bandai, CC BY-NC 4.0, editable:
-# weights retrained into its folders are used at once), and run. `pip install .` alone installs none of
-# the extras and no human model.
+# keyfill: `make demo` creates .venv and installs what the demo runs: keyfill's base install (pinned
+# dependencies; every shipped model runs through onnxruntime, so no torch) and the human models' own
+# distribution (models/bandai, CC BY-NC 4.0, editable: weights retrained into its folders are used at
+# once). `make test` adds every extra (train: torch, pinned to 2.13.0, the local CPU build; sim: pybullet;
+# dask; onnx: export; fbx: ufbx, for reading .fbx; test). `pip install .` alone installs none of the
+# extras and no human model.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.keyfill-installed
+DEMO_STAMP := $(VENV)/.keyfill-demo-installed
 # Blender's bpy wheel (for `make test-interop`) lives in its own venv: it pins its own numpy. pymotion, the
 # other BVH reader the interop suite checks against, needs only numpy and shares it.
 BLENDER_VENV := .venv-blender
@@ -15,13 +17,17 @@ OUT := out/demo
 
 .PHONY: demo test test-slow test-interop test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
 
-$(STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
+$(DEMO_STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx,train,sim,dask,fbx]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e .
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps -e ./models/bandai
+	@touch $(DEMO_STAMP)
+
+$(STAMP): $(DEMO_STAMP)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[test,onnx,train,sim,dask,fbx]'
 	@touch $(STAMP)
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	@mkdir -p $(OUT)
 	$(BIN)/keyfill complete examples/mixamo_keys.usda -o $(OUT)/mixamo_cubic.usda --method cubic
 	$(BIN)/keyfill convert $(OUT)/mixamo_cubic.usda $(OUT)/mixamo_cubic.bvh

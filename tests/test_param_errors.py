@@ -143,7 +143,7 @@ def files(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     io.save(unkeyed(), tmp_path / "a.bvh")
     io.save(unkeyed(), tmp_path / "b.bvh")
-    io.save(_static_motion(), tmp_path / "still.bvh")
+    io.save(_static_motion(), tmp_path / "still.bvh", bvh_layout="source")  # no rotation channel
     (tmp_path / "x.onnx").write_bytes(b"")
     (tmp_path / "folder").mkdir()
     return tmp_path

@@ -70,11 +70,9 @@ from keyfill import limits, progress
 from keyfill.errors import DataError, FormatError, KeyfillError
 from keyfill.io.usd_samples import BLOCK, decimals, resolve, samples
 from keyfill.kinematics import fk
-from keyfill.motion import POSITION_CHANNELS, Keys, Motion, Skeleton
+from keyfill.motion import FULL_CHANNELS, FULL_ROOT_CHANNELS, Keys, Motion, Skeleton
 
 CUSTOM_KEY = "keyfill"
-_DEFAULT_ROOT_CHANNELS = POSITION_CHANNELS + ("Zrotation", "Xrotation", "Yrotation")
-_DEFAULT_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
 
 
 def _pxr():
@@ -521,7 +519,7 @@ def _skeleton_from(custom, joints, parents, rest_pos, rot, pos, stage, UsdGeom, 
         # position channels, every joint gets three rotation channels.
         moving = _largest_move(pos, rest_pos) > 1e-6 * max(1.0, np.abs(rest_pos).max())
         channels = [
-            _DEFAULT_ROOT_CHANNELS if parents[j] < 0 or moving[j] else _DEFAULT_CHANNELS for j in range(J)
+            FULL_ROOT_CHANNELS if parents[j] < 0 or moving[j] else FULL_CHANNELS for j in range(J)
         ]
     end_joints = _int_list(custom.get("endSiteJoints", []), "endSiteJoints", label)
     try:

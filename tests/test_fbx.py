@@ -96,6 +96,22 @@ def test_writing_fbx_is_refused(capsys, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_batch_of_fbx_needs_an_output_format_before_any_work(capsys, tmp_path):
+    """A batch keeps each input's suffix unless --format: for .fbx inputs that is refused up front, not file by
+    file at write time."""
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "rig.fbx").write_bytes(RIG.read_bytes())
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "convert", src, "-o", f"{out}/")
+    assert code == 2 and "rig.fbx: keyfill does not write .fbx; give --format (one of bvh" in one_error_line(err)
+    code, _, err = run(capsys, "complete", src, "-o", f"{out}/", "--format", "fbx", "--key-every", "5")
+    assert code == 2 and "--format fbx: keyfill reads FBX but does not write it" in one_error_line(err)
+    assert not out.exists()
+    assert run(capsys, "convert", src, "-o", f"{out}/", "--format", "usda")[0] == 0
+    assert (out / "rig.usda").is_file()
+
+
 def bad_files(tmp_path: Path) -> dict[str, Path]:
     data = RIG.read_bytes()
     files = {"truncated": data[: len(data) // 3], "header only": data[:27], "text": b"hello, not an FBX file\n",

@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from keyfill.errors import FormatError, KeyfillError, NoSuchFile, OutputError, UsageError
-from keyfill.io import FORMATS, SUFFIXES, listing
+from keyfill.io import FORMATS, SUFFIXES, listing, writable
 from keyfill.limits import CONNECT_SECONDS
 
 #: suffixes of motion files a folder input contributes (those of :data:`keyfill.io.FORMATS`)
@@ -153,6 +153,9 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None, force: bo
         fmt = format.lower().lstrip(".")
         if fmt not in FORMATS:
             raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+        if FORMATS[fmt].writer is None:
+            raise UsageError(f"format {fmt}: keyfill reads {fmt.upper()} but does not write it; give one of "
+                             f"{listing(writable())}", params="format")
     resolved_out = out.resolve()
     seen: dict[Path, Path] = {}  # output -> input
     items = []
@@ -162,6 +165,9 @@ def plan(inputs, outdir: str | os.PathLike, format: str | None = None, force: bo
             if dst.suffix.lower() not in MOTION_SUFFIXES:
                 raise UsageError(f"{src}: unknown file type {src.suffix or '(no suffix)'!r}; give format",
                                  params="format")
+            if FORMATS[SUFFIXES[dst.suffix.lower()]].writer is None:  # an output in the input's read-only format
+                raise UsageError(f"{src}: keyfill does not write {dst.suffix}; give format (one of "
+                                 f"{listing(writable())}) for the outputs", params="format")
             key = dst.resolve()
             if key in seen:
                 if seen[key].resolve() == src.resolve():

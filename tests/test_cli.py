@@ -201,9 +201,9 @@ def test_file_without_keys_needs_key_options(capsys, tmp_path):
 
 
 def test_unknown_suffix_and_missing_folder_and_missing_file(capsys, tmp_path):
-    code, _, err = run(capsys, "convert", MIXAMO, tmp_path / "out.fbx")
-    assert code == 2 and not (tmp_path / "out.fbx").exists()
-    assert_one_line_error(err, "unknown file type '.fbx'")
+    code, _, err = run(capsys, "convert", MIXAMO, tmp_path / "out.obj")
+    assert code == 2 and not (tmp_path / "out.obj").exists()
+    assert_one_line_error(err, "unknown file type '.obj'")
     code, _, err = run(capsys, "convert", MIXAMO, tmp_path / "nope" / "out.usda")
     assert code == 2 and not (tmp_path / "nope").exists()
     assert_one_line_error(err, "the output folder", "does not exist")

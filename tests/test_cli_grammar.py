@@ -34,7 +34,7 @@ def files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("formats")
     motion = io.load(CMU)
     out = {}
-    for name in io.FORMATS:
+    for name in io.writable():
         path = folder / f"cmu{io.FORMATS[name].suffixes[0]}"
         io.save(motion, path)
         out[name] = path

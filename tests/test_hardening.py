@@ -21,7 +21,7 @@ from conftest import DATA, one_error_line, run
 
 from keyfill import io
 from keyfill.errors import DataError, FormatError
-from keyfill.io import bvh, usd
+from keyfill.io import bvh, bvh_values, usd
 from keyfill.motion import Keys, Motion, Skeleton
 
 REGRESS = DATA / "regress"
@@ -112,7 +112,7 @@ def test_limits_can_be_raised(monkeypatch):
 
 def test_the_motion_block_is_read_in_chunks(monkeypatch):
     m = bvh.read(MIXAMO)
-    monkeypatch.setattr(bvh, "CHUNK_BYTES", 200)  # many chunks; error lines still exact
+    monkeypatch.setattr(bvh_values, "CHUNK_BYTES", 200)  # many chunks; error lines still exact
     again = bvh.parse(bvh.dumps(m))
     assert np.array_equal(again.rotations, bvh.parse(bvh.dumps(m)).rotations)
     lines = bvh.dumps(m).split("\n")

@@ -9,7 +9,7 @@ from conftest import DATA
 
 from keyfill import interpolate, io
 from keyfill import rotations as R
-from keyfill.io import bvh
+from keyfill.io import bvh, bvh_values
 from keyfill.learn.registry import complete
 from keyfill.motion import Keys, Motion
 
@@ -36,7 +36,7 @@ def test_the_reader_gives_the_same_numbers_in_any_chunk_size(tmp_path, monkeypat
     path = tmp_path / "walk.bvh"
     bvh.write(long_motion(300), path)
     whole = bvh.parse(path.read_bytes())
-    monkeypatch.setattr(bvh, "CHUNK_BYTES", 100)
+    monkeypatch.setattr(bvh_values, "CHUNK_BYTES", 100)
     monkeypatch.setattr(bvh, "HEAD_BYTES", 50)
     streamed = bvh.read(path)
     assert np.array_equal(streamed.rotations, whole.rotations)
@@ -47,7 +47,7 @@ def test_a_short_file_is_refused_with_its_line_when_streamed(tmp_path, monkeypat
     text = bvh.dumps(long_motion(50)).replace("Frames: 50", "Frames: 60")
     path = tmp_path / "short.bvh"
     path.write_text(text)
-    monkeypatch.setattr(bvh, "CHUNK_BYTES", 100)
+    monkeypatch.setattr(bvh_values, "CHUNK_BYTES", 100)
     with pytest.raises(io.FormatError, match="'Frames: 60' but 50 lines"):
         bvh.read(path)
 
@@ -60,7 +60,7 @@ def test_the_template_is_followed_the_same_in_any_chunk_size(tmp_path, monkeypat
     motion = bvh.read(src)
     result = complete(motion, Keys(np.arange(0, 400, 37)), "cubic").motion
     bvh.write(result, tmp_path / "whole.bvh", template=src)
-    monkeypatch.setattr(bvh, "CHUNK_BYTES", 333)
+    monkeypatch.setattr(bvh_values, "CHUNK_BYTES", 333)
     bvh.write(result, tmp_path / "chunked.bvh", template=src)
     assert (tmp_path / "chunked.bvh").read_bytes() == (tmp_path / "whole.bvh").read_bytes()
     # and the keys print as the input printed them

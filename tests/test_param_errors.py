@@ -21,7 +21,8 @@ from keyfill import io, limits, parallel, viz
 from keyfill.cli.common import flag, flag_words
 from keyfill.cli.main import main
 from keyfill.errors import DataError, KeyfillError, UsageError
-from keyfill.io.batch import Item, failure
+from keyfill.io.batch import failure
+from keyfill.io.batch_record import Item
 from keyfill.motion import Keys, Motion, Skeleton
 
 MIXAMO = DATA / "bvhtoolbox_test_freebvh_mixamo.bvh"

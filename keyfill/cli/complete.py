@@ -181,7 +181,7 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
     from keyfill.files import refuse_overwriting_input
-    from keyfill.io.batch import refuse_read_only
+    from keyfill.io.batch_record import refuse_read_only
 
     dna_files = [] if dna is None else [dna, dna.rpartition(":")[0]]  # FILE or FILE:FRAMES
     fmt = output_format(dst, fmt)  # a misnamed output is refused before any work

@@ -102,7 +102,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, us
         raise click.UsageError(f"got {len(paths)} paths: give SRC DST, or SRC... -o OUTDIR/")
     src, dst = paths
     from keyfill.files import refuse_overwriting_input
-    from keyfill.io.batch import refuse_read_only
+    from keyfill.io.batch_record import refuse_read_only
 
     if not curves:  # a misnamed output is refused before any work (--curves checks its own below)
         fmt = output_format(dst, fmt)

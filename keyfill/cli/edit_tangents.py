@@ -61,7 +61,7 @@ def output_options(f):
 def run_edits(mode, curves_path, edit_path, dst, solver, best_effort, as_json, frame=None, force=False) -> None:
     """Read the curves, apply the edit file (``mode`` "tangents" or "pose"), write and report."""
     from keyfill.files import refuse_overwriting_input
-    from keyfill.io.batch import refuse_read_only
+    from keyfill.io.batch_record import refuse_read_only
 
     refuse_overwriting_input(dst, [curves_path, edit_path], force)
     refuse_read_only(dst, force)

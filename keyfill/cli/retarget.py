@@ -97,7 +97,7 @@ def retarget(inputs, rig, dst, rig_map, to_rig_map, fmt, in_fmt, workers, schedu
         raise UsageError("several inputs need an output folder: -o OUTDIR/")
     src = inputs[0]
     from keyfill.files import refuse_overwriting_input
-    from keyfill.io.batch import refuse_read_only
+    from keyfill.io.batch_record import refuse_read_only
 
     refuse_overwriting_input(dst, [src, rig], force)
     refuse_read_only(dst, force)

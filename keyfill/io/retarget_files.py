@@ -27,7 +27,8 @@ from keyfill import io
 from keyfill.characters.humanoid import read_rig_map
 from keyfill.characters.retarget import Rig, make_rig, retarget
 from keyfill.errors import DataError, FormatError, KeyfillError
-from keyfill.io.batch import Item, failure
+from keyfill.io.batch import failure
+from keyfill.io.batch_record import Item
 from keyfill.motion import Motion, Skeleton
 
 
@@ -42,7 +43,7 @@ class RetargetSpec:
 
     def recipe(self) -> dict:
         """What shapes every output, for the output folder's record: the rig and rig maps by their SHA-256."""
-        from keyfill.io.batch import file_sha256, input_sha256
+        from keyfill.io.batch_record import file_sha256, input_sha256
 
         return {"command": "retarget", "rig": input_sha256(self.rig),
                 "rig_map": None if self.rig_map is None else file_sha256(self.rig_map),

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from keyfill.errors import FormatError, KeyfillError
-from keyfill.io.batch import Item, bvh_layout, failure
+from keyfill.io.batch import bvh_layout, failure
+from keyfill.io.batch_record import Item
 from keyfill.learn.completion import CompleteOptions
 
 
@@ -36,7 +37,7 @@ class CompleteSpec:
         method, the model's identity (the SHA-256 of its config, weights and graph, not its path), the runtime
         that will run it, the keys and every option; files the options name (rig map, Motion DNA) by their
         SHA-256."""
-        from keyfill.io.batch import file_sha256, input_sha256
+        from keyfill.io.batch_record import file_sha256, input_sha256
         from keyfill.learn.registry import get
 
         m, o = get(self.method), self.options
@@ -58,7 +59,7 @@ def model_identity(method, model: str | None, runtime: str = "auto") -> dict:
     """``{"model": {...}, "runtime": ...}``: the content of the model a learned ``method`` (a registry entry)
     completes with (``model``: a folder, a graph file or None for the shipped one) and the runtime that runs
     it; reads no weights into a network."""
-    from keyfill.io.batch import file_sha256
+    from keyfill.io.batch_record import file_sha256
     from keyfill.learn import onnx
 
     if onnx.is_graph(model):

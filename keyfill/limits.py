@@ -6,26 +6,34 @@ data the file holds *before* they allocate, so a few bytes can never ask for
 gigabytes. The defaults are far above any real motion file; the environment
 variables below raise them for a file that really needs more.
 
-=====================  ==============  ======================================================
-limit                  default         meaning (environment variable to override)
-=====================  ==============  ======================================================
-``max_frames``         10,000,000      frames in one motion (``KEYFILL_MAX_FRAMES``)
-``max_joints``         10,000          joints in one skeleton (``KEYFILL_MAX_JOINTS``)
-``free_joint_frames``  2,000,000       frames x (joints + 8) a file may declare beyond one per
-                                       byte of the file (``KEYFILL_FREE_JOINT_FRAMES``); a motion
-                                       takes 56 bytes per joint and frame in memory, and USD
-                                       costs about as much per frame as per 8 joints
-``max_abs``            1e12            largest magnitude of a coordinate or angle (file units,
-                                       degrees); USD stores 32-bit floats (``KEYFILL_MAX_ABS``)
-fps                    1e-6 .. 1e6     frames per second (BVH ``Frame Time``, USD
-                                       ``timeCodesPerSecond``)
-time codes             |t| <= 1e12     USD start, end and sample times
-model sizes            see             :mod:`keyfill.learn.modelfile`
-=====================  ==============  ======================================================
+=======================  ==============  ======================================================
+limit                    default         meaning (environment variable to override)
+=======================  ==============  ======================================================
+``max_frames``           10,000,000      frames in one motion (``KEYFILL_MAX_FRAMES``)
+``max_joints``           10,000          joints in one skeleton (``KEYFILL_MAX_JOINTS``)
+``free_joint_frames``    2,000,000       frames x (joints + 8) a file may declare beyond one per
+                                         byte of the file (``KEYFILL_FREE_JOINT_FRAMES``); a motion
+                                         takes 56 bytes per joint and frame in memory, and USD
+                                         costs about as much per frame as per 8 joints
+``free_accessor_reads``  16,000,000      numbers a glTF file's accessors may yield, summed over
+                                         every time one is read (channels share accessors; sparse
+                                         ones are mostly zeros), beyond one per byte of the file
+                                         (``KEYFILL_FREE_ACCESSOR_READS``)
+``max_abs``              1e12            largest magnitude of a coordinate or angle (file units,
+                                         degrees); USD stores 32-bit floats (``KEYFILL_MAX_ABS``)
+fps                      1e-6 .. 1e6     frames per second (BVH ``Frame Time``, USD
+                                         ``timeCodesPerSecond``)
+time codes               |t| <= 1e12     USD start, end and sample times
+model sizes              see             :mod:`keyfill.learn.modelfile`
+=======================  ==============  ======================================================
 
 Options: ``--seed`` 0 to 2**63-1 (what numpy's and torch's generators both take), ``--workers`` and
 ``--threads`` 1 to 1,024, ``--connect-timeout`` up to a day; a value outside is a :class:`UsageError`
 before any work, not an overflow deep inside a library.
+
+JSON (glTF, model configs, libraries) is strict: no ``NaN`` or ``Infinity``, no number that overflows a
+64-bit float (``1e400``), no whole number beyond 64 bits (:func:`json_int64`: Python would otherwise spend
+time on, or refuse with its own error, an integer of thousands of digits).
 
 Numbers in BVH text follow one grammar, ``[+-]?(digits[.digits]|.digits)([eE][+-]?digits)?``,
 in the hierarchy and in the motion block alike: no ``inf``, ``nan``, ``1_0`` or hexadecimal.
@@ -50,6 +58,8 @@ MAX_SEED = 2**63 - 1
 #: local worker processes, jobs in flight on a cluster, and torch threads
 MAX_WORKERS = 1024
 MAX_CONNECT_SECONDS = 86_400.0
+#: the bytes of a ``--rig-map`` TOML file (a rig map is a few dozen lines; keyfill.files.read_regular)
+MAX_RIG_MAP_BYTES = 2**20
 #: how long ``--scheduler`` is tried before one error line (``--connect-timeout``'s default, CLI and library)
 CONNECT_SECONDS = 3.0
 
@@ -98,8 +108,44 @@ def free_joint_frames() -> int:
     return _env_int("KEYFILL_FREE_JOINT_FRAMES", 2_000_000)
 
 
+def free_accessor_reads() -> int:
+    return _env_int("KEYFILL_FREE_ACCESSOR_READS", 16_000_000)
+
+
+def check_reads(numbers: int, file_bytes: int) -> str | None:
+    """Why reading ``numbers`` accessor numbers in all (every use of an accessor counted) is more than a
+    ``file_bytes``-byte file may ask for, or None."""
+    allowed = file_bytes + free_accessor_reads()
+    if numbers > allowed:
+        return (f"the file asks for {numbers:,} numbers from its accessors (each counted every time a channel "
+                f"uses it), more than a {file_bytes}-byte file can describe (at most {allowed:,}; set "
+                "KEYFILL_FREE_ACCESSOR_READS to raise it)")
+    return None
+
+
 def max_abs() -> float:
     return _env_float("KEYFILL_MAX_ABS", 1e12)
+
+
+def json_no_constant(name: str):
+    """``parse_constant`` of :func:`json.loads`: ``NaN`` and ``Infinity`` are a :class:`ValueError`."""
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def json_int64(text: str) -> int:
+    """``parse_int`` of :func:`json.loads`: a JSON integer must fit in 64 bits (checked by its length first, so
+    an integer of thousands of digits is never converted)."""
+    if len(text) > 20 or not -(2**63) <= int(text) < 2**63:
+        raise ValueError(f"the integer {text[:12]}{'...' if len(text) > 12 else ''} does not fit in 64 bits")
+    return int(text)
+
+
+def json_finite(text: str) -> float:
+    """``parse_float`` of :func:`json.loads`: a JSON number must be a finite 64-bit float (``1e400`` is not)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text[:20]} is not a finite number")
+    return value
 
 
 def is_number(text: str) -> bool:
@@ -131,7 +177,11 @@ def check_size(frames: int, joints: int, file_bytes: int) -> str | None:
 
 
 def check_fps(fps: float) -> str | None:
-    """Why ``fps`` is not a usable frame rate, or None."""
+    """Why ``fps`` is not a usable frame rate, or None (an int too large for a float is not one either)."""
+    try:
+        fps = float(fps)
+    except OverflowError:
+        fps = math.inf
     if not (math.isfinite(fps) and MIN_FPS <= fps <= MAX_FPS):
         return f"the frame rate {fps:g} fps is outside {MIN_FPS:g} to {MAX_FPS:g}"
     return None

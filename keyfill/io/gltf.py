@@ -120,31 +120,60 @@ def parent_nodes(doc: Document) -> np.ndarray:
 
 def node_transform(node: dict, i: int, label) -> np.ndarray:
     """The ``(4, 4)`` local matrix of a node (column vectors), from ``matrix`` or T, R, S."""
+    return node_transforms([node], [i], label)[0]
+
+
+def node_transforms(nodes: list[dict], ids: list[int], label) -> np.ndarray:
+    """``(K, 4, 4)`` local matrices of ``nodes`` (numbered ``ids`` in errors), at once: a rig of thousands of
+    joints is one array operation, not thousands."""
     limit = limits.max_abs()
-    for key, size in (("matrix", 16), ("translation", 3), ("rotation", 4), ("scale", 3)):
-        if key in node and (len(node[key]) != size or not (np.abs(node[key]) <= limit).all()):
-            raise FormatError(f"node {i}'s {key} is not {size} finite numbers within {limit:g}", label)
-    if "matrix" in node:
-        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
-    q = np.array(node.get("rotation", [0, 0, 0, 1]), dtype=np.float64)[[3, 0, 1, 2]]
-    norm = np.linalg.norm(q)
-    if norm < 1e-6:
-        raise FormatError(f"node {i}'s rotation is zero (not a quaternion)", label)
-    m = np.eye(4)
-    m[:3, :3] = R.quat_to_matrix(q / norm) * np.array(node.get("scale", [1, 1, 1]), dtype=np.float64)
-    m[:3, 3] = node.get("translation", [0, 0, 0])
+    K = len(nodes)
+    t, q, s = np.zeros((K, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (K, 1)), np.ones((K, 3))
+    given, mats = [], []
+    for k, (node, i) in enumerate(zip(nodes, ids)):
+        for key, size in (("matrix", 16), ("translation", 3), ("rotation", 4), ("scale", 3)):
+            if key in node and (len(node[key]) != size or not all(abs(v) <= limit for v in node[key])):
+                raise FormatError(f"node {i}'s {key} is not {size} finite numbers within {limit:g}", label)
+        if "matrix" in node:
+            given.append(k)
+            mats.append(node["matrix"])
+            continue
+        if "translation" in node:
+            t[k] = node["translation"]
+        if "rotation" in node:
+            x, y, z, w = node["rotation"]
+            q[k] = w, x, y, z
+        if "scale" in node:
+            s[k] = node["scale"]
+    norm = np.linalg.norm(q, axis=1)
+    if np.any(norm < 1e-6):
+        raise FormatError(f"node {ids[int(np.argmax(norm < 1e-6))]}'s rotation is zero (not a quaternion)", label)
+    m = np.broadcast_to(np.eye(4), (K, 4, 4)).copy()
+    m[:, :3, :3] = R.quat_to_matrix(q / norm[:, None]) * s[:, None, :]
+    m[:, :3, 3] = t
+    if given:
+        m[given] = np.array(mats, dtype=np.float64).reshape(-1, 4, 4).transpose(0, 2, 1)
     return m
 
 
 def decompose(m: np.ndarray, what: str, label) -> tuple[np.ndarray, float, np.ndarray]:
     """``(rotation (4,), uniform scale, translation (3,))`` of a matrix; refuses shear, mirrors, uneven scale."""
-    cols = np.linalg.norm(m[:3, :3], axis=0)
-    scale = float(cols.mean())
-    rot = m[:3, :3] / max(scale, 1e-300)
-    if (not scale > 0 or np.abs(cols - scale).max() > 1e-6 * scale or np.abs(rot.T @ rot - np.eye(3)).max() > 1e-6
-            or np.linalg.det(rot) < 0):
-        raise FormatError(f"{what} is scaled unevenly, sheared or mirrored; keyfill reads rigid joints", label)
-    return R.quat_from_matrix(rot), scale, m[:3, 3].copy()
+    q, scale, t = decompose_all(m[None], [what], label)
+    return q[0], float(scale[0]), t[0]
+
+
+def decompose_all(m: np.ndarray, whats: list[str], label) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`decompose` of ``(K, 4, 4)`` matrices at once: ``(rotations (K, 4), scales (K,), translations
+    (K, 3))``; ``whats[k]`` names matrix ``k`` in the error."""
+    cols = np.linalg.norm(m[:, :3, :3], axis=1)
+    scale = cols.mean(axis=1)
+    rot = m[:, :3, :3] / np.maximum(scale, 1e-300)[:, None, None]
+    bad = (~(scale > 0) | (np.abs(cols - scale[:, None]).max(axis=1) > 1e-6 * scale)
+           | (np.abs(rot.transpose(0, 2, 1) @ rot - np.eye(3)).max(axis=(1, 2)) > 1e-6) | (np.linalg.det(rot) < 0))
+    if bad.any():
+        raise FormatError(f"{whats[int(np.argmax(bad))]} is scaled unevenly, sheared or mirrored; keyfill reads "
+                          "rigid joints", label)
+    return R.quat_from_matrix(rot), scale, m[:, :3, 3].copy()
 
 
 def joint_names(nodes: list[dict], joints: list[int]) -> list[str]:
@@ -181,39 +210,56 @@ def rig_of(doc: Document, skin: str | int | None, note: bool = True) -> Rig:
             raise FormatError(f"skin {s} has {len(joints)} joints and {len(ibm)} inverse bind matrices", label)
     parent = parent_nodes(doc)
     index = {n: j for j, n in enumerate(joints)}
-    parents, above_nodes = [], {}
+    between = _between(nodes, parent, index, label)
+    parents, above_of = [], {}
     for n in joints:
-        p, between = int(parent[n]), []
-        while p != -1 and p not in index:
-            between.append(p)
-            p = int(parent[p])
-        if p != -1 and any(np.abs(node_transform(nodes[b], b, label) - np.eye(4)).max() > 1e-9 for b in between):
-            raise FormatError(f"joint node {n}'s parent node {between[0]} is not a joint of skin {s} and moves it",
-                              label)
-        parents.append(-1 if p == -1 else index[p])
-        if p == -1:
-            above_nodes[index[n]] = between
+        p = int(parent[n])
+        up, still, m = (-1, True, None) if p == -1 else (p, True, None) if p in index else between[p]
+        if up != -1 and not still:
+            raise FormatError(f"joint node {n}'s parent node {p} is not a joint of skin {s} and moves it", label)
+        parents.append(-1 if up == -1 else index[up])
+        if up == -1:
+            above_of[index[n]] = np.eye(4) if m is None else m
     order = _parents_first(parents)
     new = {old: j for j, old in enumerate(order)}
     joints = [joints[j] for j in order]
     parents = np.array([-1 if parents[j] < 0 else new[parents[j]] for j in order], dtype=np.int64)
-    rest_rot, rest_pos = np.empty((len(joints), 4)), np.empty((len(joints), 3))
-    for j, n in enumerate(joints):
-        q, s_j, t = decompose(node_transform(nodes[n], n, label), f"joint node {n}", label)
-        if abs(s_j - 1) > 1e-3:
-            raise DataError(f"{label}: joint node {n} is scaled ({s_j:g}); keyfill motions have no scale")
-        rest_rot[j], rest_pos[j] = q, t
+    rest_rot, s_j, rest_pos = decompose_all(node_transforms([nodes[n] for n in joints], joints, label),
+                                            [f"joint node {n}" for n in joints], label)
+    if np.any(np.abs(s_j - 1) > 1e-3):
+        k = int(np.argmax(np.abs(s_j - 1) > 1e-3))
+        raise DataError(f"{label}: joint node {joints[k]} is scaled ({s_j[k]:g}); keyfill motions have no scale")
     above, scales = {}, []
-    for old, chain in above_nodes.items():
-        m = np.eye(4)
-        for b in chain:  # from the root's parent upwards
-            m = node_transform(nodes[b], b, label) @ m
+    for old, m in above_of.items():
         q, scale, t = decompose(m, f"the nodes above joint node {joints[new[old]]}", label)
         above[new[old]] = (q, t)
         scales.append(scale)
     if max(scales) - min(scales) > 1e-6 * max(scales):
         raise FormatError(f"the roots of skin {s} sit under nodes of different scales", label)
     return Rig(s, joints, parents, joint_names(nodes, joints), rest_rot, rest_pos, above, float(scales[0]))
+
+
+def _between(nodes: list[dict], parent: np.ndarray, index: dict[int, int], label) -> dict:
+    """Per node that is no joint (of ``index``) and lies above one: ``(the nearest joint above it or -1, whether
+    it and the other nodes up to that joint are at rest (identity), their product (4, 4))``.
+
+    Each node is walked and multiplied once, whatever the number of joints under it: a chain of thousands of
+    such nodes costs as much as its length (it used to be walked again for every joint, quadratic).
+    """
+    out: dict[int, tuple[int, bool, np.ndarray]] = {}
+    for n in index:
+        chain, p = [], int(parent[n])
+        while p != -1 and p not in index and p not in out:
+            chain.append(p)
+            p = int(parent[p])
+        if not chain:
+            continue
+        mats = node_transforms([nodes[b] for b in chain], chain, label)
+        for b, m in zip(reversed(chain), mats[::-1]):  # from the top down
+            q = int(parent[b])
+            up, still, above = (-1, True, np.eye(4)) if q == -1 else (q, True, np.eye(4)) if q in index else out[q]
+            out[b] = (up, still and np.abs(m - np.eye(4)).max() <= 1e-9, above @ m)
+    return out
 
 
 def _parents_first(parents: list[int]) -> list[int]:

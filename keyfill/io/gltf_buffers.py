@@ -6,7 +6,11 @@ the file; the JSON must be strict JSON (no ``NaN``) whose ``asset.version`` is
 ``.gltf``'s own folder (a URI that leaves the folder, is absolute or names a
 scheme is never followed); every accessor must lie inside its buffer view and
 every view inside its buffer, so what is allocated is never more than the file
-holds. Values read are finite and within :func:`keyfill.limits.max_abs`.
+holds, and every number read is counted, each time an accessor is read (channels
+may share one, a sparse one is mostly zeros), against what the file's size allows
+(:func:`keyfill.limits.check_reads`). Values read are finite and within
+:func:`keyfill.limits.max_abs`; JSON numbers are finite 64-bit floats and whole
+numbers fit in 64 bits (:func:`keyfill.limits.json_int64`).
 The JSON is read as JSON and its types checked against :data:`SCHEMA` (the
 properties keyfill uses) rather than through pygltflib, whose decoder coerces
 wrong types silently (a ``count`` of 3.5 becomes 3) and fails on valid files
@@ -117,6 +121,7 @@ class Document:
     folder: Path
     label: object
     size: int  #: bytes of the file and of the buffer files it names (the bound of what it may describe)
+    reads: int = 0  #: accessor numbers read so far, every use counted (:func:`read_accessor` checks it)
 
     def items(self, key: str) -> list[dict]:
         """The objects of a top-level collection (``"nodes"``), ``[]`` when absent."""
@@ -128,9 +133,11 @@ def _strict_json(text: str, label):
         raise FormatError(f"the JSON holds {name}, which is not a JSON number", label)
 
     try:
-        return json.loads(text, parse_constant=refuse)
+        return json.loads(text, parse_constant=refuse, parse_int=limits.json_int64, parse_float=limits.json_finite)
     except json.JSONDecodeError as e:
         raise FormatError(f"not glTF: the JSON is not valid at line {e.lineno} ({e.msg})", label) from None
+    except ValueError as e:  # a number the hooks refuse (json gives no line for it)
+        raise FormatError(f"not glTF: the JSON holds a number keyfill cannot read ({e})", label) from None
     except RecursionError:
         raise FormatError("not glTF: the JSON is nested too deeply", label) from None
 
@@ -199,6 +206,9 @@ def _whole(value, what: str, label, low: int = 0) -> int:
 def resolve_uri(folder: Path, uri: str, label, what: str) -> Path:
     """The file a relative ``uri`` names inside ``folder``; never a path outside it, absolute or with a scheme."""
     name = urllib.parse.unquote(uri)
+    if "\0" in name:
+        raise FormatError(f"{what} has the URI {uri[:60]!r}, which holds a NUL byte (%00); no file has that name",
+                          label)
     parts = Path(name).parts
     if (not name or "\\" in name or urllib.parse.urlsplit(uri).scheme or Path(name).is_absolute()
             or ".." in parts):
@@ -207,13 +217,25 @@ def resolve_uri(folder: Path, uri: str, label, what: str) -> Path:
     target = folder / name
     try:
         inside = target.resolve().is_relative_to(folder.resolve())
-    except OSError:
-        inside = False
+        is_file = target.is_file()
+    except OSError as e:  # a name too long for the file system, a loop of links
+        raise FormatError(f"{what} has the URI {uri[:60]!r}, which names no file that can be read "
+                          f"({e.strerror or e})", label) from None
     if not inside:
         raise FormatError(f"{what} has the URI {uri[:60]!r}, which leads outside the file's folder", label)
-    if not target.is_file():
-        raise FormatError(f"{what}: the file {name!r} it names is missing", label)
+    if not is_file:
+        raise FormatError(f"{what}: the file {name[:60]!r} it names is missing", label)
     return target
+
+
+def read_named(path: Path, label, what: str) -> bytes:
+    """The bytes of the file ``path`` that :func:`resolve_uri` found; a :class:`FormatError` when it cannot be
+    read (no permission, removed since)."""
+    try:
+        return path.read_bytes()
+    except OSError as e:
+        raise FormatError(f"{what}: the file {path.name[:60]!r} it names cannot be read ({e.strerror or e})",
+                          label) from None
 
 
 def data_uri(uri: str, label, what: str) -> bytes:
@@ -238,7 +260,7 @@ def _buffer(buf: dict, i: int, binary: bytes | None, folder: Path, label) -> byt
     elif uri.startswith("data:"):
         data = data_uri(uri, label, what)
     else:
-        data = resolve_uri(folder, uri, label, what).read_bytes()
+        data = read_named(resolve_uri(folder, uri, label, what), label, what)
     if len(data) < length:
         raise FormatError(f"{what} has {len(data)} bytes; its byteLength says {length}", label)
     return data[:length]
@@ -271,6 +293,11 @@ def read_accessor(doc: Document, index, what: str, types: tuple[str, ...], float
     if problem:
         raise FormatError(f"{name}: {problem.replace('frames', 'elements').replace('joints', 'components')}", label)
     sparse = acc.get("sparse")
+    n = sparse.get("count") if isinstance(sparse, dict) else None
+    doc.reads += count * width + (n * (width + 1) if type(n) is int and n > 0 else 0)
+    problem = limits.check_reads(doc.reads, doc.size)
+    if problem:  # before this accessor is given memory: a few shared sparse accessors can ask for gigabytes
+        raise FormatError(f"{name}: {problem}", label)
     if "bufferView" in acc:
         values = _view_elements(doc, acc["bufferView"], acc.get("byteOffset", 0), count, width, dtype, name)
     elif sparse is None:

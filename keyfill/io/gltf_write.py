@@ -36,7 +36,7 @@ from keyfill import limits
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError, UsageError
 from keyfill.io.gltf import EXTRAS, Z_TO_Y, pick, rig_of
-from keyfill.io.gltf_buffers import IMAGE_TYPES, BufferWriter, glb_bytes, load_document, resolve_uri
+from keyfill.io.gltf_buffers import IMAGE_TYPES, BufferWriter, glb_bytes, load_document, read_named, resolve_uri
 from keyfill.kinematics import fk
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 
@@ -242,7 +242,7 @@ def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, byt
         mime = image.get("mimeType") or IMAGE_TYPES.get(source.suffix.lower())
         if mime is None:
             raise FormatError(f"image {i} ({uri[:60]!r}) is of no image type glTF knows", template)
-        image.update(bufferView=writer.add_bytes(source.read_bytes()), mimeType=mime)
+        image.update(bufferView=writer.add_bytes(read_named(source, template, f"image {i}")), mimeType=mime)
         del image["uri"]
         embedded.append(image)
     rot, pos, rest = motion.rotations.copy(), motion.positions.copy(), sk.offsets.copy()

@@ -19,6 +19,7 @@ import json
 import os
 import re
 import signal
+import stat
 import sys
 import tempfile
 import threading
@@ -26,7 +27,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from keyfill.errors import KeyfillError, OutputError, UsageError
+from keyfill.errors import FormatError, KeyfillError, OutputError, UsageError
 
 #: temporary files are ``.<stem>.k<pid>.<random>.part<suffix>``; a USD export adds its own
 #: ``.<stem>.k<pid>.<random>.part.XXXXXX`` beside it. The pid tells a live writer from a dead one.
@@ -168,6 +169,24 @@ def quiet_stderr() -> Iterator[None]:
     finally:
         os.dup2(saved, 2)
         os.close(saved)
+
+
+def read_regular(path: str | os.PathLike, limit: int, what: str) -> bytes:
+    """The bytes of ``path``, a regular file of at most ``limit`` bytes (``what`` names it in errors: "the rig
+    map"); a :class:`FormatError` naming the file for a device (``/dev/zero`` would fill the memory), a pipe,
+    a folder, a longer file or one that cannot be read. The file is opened without blocking (a FIFO without
+    a writer does not hang) and checked by its open descriptor."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise FormatError(f"{what} must be a regular file, not a device, pipe or folder", path)
+            data = f.read(limit + 1)
+    except OSError as e:
+        raise FormatError(f"cannot read {what}: {e.strerror or e}", path) from None
+    if len(data) > limit:
+        raise FormatError(f"{what} is longer than {limit:,} bytes", path)
+    return data
 
 
 def read_json_object(path: str | os.PathLike) -> dict:

@@ -49,7 +49,9 @@ from functools import cached_property
 
 import numpy as np
 
+from keyfill import limits
 from keyfill.errors import DataError, FormatError, UsageError
+from keyfill.files import read_regular
 from keyfill.motion import Skeleton
 
 SIDES = ("l", "r")
@@ -474,13 +476,15 @@ def read_rig_map(path: str | os.PathLike) -> dict[str, str | list[str]]:
     """A rig map from a TOML file of lines ``role = "JointName"`` (``spine = ["Spine", "Chest"]``, ``neck``: a
     list too), for :func:`map_roles`. A :class:`FormatError` naming the file when it cannot be read, is not
     TOML, or has an entry that is no role of :data:`ROLES` or not joint names."""
+    raw = read_regular(path, limits.MAX_RIG_MAP_BYTES, "the rig map")  # a regular file: never /dev/zero
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except OSError as e:
-        raise FormatError(f"cannot read the rig map: {e.strerror or e}", path) from None
+        data = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise FormatError(f"not a TOML rig map: {e}", path) from None
+    except ValueError as e:  # tomllib's int() of an integer of thousands of digits
+        raise FormatError(f"not a usable rig map: {str(e).split(':')[0]}", path) from None
+    except RecursionError:  # tomllib nests arrays and inline tables by recursion
+        raise FormatError("not a usable rig map: arrays or tables nested too deeply", path) from None
     problem = _entries_problem(data)
     if problem:
         raise FormatError(problem, path)

@@ -61,8 +61,10 @@ def _command(method: registry.Method) -> click.Command:
             **options):
         import torch
 
+        from keyfill.learn.modelfile import torch_device
         from keyfill.learn.training import Common, check_outputs, read_checkpoint, side_files, train
 
+        torch_device(device)  # meta, xla or a missing GPU: a usage error before the corpus is read
         if threads is not None:
             check_count("threads", threads, MAX_WORKERS)
             torch.set_num_threads(threads)

@@ -22,7 +22,6 @@ import contextvars
 import functools
 import hashlib
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -31,6 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from keyfill.errors import ModelError, UsageError
+from keyfill.limits import json_finite as _finite
+from keyfill.limits import json_int64 as _int64
+from keyfill.limits import json_no_constant as _no_constant
 from keyfill.motion import Skeleton
 
 FORMAT = "keyfill-model"
@@ -42,24 +44,6 @@ MAX_CONFIG_BYTES = 16 * 2**20
 #: numbers of the weights file :func:`load_model` read last (in this context), which the network that
 #: :func:`build_for_loading` builds must match before it is given memory
 _LOADED_NUMEL: contextvars.ContextVar = contextvars.ContextVar("keyfill_loaded_numel", default=None)
-
-
-def _no_constant(name: str):
-    raise ValueError(f"{name} is not a number JSON allows")
-
-
-def _int64(text: str) -> int:
-    """A JSON integer of the config: it must fit in 64 bits (a seed does; 1e400 written out does not)."""
-    if len(text) > 20 or not -(2**63) <= int(text) < 2**63:
-        raise ValueError(f"the integer {text[:12]}{'...' if len(text) > 12 else ''} does not fit in 64 bits")
-    return int(text)
-
-
-def _finite(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"{text[:20]} is not a finite number")
-    return value
 
 
 def bounded_array(values, what: str, shape: tuple | None = None, above: float | None = None) -> np.ndarray:
@@ -292,14 +276,25 @@ def _load_cached(loader, path: str, device: str, stamp: tuple):
     return loader(path, device)
 
 
+#: the torch device types keyfill runs its networks on (``meta`` holds no data, ``xla``, ``mps`` and the
+#: others are not in the torch keyfill installs)
+DEVICE_TYPES = ("cpu", "cuda")
+
+
 def torch_device(name: str):
-    """``torch.device(name)``, or a :class:`UsageError` (naming the parameter ``device``) when it is not there."""
+    """``torch.device(name)``, or a :class:`UsageError` (naming the parameter ``device``) when it is not a
+    device keyfill can run on here: ``cpu``, or ``cuda`` / ``cuda:N`` with such a GPU."""
     import torch
 
     try:
         dev = torch.device(name)
     except (RuntimeError, ValueError):
         raise UsageError(f"unknown torch device {name!r}; use cpu, cuda or cuda:N") from None
+    if dev.type not in DEVICE_TYPES:
+        raise UsageError(f"device {name!r} is not one keyfill runs on; use cpu, cuda or cuda:N", params="device")
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise UsageError(f"{name!r} was asked for, but torch sees no CUDA GPU here; use device cpu", params="device")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise UsageError(f"{name!r} was asked for, but torch sees {torch.cuda.device_count()} CUDA GPU(s) here "
+                         f"(cuda:0 to cuda:{torch.cuda.device_count() - 1})", params="device")
     return dev

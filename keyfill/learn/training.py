@@ -367,7 +367,10 @@ def train(
     """
     import torch
 
+    from keyfill.learn.modelfile import torch_device
+
     check_seed(seed)
+    torch_device(device)  # a device keyfill can train on here (not meta, xla, a missing GPU), before any work
     ctx = distributed_context(device)
     try:
         check_outputs(output, checkpoint, log)

@@ -192,10 +192,12 @@ def read_regular(path: str | os.PathLike, limit: int, what: str) -> bytes:
 def read_json_object(path: str | os.PathLike) -> dict:
     """The JSON object in the settings file ``path``; a :class:`UsageError` of one line (with the line
     number for bad JSON) when it cannot be read, is not JSON or is not an object."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise UsageError(f"{path}: cannot read the config ({e.strerror})") from None
+    from keyfill import limits
+
+    try:  # a regular file of bounded size: never /dev/zero or a FIFO
+        data = json.loads(read_regular(path, limits.MAX_SETTINGS_BYTES, "the config").decode("utf-8"))
+    except FormatError as e:
+        raise UsageError(str(e)) from None
     except json.JSONDecodeError as e:
         raise UsageError(f"{path}:{e.lineno}: not valid JSON ({e.msg})") from None
     except UnicodeDecodeError as e:

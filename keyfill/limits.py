@@ -58,8 +58,9 @@ MAX_SEED = 2**63 - 1
 #: local worker processes, jobs in flight on a cluster, and torch threads
 MAX_WORKERS = 1024
 MAX_CONNECT_SECONDS = 86_400.0
-#: the bytes of a ``--rig-map`` TOML file (a rig map is a few dozen lines; keyfill.files.read_regular)
-MAX_RIG_MAP_BYTES = 2**20
+#: the bytes of a settings file a user hands keyfill: a ``--rig-map`` (a few dozen lines), a ``--config`` or
+#: an edit file (a few lines per edit) (keyfill.files.read_regular)
+MAX_SETTINGS_BYTES = 2**20
 #: how long ``--scheduler`` is tried before one error line (``--connect-timeout``'s default, CLI and library)
 CONNECT_SECONDS = 3.0
 

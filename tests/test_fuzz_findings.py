@@ -311,3 +311,28 @@ def test_graphs_and_libraries_whose_parents_form_a_cycle_are_refused(capsys, tmp
     line = one_error_line(err)
     assert code == 1 and str(library) in line and "its parent must come before it" in line, line
     assert not out.exists()
+
+
+# --- 4b. the other settings files: edit files and --config -----------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["device", "fifo"])
+def test_edit_files_and_configs_are_regular_files(capsys, tmp_path, kind):
+    """/dev/zero read to its end fills the memory and a FIFO waits for a writer: an edit file and a training
+    --config are read as a rig map is (files.read_regular)."""
+    if kind == "device":
+        path = Path("/dev/zero")
+    else:
+        path = tmp_path / "settings"
+        os.mkfifo(path)
+    curves = LAMP_KEYS.parents[1] / "edit" / "lamp_nod_curves.usda"
+    out = tmp_path / "out.usda"
+    start = time.perf_counter()
+    code, stdout, err = _clean_run(capsys, "edit-tangents", curves, "--edit", path, "-o", out)
+    line = one_error_line(err)
+    assert code == 1 and str(path) in line and "the edit file must be a regular file" in line, line
+    assert stdout == ""
+    code, stdout, err = _clean_run(capsys, "train", "transformer", DATA, "-o", tmp_path / "m", "--config", path)
+    line = one_error_line(err)
+    assert code == 2 and str(path) in line and "the config must be a regular file" in line, line
+    assert stdout == "" and not out.exists() and not (tmp_path / "m").exists() and time.perf_counter() - start < 20

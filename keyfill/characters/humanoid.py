@@ -476,7 +476,7 @@ def read_rig_map(path: str | os.PathLike) -> dict[str, str | list[str]]:
     """A rig map from a TOML file of lines ``role = "JointName"`` (``spine = ["Spine", "Chest"]``, ``neck``: a
     list too), for :func:`map_roles`. A :class:`FormatError` naming the file when it cannot be read, is not
     TOML, or has an entry that is no role of :data:`ROLES` or not joint names."""
-    raw = read_regular(path, limits.MAX_RIG_MAP_BYTES, "the rig map")  # a regular file: never /dev/zero
+    raw = read_regular(path, limits.MAX_SETTINGS_BYTES, "the rig map")  # a regular file: never /dev/zero
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:

@@ -56,6 +56,7 @@ from keyfill import limits
 from keyfill.curves import Curves
 from keyfill.edit.rig import Point
 from keyfill.errors import FormatError, KeyfillError, NoSuchFile
+from keyfill.files import read_regular
 
 
 @dataclass(frozen=True, eq=False)
@@ -446,11 +447,11 @@ def load(path: str | Path, curves: Curves, mode: str = "tangents", frame: float 
     :class:`FormatError` naming the file and line (:class:`NoSuchFile` when there is no file).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise NoSuchFile(path) from None
-    except (OSError, UnicodeDecodeError) as e:
+    if not path.exists():
+        raise NoSuchFile(path)
+    try:  # a regular file of bounded size: never /dev/zero or a FIFO
+        text = read_regular(path, limits.MAX_SETTINGS_BYTES, "the edit file").decode("utf-8")
+    except UnicodeDecodeError as e:
         raise FormatError(f"cannot read the edit file ({e})", path) from None
     try:
         data = tomllib.loads(text)

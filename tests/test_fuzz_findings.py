@@ -336,3 +336,24 @@ def test_edit_files_and_configs_are_regular_files(capsys, tmp_path, kind):
     line = one_error_line(err)
     assert code == 2 and str(path) in line and "the config must be a regular file" in line, line
     assert stdout == "" and not out.exists() and not (tmp_path / "m").exists() and time.perf_counter() - start < 20
+
+
+@pytest.mark.parametrize("uri", ["/dev/zero", "../outside.bin", "fifo.bin"])
+def test_a_batch_follows_a_gltf_uri_only_where_the_reader_does(capsys, tmp_path, uri):
+    """Hashing a batch's inputs followed every buffer URI (absolute, ``../``, a FIFO): /dev/zero or a FIFO hung
+    it. It now follows them as the reader does, and the input fails with the reader's own line."""
+    src = tmp_path / "in"
+    src.mkdir()
+    assert run(capsys, "convert", CMU, src / "a.gltf")[0] == 0
+    doc = json.loads((src / "a.gltf").read_text())
+    doc["buffers"][0]["uri"] = uri
+    (src / "a.gltf").write_text(json.dumps(doc))
+    (tmp_path / "outside.bin").write_bytes((src / "a.bin").read_bytes())
+    os.mkfifo(src / "fifo.bin")
+    out = tmp_path / "out"
+    start = time.perf_counter()
+    code, _, err = _clean_run(capsys, "convert", src, "-o", f"{out}/", "--format", "bvh")
+    assert code == 1 and time.perf_counter() - start < 20
+    lines = err.strip().splitlines()
+    assert lines[0].startswith(f"keyfill: error: {src / 'a.gltf'}: buffer 0") and "Traceback" not in err
+    assert not (out / "a.bvh").exists()

@@ -23,11 +23,12 @@ import contextlib
 import hashlib
 import json
 import os
+import stat
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from keyfill.errors import OutputError, UsageError
+from keyfill.errors import FormatError, OutputError, UsageError
 from keyfill.io import FORMATS, SUFFIXES
 
 
@@ -55,10 +56,13 @@ _DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
 def file_sha256(path: str | os.PathLike) -> str | None:
-    """SHA-256 (hex) of the bytes of ``path``, or None when it cannot be read."""
+    """SHA-256 (hex) of the bytes of ``path``, or None when it cannot be read or is no regular file (a FIFO
+    would wait for a writer, ``/dev/zero`` never end)."""
     try:
         real = os.path.realpath(path)
         st = os.stat(real)
+        if not stat.S_ISREG(st.st_mode):
+            return None
         key = (real, st.st_size, st.st_mtime_ns)
         if key not in _DIGESTS:
             h = hashlib.sha256()
@@ -73,7 +77,9 @@ def file_sha256(path: str | os.PathLike) -> str | None:
 
 def input_sha256(path: str | os.PathLike) -> str | None:
     """SHA-256 of the bytes that make up the motion file ``path``: the file, and for a ``.gltf`` also the files
-    its buffers and images name (the ``.bin`` beside it); None when the file cannot be read."""
+    its buffers and images name (the ``.bin`` beside it) where the reader follows them (inside the file's folder:
+    :func:`keyfill.io.gltf_buffers.resolve_uri`; the reader refuses the others); None when the file cannot be
+    read."""
     digest = file_sha256(path)
     if digest is None or Path(path).suffix.lower() != ".gltf":
         return digest
@@ -81,7 +87,7 @@ def input_sha256(path: str | os.PathLike) -> str | None:
         doc = json.loads(Path(path).read_bytes())
     except (OSError, ValueError):
         return digest  # the reader reports it
-    from urllib.parse import unquote
+    from keyfill.io.gltf_buffers import resolve_uri
 
     parts = [digest]
     for key in ("buffers", "images"):
@@ -89,7 +95,11 @@ def input_sha256(path: str | os.PathLike) -> str | None:
         for entry in entries if isinstance(entries, list) else ():
             uri = entry.get("uri") if isinstance(entry, dict) else None
             if isinstance(uri, str) and not uri.startswith("data:"):
-                parts.append(f"{uri}\0{file_sha256(Path(path).parent / unquote(uri))}")
+                try:
+                    named = file_sha256(resolve_uri(Path(path).parent, uri, path, key))
+                except FormatError:  # outside the folder, missing, not a file: the reader says so for this input
+                    named = None
+                parts.append(f"{uri}\0{named}")
     return digest if len(parts) == 1 else hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 

@@ -224,7 +224,8 @@ def resolve_uri(folder: Path, uri: str, label, what: str) -> Path:
     if not inside:
         raise FormatError(f"{what} has the URI {uri[:60]!r}, which leads outside the file's folder", label)
     if not is_file:
-        raise FormatError(f"{what}: the file {name[:60]!r} it names is missing", label)
+        why = "is not a regular file (a folder, pipe or device)" if target.exists() else "is missing"
+        raise FormatError(f"{what}: the file {name[:60]!r} it names {why}", label)
     return target
 
 

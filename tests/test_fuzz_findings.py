@@ -357,3 +357,33 @@ def test_a_batch_follows_a_gltf_uri_only_where_the_reader_does(capsys, tmp_path,
     lines = err.strip().splitlines()
     assert lines[0].startswith(f"keyfill: error: {src / 'a.gltf'}: buffer 0") and "Traceback" not in err
     assert not (out / "a.bvh").exists()
+
+
+def test_a_usd_layer_that_is_no_regular_file_is_one_line_not_a_hang(capsys, tmp_path):
+    """A sublayer that is a FIFO hung USD's stage opening (no signal reaches it there); every layer a stage
+    composes is checked first, in single and batch runs."""
+    shot = tmp_path / "in" / "shot.usda"
+    shot.parent.mkdir()
+    shot.write_text('#usda 1.0\n(\n    subLayers = [@./fifo.usda@]\n)\n')
+    os.mkfifo(shot.parent / "fifo.usda")
+    start = time.perf_counter()
+    code, _, err = _clean_run(capsys, "info", shot)
+    assert code == 1 and "fifo.usda', which is not a regular file" in one_error_line(err)
+    code, _, err = _clean_run(capsys, "convert", shot.parent, "-o", f"{tmp_path / 'out'}/", "--format", "bvh")
+    assert code == 1 and "fifo.usda', which is not a regular file" in err.strip().splitlines()[0]
+    assert time.perf_counter() - start < 20 and not (tmp_path / "out" / "shot.bvh").exists()
+
+
+def test_a_batch_redoes_a_usd_output_whose_sublayer_changed(capsys, tmp_path):
+    """The record's input digest covers the layers a USD stage composes, not only its root file."""
+    src = tmp_path / "in"
+    src.mkdir()
+    assert run(capsys, "convert", CMU, tmp_path / "anim.usda")[0] == 0
+    (src / "shot.usda").write_text(f'#usda 1.0\n(\n    subLayers = [@{tmp_path / "anim.usda"}@]\n)\n')
+    out = f"{tmp_path / 'out'}/"
+    assert run(capsys, "convert", src, "-o", out, "--format", "bvh", "--json")[0] == 0
+    assert json.loads(run(capsys, "convert", src, "-o", out, "--format", "bvh", "--json")[1])["skipped"] == 1
+    motion = io.load(tmp_path / "anim.usda")
+    io.save(motion.replace(positions=motion.positions + 1.0), tmp_path / "anim.usda")
+    code, stdout, _ = run(capsys, "convert", src, "-o", out, "--format", "bvh", "--json")
+    assert code == 0 and json.loads(stdout)["redone"] == 1

@@ -76,11 +76,14 @@ def file_sha256(path: str | os.PathLike) -> str | None:
 
 
 def input_sha256(path: str | os.PathLike) -> str | None:
-    """SHA-256 of the bytes that make up the motion file ``path``: the file, and for a ``.gltf`` also the files
-    its buffers and images name (the ``.bin`` beside it) where the reader follows them (inside the file's folder:
+    """SHA-256 of the bytes that make up the motion file ``path``: the file; for USD also the layers its stage
+    composes (sublayers, references, payloads); for a ``.gltf`` also the files its buffers and images name (the ``.bin`` beside it) where the reader follows them (inside the file's folder:
     :func:`keyfill.io.gltf_buffers.resolve_uri`; the reader refuses the others); None when the file cannot be
     read."""
     digest = file_sha256(path)
+    family = FORMATS[SUFFIXES[Path(path).suffix.lower()]].family if Path(path).suffix.lower() in SUFFIXES else None
+    if digest is not None and family == "usd":
+        return _usd_sha256(path, digest)
     if digest is None or Path(path).suffix.lower() != ".gltf":
         return digest
     try:
@@ -101,6 +104,21 @@ def input_sha256(path: str | os.PathLike) -> str | None:
                     named = None
                 parts.append(f"{uri}\0{named}")
     return digest if len(parts) == 1 else hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def _usd_sha256(path: str | os.PathLike, digest: str) -> str:
+    """The digest of a USD file ``path`` (whose own is ``digest``) and of the layers its stage composes
+    (:func:`keyfill.io.usd_layers.layer_files`): a changed sublayer or reference changes the input."""
+    from keyfill.io.usd_layers import layer_files
+
+    try:
+        layers = layer_files(path, path)[1:]
+    except Exception:  # noqa: BLE001 - not USD, or a layer that is no regular file: the reader says so
+        return digest
+    if not layers:
+        return digest
+    parts = [digest] + [f"{p}\0{file_sha256(p)}" for p in layers]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 
 def recipe_digest(recipe: dict) -> str:

@@ -68,7 +68,7 @@ import numpy as np
 
 from keyfill import limits, progress
 from keyfill.errors import DataError, FormatError, KeyfillError
-from keyfill.io.usd_layers import layer_files
+from keyfill.io.usd_layers import composed_layers
 from keyfill.io.usd_samples import BLOCK, decimals, resolve, samples
 from keyfill.kinematics import fk
 from keyfill.motion import FULL_CHANNELS, FULL_ROOT_CHANNELS, Keys, Motion, Skeleton
@@ -341,12 +341,13 @@ def read(path: str | Path, label=None) -> Motion:
 
 def open_stage(path: str | Path, label=None):
     """The ``Usd.Stage`` of ``path``; :class:`FormatError` (naming ``label``) when it is not USD or composes a
-    layer that is not a regular file (:func:`layer_files`)."""
+    layer that is not a regular file (:func:`~keyfill.io.usd_layers.composed_layers`)."""
     Usd = _pxr()[2]
     label = label if label is not None else path
     try:
-        layer_files(path, label)
+        held = composed_layers(path, label)  # checked, and parsed once: the stage reuses them
         stage = Usd.Stage.Open(str(path))
+        del held
     except FormatError:
         raise
     except Exception as e:  # noqa: BLE001 - pxr raises Tf.ErrorException (and others) with a multi-line text

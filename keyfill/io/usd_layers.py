@@ -15,14 +15,20 @@ from keyfill.errors import FormatError
 
 
 def layer_files(path: str | Path, label=None) -> list[Path]:
-    """The files of the layers the stage of ``path`` composes: the file, its sublayers, references and payloads,
+    """The files of :func:`composed_layers`."""
+    return [file for file, _ in composed_layers(path, label)]
+
+
+def composed_layers(path: str | Path, label=None) -> list[tuple[Path, object]]:
+    """``(file, Sdf.Layer)`` of each layer the stage of ``path`` composes (the layers open: a stage opened
+    while they are held reuses them instead of parsing them again): the file, its sublayers, references and payloads,
     and theirs, as USD resolves them (relative to the layer that names them, or absolute: USD pipelines keep
     assets beside their shots). Each must be a regular file: a pipe would wait for a writer and a device never
     end, inside USD where no signal reaches (:class:`FormatError` naming it); a layer that cannot be found or
     read is left to USD. Inside a ``.usdz`` package only the package itself is a file."""
     from pxr import Sdf
 
-    files: list[Path] = []
+    files: list[tuple[Path, object]] = []
     todo, seen = [os.path.abspath(path)], set()
     while todo:
         name = todo.pop()
@@ -35,8 +41,8 @@ def layer_files(path: str | Path, label=None) -> list[Path]:
             continue
         if not stat.S_ISREG(mode):
             raise FormatError(f"it composes {name!r}, which is not a regular file (a pipe, device or folder)", label)
-        files.append(Path(name))
         layer = Sdf.Layer.FindOrOpen(name)
+        files.append((Path(name), layer))
         if layer is not None:
             todo.extend(layer.ComputeAbsolutePath(a) for a in layer.GetCompositionAssetDependencies() if a)
     return files

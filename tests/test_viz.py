@@ -451,3 +451,41 @@ def test_bandai_walk_preview(tmp_path):
     info = S.preview([motion], ["walk"], tmp_path / "walk.gif")
     frames, delays = gif_frames(tmp_path / "walk.gif")
     assert len(frames) == 31 and abs(sum(delays) - 1033) <= 10 and info.size == (frames[0].shape[1], frames[0].shape[0])
+
+
+def _figure_rows(cell: np.ndarray) -> int:
+    """The height in pixels of what is drawn in the file's colours (not white, grey ground or text)."""
+    rgb = cell.astype(int)
+    coloured = (np.abs(rgb - rgb.mean(axis=-1, keepdims=True)).max(axis=-1) > 40)  # saturated: a figure
+    rows = np.flatnonzero(coloured.any(axis=1))
+    return 0 if not len(rows) else int(rows[-1] - rows[0] + 1)
+
+
+def test_a_filmstrip_of_a_long_walk_follows_the_figures(tmp_path):
+    """A 12 m walk framed whole drew figures about a fifth of the frame's height (the issue: 70 px of 300); the
+    camera follows them now: every cell shows them at least a third of its height, at one scale."""
+    long_walk = walker(frames=300, speed=4.0, keys=(0, 100, 200, 299))  # 4 cm a frame: 12 m
+    info = S.preview([long_walk, walker(frames=300, speed=4.0, swing=0.3, keys=None)], ["a", "b"],
+                     tmp_path / "s.png")
+    W, H = info.frame_size
+    im = pixels(tmp_path / "s.png")
+    heights = [_figure_rows(im[4:4 + H, 4 + i * (W + 4): 4 + i * (W + 4) + W]) for i in range(len(info.frames))]
+    assert min(heights) >= H / 3, heights
+    assert max(heights) - min(heights) <= 0.12 * H  # the same scale in every cell (the walker bobs 2 cm)
+    assert {0, 100, 200, 299} <= set(info.frames)  # the keys are among the frames shown
+    # framed whole (the old picture) the figures were small: the check above can fail
+    r = S.StickRenderer([long_walk], ["a"], "side", None, -S.STRIP_HEIGHT)
+    assert r.centers is None
+    assert (r.ax.get_ylim()[1] - r.ax.get_ylim()[0]) > 3 * 160  # the 160 cm figure under a third of the view
+
+
+def test_a_short_motion_is_framed_whole(tmp_path):
+    r = S.StickRenderer([walker()], ["w"], "side", None, -S.STRIP_HEIGHT, follow=True)
+    assert r.centers is None  # 24 frames of a walk: the figures fill the frame already
+
+
+def test_filmstrip_frames_are_the_keys_then_the_middles_of_the_widest_gaps():
+    assert S.strip_frames(24, []) == [0, 3, 7, 10, 13, 16, 20, 23]
+    assert S.strip_frames(273, [0, 68, 137, 205, 272]) == [0, 34, 68, 102, 137, 171, 205, 272]
+    assert S.strip_frames(300, range(0, 300, 10)) == [0, 40, 80, 120, 170, 210, 250, 290]  # 8 of 30 keys
+    assert S.strip_frames(3, [1]) == [0, 1, 2] and S.strip_frames(100, [50])[:2] == [0, 12]

@@ -32,6 +32,9 @@ from keyfill.viz.scene import VIEWS, figure_points, ground_segments, is_planar, 
 GIF_SIDE, STILL_SIDE, STRIP_HEIGHT = 480, 720, 300
 #: the shortest side of a default-sized picture (a wide motion gets a wider picture, not a lower one)
 MIN_SIDE = 300
+#: a filmstrip or GIF follows the figures when framing every frame at once would draw them under this share of
+#: the picture's height (:class:`StickRenderer`'s ``follow``)
+FOLLOW_BELOW = 1 / 3
 #: frames in a filmstrip without --step, and per filmstrip row
 STRIP_FRAMES, STRIP_COLUMNS = 8, 8
 #: most frames a GIF may have (Pillow holds them all in memory)
@@ -75,10 +78,14 @@ class StickRenderer:
         trail: joint names whose world paths to draw.
         first_frame: file frame number of frame 0 (for the labels).
         legend_keys: add a pink "keys" entry to the legend.
+        follow: frame each picture around the figures of its frame (a camera that follows them sideways) when
+            framing every frame at once would draw them under :data:`FOLLOW_BELOW` of the picture's height (a
+            10 m walk in a 600 x 300 frame); the scale stays the same in every picture.
     """
 
     def __init__(self, motions: Sequence[Motion], labels: Sequence[str], view: str, size: tuple[int, int] | None,
-                 default_side: int, trail: Sequence[str] = (), first_frame: int = 0, legend_keys: bool = False):
+                 default_side: int, trail: Sequence[str] = (), first_frame: int = 0, legend_keys: bool = False,
+                 follow: bool = False):
         from keyfill.viz import style
 
         self.style = style
@@ -106,11 +113,15 @@ class StickRenderer:
         feet[:, up_index(up_axis)] = level
         xy = self.camera.project(np.concatenate([drawn, feet]))
         lo, hi = xy.min(axis=0), xy.max(axis=0)
-        span = max(float((hi - lo).max()), 1e-9)
-        lo, hi = lo - 0.06 * span, hi + 0.06 * span
-        hi[1] += 0.08 * span  # room for the frame label
-        self.size = size or _default_size((hi[0] - lo[0]) / (hi[1] - lo[1]), default_side)
-        lo, hi = _fit(lo, hi, self.size[0] / self.size[1])
+        self.size, view_lo, view_hi = _frame(lo, hi, size, default_side)
+        self.centers = None  # per frame, the x of the picture's centre when the camera follows
+        if follow and (hi[1] - lo[1]) < FOLLOW_BELOW * (view_hi[1] - view_lo[1]):
+            self.centers, width = self._follow()
+            width = max(width, 0.8 * float(hi[1] - lo[1]))  # room for a stride, the frame label and the legend
+            box_lo, box_hi = np.array([-width / 2, lo[1]]), np.array([width / 2, hi[1]])
+            self.size, view_lo, view_hi = _frame(box_lo, box_hi, size, default_side)
+        lo, hi = view_lo, view_hi
+        self.half_width = (hi[0] - lo[0]) / 2
         self.keys = motions[0].keys.frames if motions[0].keys is not None else np.zeros(0, dtype=np.int64)
         trails = [(n, m.skeleton.index(name)) for n, m in enumerate(motions) for name in trail]
         legend = [(label, style.FILE_COLORS[n % len(style.FILE_COLORS)]) for n, label in enumerate(labels)]
@@ -119,6 +130,20 @@ class StickRenderer:
             legend.append(("keys", style.KEY_COLOR))
         with style.style():
             self._build(lo, hi, ground, trails, [m.keys for m in motions], legend)
+
+    def _follow(self) -> tuple[np.ndarray, float]:
+        """``(per-frame centre x (T,), the width of the figures' widest frame)``, on the screen's x axis."""
+        T = max(len(f.points) for f in self.figs)
+        boxes_lo, boxes_hi = np.full(T, np.inf), np.full(T, -np.inf)
+        for f in self.figs:
+            xy = self.camera.project(f.points[:, f.used].reshape(-1, 3)).reshape(len(f.points), -1, 2)[..., 0]
+            n = len(f.points)
+            boxes_lo[:n] = np.minimum(boxes_lo[:n], xy.min(axis=1))
+            boxes_hi[:n] = np.maximum(boxes_hi[:n], xy.max(axis=1))
+            if n < T:  # a shorter motion holds its last pose
+                boxes_lo[n:] = np.minimum(boxes_lo[n:], xy[-1].min())
+                boxes_hi[n:] = np.maximum(boxes_hi[n:], xy[-1].max())
+        return (boxes_lo + boxes_hi) / 2, float((boxes_hi - boxes_lo).max())
 
     def _build(self, lo, hi, ground, trails, keys, legend):
         from matplotlib.collections import LineCollection
@@ -190,7 +215,12 @@ class StickRenderer:
         st = self.style
         at_key = t is not None and t in self.keys
         canvas = self.fig.canvas
-        canvas.restore_region(self.background)
+        if self.centers is not None and t is not None:  # the camera follows: the static layer moves with it
+            c = float(self.centers[min(t, len(self.centers) - 1)])
+            self.ax.set_xlim(c - self.half_width, c + self.half_width)
+            canvas.draw()
+        else:
+            canvas.restore_region(self.background)
         if len(self.figs[0].bones):
             self.ghost.set_segments([seg for g in ghosts for seg in self._screen(0, int(g))])
             self.ax.draw_artist(self.ghost)
@@ -251,6 +281,41 @@ def _default_size(aspect: float, side: int) -> tuple[int, int]:
         grow = max(1.0, MIN_SIDE / min(w, h))  # readable: a wide motion gets a wider picture, no side under MIN_SIDE
         w, h = w * grow, h * grow
     return round(w / 2) * 2, round(h / 2) * 2
+
+
+def strip_frames(length: int, keys, count: int = STRIP_FRAMES) -> list[int]:
+    """The frames of a filmstrip of ``length`` frames: ``count`` evenly spaced ones, or with ``keys`` the keys
+    (``count`` of them evenly chosen when there are more), then the middle of the widest gap between shown
+    frames (the first and last frame count as shown) until there are ``count``."""
+    keys = sorted({int(k) for k in keys if 0 <= k < length})
+    if not keys:
+        return sorted(set(np.round(np.linspace(0, length - 1, min(count, length))).astype(int).tolist()))
+    if len(keys) > count:
+        keys = [keys[i] for i in np.round(np.linspace(0, len(keys) - 1, count)).astype(int)]
+    shown = set(keys)
+    while len(shown) < min(count, length):
+        edges = sorted(shown | {0, length - 1})
+        best = None  # (gap, frame to add)
+        for a, b in zip(edges, edges[1:]):
+            pick = a if a not in shown else b if b not in shown else (a + b) // 2 if b - a >= 2 else None
+            if pick is not None and (best is None or b - a > best[0]):
+                best = (b - a, pick)
+        if best is None:
+            break
+        shown.add(best[1])
+    return sorted(shown)
+
+
+def _frame(lo: np.ndarray, hi: np.ndarray, size: tuple[int, int] | None,
+           default_side: int) -> tuple[tuple[int, int], np.ndarray, np.ndarray]:
+    """``(size, view lo, view hi)`` of a picture showing the screen box ``lo``-``hi``: margins, room for the
+    frame label, the size (``size``, or :func:`_default_size` of the box's aspect) and the box grown to it."""
+    span = max(float((hi - lo).max()), 1e-9)
+    lo, hi = lo - 0.06 * span, hi + 0.06 * span
+    hi[1] += 0.08 * span  # room for the frame label
+    size = size or _default_size((hi[0] - lo[0]) / (hi[1] - lo[1]), default_side)
+    lo, hi = _fit(lo, hi, size[0] / size[1])
+    return size, lo, hi
 
 
 def _fit(lo: np.ndarray, hi: np.ndarray, aspect: float) -> tuple[np.ndarray, np.ndarray]:
@@ -334,7 +399,8 @@ def preview(
     else:
         kind = "still" if trail else "filmstrip"
     side = {"gif": GIF_SIDE, "still": STILL_SIDE, "filmstrip": -STRIP_HEIGHT}[kind]
-    r = StickRenderer(cut, labels, view, size, side, trail, first_frame=shown_first, legend_keys=kind == "still")
+    r = StickRenderer(cut, labels, view, size, side, trail, first_frame=shown_first, legend_keys=kind == "still",
+                      follow=kind != "still")
     wrap = progress or (lambda it, **kw: it)
 
     with atomic_output(output) as tmp:
@@ -347,11 +413,7 @@ def preview(
             gif.write_gif(images, tmp, delays)
             shown, out_fps = ts, rate / stride
         elif kind == "filmstrip":
-            if step is not None:
-                shown = list(range(0, length, step))
-            else:
-                even = np.linspace(0, length - 1, min(STRIP_FRAMES, length))
-                shown = sorted(set(np.round(even).astype(int).tolist()))
+            shown = list(range(0, length, step)) if step is not None else strip_frames(length, r.keys)
             cells = [Image.fromarray(r.render(t, r.bracketing_keys(t), r.frame_label(t))[..., :3])
                      for t in wrap(shown, desc="frames")]
             _montage(cells, STRIP_COLUMNS, r.palette_colors()).save(tmp, format="PNG", optimize=True)

@@ -344,7 +344,8 @@ def _view_elements(doc: Document, view_index, offset, count: int, width: int, dt
         raise FormatError(f"{name} needs {end} bytes of {vname}, which has {length}", label)
     block = np.frombuffer(data, dtype=np.uint8, count=end, offset=start)
     rows = np.lib.stride_tricks.as_strided(block[offset:], shape=(count, element), strides=(stride, 1))
-    return np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
+    with np.errstate(invalid="ignore"):  # a signalling NaN warns as it widens; read_accessor refuses it next
+        return np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
 
 
 def _apply_sparse(doc: Document, sparse: dict, values: np.ndarray, width: int, dtype, name: str) -> None:

@@ -15,7 +15,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
+.PHONY: demo test test-slow test-interop blender-extension test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
 
 $(DEMO_STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -238,7 +238,32 @@ $(BLENDER_STAMP): Makefile
 	$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check bpy==5.0.1 upc-pymotion==0.3.4
 	@touch $(BLENDER_STAMP)
 
-test-interop: $(STAMP) $(BLENDER_STAMP)
+# keyfill (the base install, no torch) and the human models in Blender's venv, for the Blender extension
+# (blender/keyfill_blender, docs/blender.md): bpy pins numpy 1.26.4, keyfill's floor series, so the
+# project's constraints are used with that numpy.
+BLENDER_KEYFILL_STAMP := $(BLENDER_VENV)/.keyfill-installed
+$(BLENDER_KEYFILL_STAMP): $(BLENDER_STAMP) pyproject.toml constraints.txt models/bandai/pyproject.toml
+	grep -v '^numpy==' constraints.txt > $(BLENDER_VENV)/constraints.txt
+	echo 'numpy==1.26.4' >> $(BLENDER_VENV)/constraints.txt
+	$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check -c $(BLENDER_VENV)/constraints.txt -e .
+	$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e ./models/bandai
+	@touch $(BLENDER_KEYFILL_STAMP)
+
+# The Blender extension's zip (what Blender 4.2+ installs: Preferences > Get Extensions > Install from Disk, or
+# `blender --command extension install-file -r user_default out/blender/keyfill-VERSION.zip`): the files of
+# blender/keyfill_blender at the zip's top, blender_manifest.toml among them.
+BLENDER_EXT_VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender/keyfill_blender/blender_manifest.toml)
+BLENDER_ZIP := out/blender/keyfill-$(BLENDER_EXT_VERSION).zip
+blender-extension: $(BLENDER_ZIP)
+
+$(BLENDER_ZIP): $(wildcard blender/keyfill_blender/*.py) blender/keyfill_blender/blender_manifest.toml
+	@mkdir -p $(@D)
+	$(PYTHON) -c "import sys, zipfile, pathlib; src = pathlib.Path('blender/keyfill_blender'); \
+	    z = zipfile.ZipFile(sys.argv[1], 'w', zipfile.ZIP_DEFLATED); \
+	    [z.write(p, p.relative_to(src).as_posix()) for p in sorted(src.rglob('*')) if p.is_file() and '__pycache__' not in p.parts]; \
+	    z.close()" $@
+
+test-interop: $(STAMP) $(BLENDER_STAMP) $(BLENDER_KEYFILL_STAMP) $(BLENDER_ZIP)
 	$(BIN)/python -m pytest -q -m interop
 
 clean:

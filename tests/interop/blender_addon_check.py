@@ -1,0 +1,218 @@
+"""The Blender side of tests/test_blender_addon.py: runs in ``.venv-blender`` (bpy 5.0.1, keyfill installed there).
+
+    .venv-blender/bin/python tests/interop/blender_addon_check.py convert CLIP.bvh --out r.json
+    .venv-blender/bin/python tests/interop/blender_addon_check.py fill CLIP.bvh --zip keyfill.zip --every 15 \
+        --method cubic --exported keys.bvh --out r.json
+    .venv-blender/bin/python tests/interop/blender_addon_check.py tangents CLIP.bvh --zip keyfill.zip --out r.json
+
+``convert``: the clip through Blender's BVH importer (Z-up, metres, as a user imports it; and a second time
+with the file's own axes and centimetres, the armature object turned and scaled instead), then through the
+extension's convert module; writes keyfill's local arrays and world positions of every frame.
+``fill``: installs the extension zip (bpy's ``extensions.package_install_files``, into a user folder under
+``$HOME``), imports the clip with its own axes (the object turned Z-up, scaled to metres: so Blender's BVH
+exporter, which writes armature space, writes the file's own Y-up centimetres), deletes every key but every
+``--every``-th frame, writes those keys with Blender's BVH exporter, runs Fill In-betweens and writes the bone
+heads (armature space) at every frame, the operator's time, and whether undo restored the action.
+``tangents``: the clip (Euler rotations) keyed every 15th frame; Edit Tangents moves Hand_L's tail at frame 9
+by (0, 0.1, 0.1) m (the 3D cursor); writes the distance left, the keys before and after, and the undo check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _import(path: Path, own_axes: bool, rotate_mode: str = "QUATERNION"):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    kw = {"axis_forward": "Y", "axis_up": "Z", "global_scale": 1.0} if own_axes else {"global_scale": 0.01}
+    bpy.ops.import_anim.bvh(filepath=str(path), target="ARMATURE", frame_start=1, use_fps_scale=False,
+                            update_scene_fps=True, update_scene_duration=True, rotate_mode=rotate_mode, **kw)
+    obj = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    if own_axes:
+        obj.rotation_euler = (np.pi / 2, 0.0, 0.0)
+        obj.scale = (0.01, 0.01, 0.01)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    bpy.context.view_layer.update()
+    return obj
+
+
+def _convert_module():
+    sys.path.insert(0, str(ROOT / "blender"))
+    from keyfill_blender import action, convert
+
+    return action, convert
+
+
+def cmd_convert(args) -> dict:
+    action, convert = _convert_module()
+    out = {}
+    for label, own in (("default", False), ("object", True)):
+        obj = _import(args.clip, own)
+        rig = convert.rig_from_armature(obj)
+        first, last = (round(x) for x in obj.animation_data.action.frame_range)
+        frames = np.arange(first, last + 1)
+        brot, bloc, _ = action.read_basis(obj, rig, frames)
+        rot, pos = convert.to_keyfill(rig, brot, bloc)
+        back_rot, back_loc = convert.to_blender(rig, rot, pos)
+        dots = np.abs(np.sum(back_rot * brot, axis=-1))
+        loc_err = np.abs(np.where(rig.connected[:, None], 0, back_loc - bloc)).max()
+        # Blender's own bone heads, in keyfill's frame (K (scene) / meters_per_unit), at a few frames
+        blender = []
+        for f in frames[:: max(1, len(frames) // 5)]:
+            bpy.context.scene.frame_set(int(f))
+            mw = obj.matrix_world
+            heads = np.array([list(mw @ obj.pose.bones[n].head) for n in rig.names])
+            blender.append([int(f - first), (heads @ convert.Z_UP_TO_Y_UP.T / 0.01).tolist()])
+        out[label] = {"names": list(rig.names), "world": convert.world_positions(rig, rot, pos).tolist(),
+                      "roundtrip_rot": float(1 - dots.min()), "roundtrip_loc": float(loc_err),
+                      "blender_heads": blender}
+    return out
+
+
+def _install(zip_path: Path) -> str:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    result = bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default",
+                                                      enable_on_install=True)
+    mod = "bl_ext.user_default.keyfill"
+    if "FINISHED" not in result or mod not in bpy.context.preferences.addons:
+        raise SystemExit(f"the extension did not install: {result}; add-ons: {list(bpy.context.preferences.addons.keys())}")
+    bpy.ops.wm.save_userpref()
+    return mod
+
+
+def _keep_every(obj, every: int, first: int) -> None:
+    from bpy_extras import anim_utils
+
+    ad = obj.animation_data
+    cb = anim_utils.action_get_channelbag_for_slot(ad.action, ad.action_slot)
+    for fc in cb.fcurves:
+        kps = fc.keyframe_points
+        for i in reversed(range(len(kps))):
+            if (round(kps[i].co[0]) - first) % every:
+                kps.remove(kps[i], fast=True)
+        fc.update()
+
+
+def _keys_snapshot(obj) -> dict:
+    from bpy_extras import anim_utils
+
+    ad = obj.animation_data
+    cb = anim_utils.action_get_channelbag_for_slot(ad.action, ad.action_slot)
+    snap = {}
+    for fc in cb.fcurves:
+        co = np.empty(2 * len(fc.keyframe_points))
+        fc.keyframe_points.foreach_get("co", co)
+        snap[f"{fc.data_path}[{fc.array_index}]"] = co.tolist()
+    return snap
+
+
+def _heads(obj, frames) -> list:
+    out = []
+    for f in frames:
+        bpy.context.scene.frame_set(int(f))
+        out.append([list(pb.head) for pb in obj.pose.bones])
+    return out
+
+
+def cmd_fill(args) -> dict:
+    mod = _install(args.zip)
+    obj = _import(args.clip, own_axes=True)
+    scene = bpy.context.scene
+    first, last = (round(x) for x in obj.animation_data.action.frame_range)
+    last = min(last, first + args.frames - 1)
+    scene.frame_start, scene.frame_end = first, last
+    _keep_every(obj, args.every, first)
+    bpy.ops.export_anim.bvh(filepath=str(args.exported), global_scale=1.0, frame_start=first, frame_end=last,
+                            rotate_mode="NATIVE", root_transform_only=False)
+    before = _keys_snapshot(obj)
+    bpy.ops.ed.undo_push(message="before keyfill")
+    t0 = time.perf_counter()
+    result = bpy.ops.keyfill.fill_inbetweens(method=args.method, use_range=True, frame_start=first, frame_end=last)
+    seconds = time.perf_counter() - t0
+    obj = bpy.data.objects[obj.name]
+    after = _keys_snapshot(obj)
+    heads = _heads(obj, range(first, last + 1))
+    kept = all(all(abs(a - b) < 1e-6 for a, b in zip(after[k][1::2], v[1::2]) if True) for k, v in before.items())
+    keys_kept = True
+    for k, v in before.items():
+        got = dict(zip(after[k][0::2], after[k][1::2]))
+        keys_kept &= all(abs(got.get(f, np.inf) - x) < 1e-6 for f, x in zip(v[0::2], v[1::2]))
+    del kept
+    n_after = sum(len(v) // 2 for v in after.values())
+    bpy.ops.ed.undo()
+    obj = bpy.data.objects[obj.name]
+    undone = _keys_snapshot(obj)
+    # a failing call: one ERROR report and CANCELLED, no traceback
+    try:
+        bpy.ops.keyfill.fill_inbetweens(method="transformer", model="/nonexistent/model")
+        error = None
+    except RuntimeError as e:
+        error = str(e)
+    return {"module": mod, "result": sorted(result), "seconds": seconds, "first": first, "last": last,
+            "bones": [pb.name for pb in obj.pose.bones], "heads": heads, "keys_kept": bool(keys_kept),
+            "points_before": sum(len(v) // 2 for v in before.values()), "points_after": n_after,
+            "undo_restored": undone == before, "error_report": error}
+
+
+def cmd_tangents(args) -> dict:
+    mod = _install(args.zip)
+    obj = _import(args.clip, own_axes=False, rotate_mode="NATIVE")
+    first = round(obj.animation_data.action.frame_range[0])
+    _keep_every(obj, 15, first)
+    scene = bpy.context.scene
+    frame = first + 8
+    scene.frame_set(frame)
+    bone = obj.data.bones["Hand_L"]
+    obj.data.bones.active = bone
+    tail = np.array(obj.matrix_world @ obj.pose.bones["Hand_L"].tail)
+    target = tail + np.array([0.0, 0.1, 0.1])
+    scene.cursor.location = target.tolist()
+    before = _keys_snapshot(obj)
+    bpy.ops.ed.undo_push(message="before edit")
+    t0 = time.perf_counter()
+    result = bpy.ops.keyfill.edit_tangents(bone="Hand_L", point="TAIL", target="CURSOR", pins="Hips",
+                                           contacts=f"Toes_L:{first}-{first + 15}")
+    seconds = time.perf_counter() - t0
+    obj = bpy.data.objects[obj.name]
+    scene.frame_set(frame)
+    got = np.array(obj.matrix_world @ obj.pose.bones["Hand_L"].tail)
+    after = _keys_snapshot(obj)
+    changed_values = 0
+    for k, v in before.items():
+        now = dict(zip(after[k][0::2], after[k][1::2]))
+        changed_values += sum(abs(now.get(f, np.inf) - x) > 1e-6 for f, x in zip(v[0::2], v[1::2]))
+    heights = [np.array(obj.matrix_world @ obj.pose.bones[n].head)[2] for n in ("Head", "Toes_L", "Toes_R")]
+    bpy.ops.ed.undo()
+    obj = bpy.data.objects[obj.name]
+    return {"module": mod, "result": sorted(result), "seconds": seconds, "moved": float(np.linalg.norm(tail - target)),
+            "distance": float(np.linalg.norm(got - target)), "changed_key_values": int(changed_values),
+            "height": float(max(heights) - min(heights)), "undo_restored": _keys_snapshot(obj) == before}
+
+
+def main(argv):
+    p = argparse.ArgumentParser()
+    p.add_argument("command", choices=["convert", "fill", "tangents"])
+    p.add_argument("clip", type=Path)
+    p.add_argument("--zip", type=Path)
+    p.add_argument("--every", type=int, default=15)
+    p.add_argument("--frames", type=int, default=301)
+    p.add_argument("--method", default="cubic")
+    p.add_argument("--exported", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    args = p.parse_args(argv)
+    result = {"convert": cmd_convert, "fill": cmd_fill, "tangents": cmd_tangents}[args.command](args)
+    args.out.write_text(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -150,4 +150,4 @@ class Features:
             return q, pos
         par = np.asarray(self.parents)
         local = R.quat_mul(R.quat_conjugate(q[..., par[1:], :]), q[..., 1:, :])
-        return R._xp(q).concat([q[..., :1, :], local], axis=-2), pos[..., :3]
+        return R._xp(q).concatenate([q[..., :1, :], local], axis=-2), pos[..., :3]

@@ -128,8 +128,8 @@ def _graph_menu(self, context):
 
 CLASSES = (KeyfillPreferences, KeyfillRole, KEYFILL_OT_detect_roles, KEYFILL_PT_roles,
            fill.KEYFILL_OT_fill_inbetweens, tangents.KEYFILL_OT_edit_tangents)
-MENUS = (("DOPESHEET_MT_key", _fill_menu), ("GRAPH_MT_key", _graph_menu), ("VIEW3D_MT_object_animation", _fill_menu),
-         ("VIEW3D_MT_pose_animation", _fill_menu))
+MENUS = (("DOPESHEET_MT_key", _fill_menu), ("GRAPH_MT_key", _graph_menu), ("VIEW3D_MT_object_animation", _fill_menu))
+  # the 3D view's Animation menu (Object and Pose mode share it in Blender 5.0)
 
 
 def register():
@@ -137,12 +137,14 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Armature.keyfill_roles = bpy.props.CollectionProperty(type=KeyfillRole)
     for menu, func in MENUS:
-        getattr(bpy.types, menu).append(func)
+        if hasattr(bpy.types, menu):  # menus move between Blender versions
+            getattr(bpy.types, menu).append(func)
 
 
 def unregister():
     for menu, func in MENUS:
-        getattr(bpy.types, menu).remove(func)
+        if hasattr(bpy.types, menu):
+            getattr(bpy.types, menu).remove(func)
     del bpy.types.Armature.keyfill_roles
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -213,11 +213,13 @@ class _Model:
                 iw, ih = curves.in_tan[k, c]
                 ow, oh = curves.out_tan[k, c]
                 left, right = (t - iw, v - ih), (t + ow, v + oh)
-                if (np.allclose(kp.handle_left, left, atol=1e-9) and np.allclose(kp.handle_right, right, atol=1e-9)
+                if (np.allclose(kp.handle_left, left, atol=1e-5) and np.allclose(kp.handle_right, right, atol=1e-5)
                         and kp.interpolation == "BEZIER"):
                     continue
                 kp.interpolation = "BEZIER"
-                kp.handle_left_type = kp.handle_right_type = "FREE" if curves.broken[k, c] else "ALIGNED"
+                # FREE: Blender recomputes neither handle (ALIGNED would move one to match the other's
+                # direction at float32 precision, AUTO would recompute both); unified keys stay unified
+                kp.handle_left_type = kp.handle_right_type = "FREE"
                 kp.handle_left, kp.handle_right = left, right
                 changed += 1
             fc.update()
@@ -344,5 +346,5 @@ class KEYFILL_OT_edit_tangents(bpy.types.Operator):
         context.scene.frame_set(context.scene.frame_current)
         r = reports[0]
         return (f"keyfill: {name} at frame {t:g} {'reached' if r.reached else 'stopped'} "
-                f"{r.distance:.3g} m from the target; {changed} keys' handles changed, {len(model.added)} keys "
+                f"{r.distance:.3g} m from the target; {changed} keys' handles written, {len(model.added)} keys "
                 f"added, {r.iterations} iteration(s)")

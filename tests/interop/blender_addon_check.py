@@ -80,7 +80,7 @@ def cmd_convert(args) -> dict:
 
 
 def _install(zip_path: Path) -> str:
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    """Install and enable the extension zip (after the scene is made: a factory reset would disable it)."""
     result = bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default",
                                                       enable_on_install=True)
     mod = "bl_ext.user_default.keyfill"
@@ -101,6 +101,14 @@ def _keep_every(obj, every: int, first: int) -> None:
             if (round(kps[i].co[0]) - first) % every:
                 kps.remove(kps[i], fast=True)
         fc.update()
+
+
+def _undo() -> None:
+    """Undo the operator. Blender without a window pushes no undo step after an operator a script calls (the
+    UI does, as the operator's UNDO flag asks), so the step is pushed here as the UI would, then undone."""
+    if not bpy.ops.ed.undo.poll():
+        bpy.ops.ed.undo_push(message="keyfill")
+    bpy.ops.ed.undo()
 
 
 def _keys_snapshot(obj) -> dict:
@@ -125,8 +133,8 @@ def _heads(obj, frames) -> list:
 
 
 def cmd_fill(args) -> dict:
-    mod = _install(args.zip)
     obj = _import(args.clip, own_axes=True)
+    mod = _install(args.zip)
     scene = bpy.context.scene
     first, last = (round(x) for x in obj.animation_data.action.frame_range)
     last = min(last, first + args.frames - 1)
@@ -149,8 +157,9 @@ def cmd_fill(args) -> dict:
         keys_kept &= all(abs(got.get(f, np.inf) - x) < 1e-6 for f, x in zip(v[0::2], v[1::2]))
     del kept
     n_after = sum(len(v) // 2 for v in after.values())
-    bpy.ops.ed.undo()
-    obj = bpy.data.objects[obj.name]
+    name = obj.name
+    _undo()
+    obj = bpy.data.objects[name]
     undone = _keys_snapshot(obj)
     # a failing call: one ERROR report and CANCELLED, no traceback
     try:
@@ -165,8 +174,8 @@ def cmd_fill(args) -> dict:
 
 
 def cmd_tangents(args) -> dict:
-    mod = _install(args.zip)
     obj = _import(args.clip, own_axes=False, rotate_mode="NATIVE")
+    mod = _install(args.zip)
     first = round(obj.animation_data.action.frame_range[0])
     _keep_every(obj, 15, first)
     scene = bpy.context.scene
@@ -181,7 +190,7 @@ def cmd_tangents(args) -> dict:
     bpy.ops.ed.undo_push(message="before edit")
     t0 = time.perf_counter()
     result = bpy.ops.keyfill.edit_tangents(bone="Hand_L", point="TAIL", target="CURSOR", pins="Hips",
-                                           contacts=f"Toes_L:{first}-{first + 15}")
+                                           contacts=f"Toes_L:{first}-{first + 15}", tolerance=5e-4)
     seconds = time.perf_counter() - t0
     obj = bpy.data.objects[obj.name]
     scene.frame_set(frame)
@@ -192,8 +201,9 @@ def cmd_tangents(args) -> dict:
         now = dict(zip(after[k][0::2], after[k][1::2]))
         changed_values += sum(abs(now.get(f, np.inf) - x) > 1e-6 for f, x in zip(v[0::2], v[1::2]))
     heights = [np.array(obj.matrix_world @ obj.pose.bones[n].head)[2] for n in ("Head", "Toes_L", "Toes_R")]
-    bpy.ops.ed.undo()
-    obj = bpy.data.objects[obj.name]
+    name = obj.name
+    _undo()
+    obj = bpy.data.objects[name]
     return {"module": mod, "result": sorted(result), "seconds": seconds, "moved": float(np.linalg.norm(tail - target)),
             "distance": float(np.linalg.norm(got - target)), "changed_key_values": int(changed_values),
             "height": float(max(heights) - min(heights)), "undo_restored": _keys_snapshot(obj) == before}

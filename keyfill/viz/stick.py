@@ -15,6 +15,7 @@ dot per frame, so spacing shows timing, and the keys circled.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -296,7 +297,7 @@ def strip_frames(length: int, keys, count: int = STRIP_FRAMES) -> list[int]:
     while len(shown) < min(count, length):
         edges = sorted(shown | {0, length - 1})
         best = None  # (gap, frame to add)
-        for a, b in zip(edges, edges[1:]):
+        for a, b in itertools.pairwise(edges):
             pick = a if a not in shown else b if b not in shown else (a + b) // 2 if b - a >= 2 else None
             if pick is not None and (best is None or b - a > best[0]):
                 best = (b - a, pick)

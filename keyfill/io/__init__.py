@@ -24,7 +24,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from keyfill.errors import FormatError, NoSuchFile, UsageError
+from keyfill.errors import DataError, FormatError, NoSuchFile, UsageError
 from keyfill.files import atomic_output
 from keyfill.motion import Motion
 
@@ -291,6 +291,15 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
     if spec.named:
         named_after = source if str(path) == STDIO else path
         options.setdefault("name", None if named_after is None or str(named_after) == STDIO else Path(named_after).stem)
+    try:
+        _write(write, motion, path, spec, options)
+    except DataError as e:  # what the output cannot hold: the line names the output (never its temporary file)
+        where = "standard output" if str(path) == STDIO else str(path)
+        raise DataError(f"{where}: {e}", params=e.params) from None
+
+
+def _write(write, motion: Motion, path, spec: Format, options: dict) -> None:
+    """:func:`save`'s writing: to standard output through a temporary file, or atomically beside ``path``."""
     if str(path) == STDIO:
         if spec.sidecar:
             options["sidecar"] = None

@@ -408,11 +408,22 @@ def follow_template(values: np.ndarray, motion: Motion, template: str | Path) ->
         return values
 
 
-def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None):
-    """BVH text of ``motion`` in pieces: the header, then about ``rows`` motion lines at a time."""
+def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None, layout_hint: bool = False):
+    """BVH text of ``motion`` in pieces: the header, then about ``rows`` motion lines at a time; ``layout_hint``:
+    a motion its channels cannot hold names ``bvh_layout full`` as the way out."""
     sk = motion.skeleton
     limits.check_values(motion)
-    values = pose_to_channels(motion)
+    for j, name in enumerate(sk.names):  # the reader joins a name's words with single spaces
+        if name != " ".join(name.split()) or not name or name.split()[-1] == "{":
+            raise DataError(f"joint {j} is named {name[:60]!r}, which a BVH file cannot hold (BVH names are words "
+                            "separated by single spaces)")
+    try:
+        values = pose_to_channels(motion)
+    except DataError as e:
+        if not layout_hint:
+            raise
+        raise DataError(f"{e}; bvh_layout full gives every joint three rotation channels, and position "
+                        "channels to joints that move", params="bvh_layout") from None
     values += 0.0  # no -0 of the arithmetic (a template's own -0 stays)
     if template is not None:
         values = follow_template(values, motion, template)
@@ -466,10 +477,4 @@ def write(motion: Motion, path: str | Path, template: str | Path | None = None, 
     if laid_out is not motion:  # a template in another layout has no values to follow
         motion, template = laid_out, None
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        try:
-            f.writelines(_pieces(motion, template=template))
-        except DataError as e:  # a motion its channels cannot hold (before any motion line is written)
-            if layout == "full":
-                raise
-            raise DataError(f"{e}; bvh_layout full gives every joint three rotation channels, and position "
-                            "channels to joints that move", params="bvh_layout") from None
+        f.writelines(_pieces(motion, template=template, layout_hint=layout != "full"))

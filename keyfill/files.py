@@ -105,10 +105,20 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
+    try:
+        try:
+            mode = os.stat(path).st_mode
+        except FileNotFoundError:  # no file yet (or a link to none, which the output replaces)
+            mode = None
+        folder_ok = folder.is_dir()
+    except OSError as e:  # a name the file system cannot hold (too long), a loop of links
+        raise OutputError(path, e.strerror or str(e)) from None
+    if not folder_ok:
         raise UsageError(f"{path}: the output folder {str(folder)!r} does not exist")
-    if path.is_dir():
+    if mode is not None and stat.S_ISDIR(mode):
         raise UsageError(f"{path}: is a folder, not a file")
+    if mode is not None and not stat.S_ISREG(mode):  # renaming onto it would replace the device (/dev/null)
+        raise UsageError(f"{path}: is a device or pipe, not a file; write to '-' for standard output")
     remove_stale(folder, path.stem)
     prefix = f".{path.stem}.k{os.getpid()}."
     try:  # from before the temporary file exists: an interrupt at any moment finds it below

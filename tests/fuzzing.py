@@ -1,4 +1,5 @@
-"""Mutation fuzzing of keyfill's inputs: BVH text, USD text, edit TOML, model folders and glTF files.
+"""Mutation fuzzing of keyfill's inputs: BVH text, USD text, edit TOML, model folders, glTF files and command
+lines (:mod:`fuzz_options`).
 
 Every case is a seed input (a test fixture, an example, the shipped model)
 changed by a few random mutations, fed to the library (and, for some cases,
@@ -43,9 +44,14 @@ ROOT = HERE.parent
 DATA = HERE / "data"
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
 
-KINDS = ("bvh", "usd", "toml", "model", "gltf")
-SUFFIX = {"bvh": ".bvh", "usd": ".usda", "toml": ".toml", "model": "", "gltf": ".glb"}
+import fuzz_options
+
+#: (runs before 2026-12-03 had the first five only: a case number of theirs is another input now)
+KINDS = ("bvh", "usd", "toml", "model", "gltf", "argv")
+SUFFIX = {"bvh": ".bvh", "usd": ".usda", "toml": ".toml", "model": "", "gltf": ".glb", "argv": ".json"}
 
 # --- seeds ------------------------------------------------------------------------------------------
 
@@ -105,6 +111,8 @@ def seeds(kind: str) -> list[bytes]:
         return [_pack(ARNN_MODEL)]
     if kind == "gltf":
         return _gltf_seeds()
+    if kind == "argv":
+        return fuzz_options.seeds()
     raise ValueError(kind)
 
 
@@ -185,6 +193,8 @@ def mutate(data: bytes, rnd: random.Random, kind: str) -> bytes:
     A model folder's config gets most of them; its weights file gets the rest,
     mostly in the safetensors header (the JSON that gives names, shapes and offsets).
     """
+    if kind == "argv":
+        return fuzz_options.mutate(data, rnd)
     if kind == "model":
         config, weights = _model_files(data)
         if rnd.random() < 0.8:
@@ -381,6 +391,8 @@ def run_case(kind: str, data: bytes, work: Path, variant: int = 0) -> Outcome:
 
 def _run_case(kind: str, data: bytes, work: Path, variant: int) -> Outcome:
     try:
+        if kind == "argv":
+            return fuzz_options.run(data, work, _cli)
         if kind == "model":
             folder = work / "model"
             folder.mkdir()

@@ -387,3 +387,32 @@ def test_a_batch_redoes_a_usd_output_whose_sublayer_changed(capsys, tmp_path):
     io.save(motion.replace(positions=motion.positions + 1.0), tmp_path / "anim.usda")
     code, stdout, _ = run(capsys, "convert", src, "-o", out, "--format", "bvh", "--json")
     assert code == 0 and json.loads(stdout)["redone"] == 1
+
+
+@pytest.mark.parametrize("device", ["fifo", "/dev/null"])
+def test_an_output_that_is_a_device_or_pipe_is_refused_not_replaced(capsys, tmp_path, device):
+    """The atomic rename would replace it: as root, ``-o /dev/null`` made /dev/null a regular file (found by
+    the option fuzzer's ``/dev/null`` paths). Standard output is ``-``."""
+    if device == "fifo":
+        target = tmp_path / "out.bvh"
+        os.mkfifo(target)
+    else:
+        target = Path(device)
+    before = os.stat(target)
+    code, _, err = _clean_run(capsys, "convert", CMU, target, "--format", "bvh")
+    assert code == 2 and "is a device or pipe, not a file; write to '-'" in one_error_line(err)
+    after = os.stat(target)
+    assert (after.st_mode, after.st_ino, after.st_rdev) == (before.st_mode, before.st_ino, before.st_rdev)
+    if device == "fifo":
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["out.bvh"]  # no temporary file beside it
+
+
+@pytest.mark.parametrize("suffix", ["", ".bvh"])
+def test_an_output_name_too_long_for_the_file_system_is_one_line(capsys, tmp_path, suffix):
+    """Found by the option fuzzer: ``-o`` of 300 characters was an internal OSError (is_batch's is_dir, then the
+    atomic writer's checks)."""
+    out = tmp_path / ("x" * 300 + suffix)
+    code, _, err = _clean_run(capsys, "complete", CMU, "--key-every", "2", "-o", out)
+    line = one_error_line(err)
+    assert code in (1, 2) and "internal error" not in line and str(out)[:40] in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -489,3 +489,12 @@ def test_filmstrip_frames_are_the_keys_then_the_middles_of_the_widest_gaps():
     assert S.strip_frames(273, [0, 68, 137, 205, 272]) == [0, 34, 68, 102, 137, 171, 205, 272]
     assert S.strip_frames(300, range(0, 300, 10)) == [0, 40, 80, 120, 170, 210, 250, 290]  # 8 of 30 keys
     assert S.strip_frames(3, [1]) == [0, 1, 2] and S.strip_frames(100, [50])[:2] == [0, 12]
+
+
+def test_a_plot_of_four_joints_with_several_panels_each_has_four_columns(tmp_path):
+    """_layout gives one column per joint for up to 4 joints; the fourth had no panel width (KeyError: 4, found
+    by the option fuzzer: plot CMU --positions, whose default joints are 4)."""
+    cmu = io.load(DATA / "cmu_02_03_cgspeed_first4frames.bvh")
+    info = C.plot([cmu], ["cmu"], tmp_path / "p.png", positions=True,
+                  joints=["Hips", "LHipJoint", "LeftUpLeg", "LowerBack"])
+    assert len(info.panels) == 12 and (tmp_path / "p.png").is_file()

@@ -64,10 +64,19 @@ def is_batch(inputs, output: str | None) -> bool:
     """Whether a command's inputs and ``-o`` ask for the many-in / folder-out form."""
     if output is None:
         return False
-    if len(inputs) != 1 or output.endswith(("/", os.sep)) or (output and Path(output).is_dir()):
+    if len(inputs) != 1 or output.endswith(("/", os.sep)) or (output and _is_dir(output)):
         return True
     src = inputs[0]
-    return src != "-" and (Path(src).is_dir() or (not Path(src).exists() and glob.has_magic(src)))
+    return src != "-" and (_is_dir(src) or (not os.path.lexists(src) and glob.has_magic(src)))
+
+
+def _is_dir(path: str) -> bool:
+    """Whether ``path`` is a folder; False for a name the file system cannot hold (too long), whose use
+    says so later with the user's path."""
+    try:
+        return Path(path).is_dir()
+    except OSError:
+        return False
 
 
 def _inside(path: Path, folder: Path) -> bool:

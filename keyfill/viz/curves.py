@@ -340,7 +340,7 @@ def _draw(motions, labels, output: str, *, joints=None, channels=None, frames=No
 
 #: fixed figure layout in inches (a layout engine would cost half the drawing time)
 _PANEL_HEIGHT, _ROW_GAP, _TOP, _BOTTOM = 1.05, 0.42, 0.5, 0.55
-_PANEL_WIDTH = {1: 6.4, 2: 4.7, 3: 3.7}
+_PANEL_WIDTH = {1: 6.4, 2: 4.7, 3: 3.7, 4: 3.1}  # inches, by the number of columns (_layout: at most 4)
 _LEFT, _RIGHT, _COLUMN_GAP = 0.75, 0.2, 0.85
 
 

@@ -459,6 +459,8 @@ def _read_stage(stage, label) -> Motion:
                                     "keyfill motions have no scale")
     for a in range(0, num_frames, BLOCK):
         block = rot[a : a + BLOCK]
+        if not (np.abs(block) <= limits.max_abs()).all():  # before squaring: 1e200 overflows the norm
+            raise FormatError(f"a rotation is not finite or beyond {limits.max_abs():g}", label)
         norms = np.linalg.norm(block, axis=-1, keepdims=True)
         if np.any(norms < 1e-6):
             raise FormatError("a rotation is zero (not a quaternion)", label)

@@ -165,11 +165,14 @@ def decompose(m: np.ndarray, what: str, label) -> tuple[np.ndarray, float, np.nd
 def decompose_all(m: np.ndarray, whats: list[str], label) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`decompose` of ``(K, 4, 4)`` matrices at once: ``(rotations (K, 4), scales (K,), translations
     (K, 3))``; ``whats[k]`` names matrix ``k`` in the error."""
-    cols = np.linalg.norm(m[:, :3, :3], axis=1)
-    scale = cols.mean(axis=1)
-    rot = m[:, :3, :3] / np.maximum(scale, 1e-300)[:, None, None]
-    bad = (~(scale > 0) | (np.abs(cols - scale[:, None]).max(axis=1) > 1e-6 * scale)
-           | (np.abs(rot.transpose(0, 2, 1) @ rot - np.eye(3)).max(axis=(1, 2)) > 1e-6) | (np.linalg.det(rot) < 0))
+    with np.errstate(all="ignore"):  # a degenerate or huge matrix: refused below, without numpy's warnings
+        cols = np.linalg.norm(m[:, :3, :3], axis=1)
+        scale = cols.mean(axis=1)
+        rot = m[:, :3, :3] / np.maximum(scale, 1e-300)[:, None, None]
+        bad = (~(scale > 0) | ~np.isfinite(rot).all(axis=(1, 2))
+               | (np.abs(cols - scale[:, None]).max(axis=1) > 1e-6 * scale)
+               | (np.abs(rot.transpose(0, 2, 1) @ rot - np.eye(3)).max(axis=(1, 2)) > 1e-6)
+               | (np.linalg.det(np.nan_to_num(rot)) < 0))
     if bad.any():
         raise FormatError(f"{whats[int(np.argmax(bad))]} is scaled unevenly, sheared or mirrored; keyfill reads "
                           "rigid joints", label)

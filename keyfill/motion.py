@@ -36,6 +36,20 @@ FULL_CHANNELS = FULL_ROTATIONS
 _CANONICAL = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 
 
+def unique_names(names: Sequence[str], fallbacks: Sequence[str]) -> list[str]:
+    """Joint names from a file's node names: runs of white space become ``_``, an empty name its entry of
+    ``fallbacks``, and a name seen before gets ``_1``, ``_2``, ... (glTF and FBX nodes may share names)."""
+    out, used = [], set()
+    for raw, fallback in zip(names, fallbacks):
+        base = "_".join(str(raw).split()) or fallback
+        name, k = base, 1
+        while name in used:
+            name, k = f"{base}_{k}", k + 1
+        used.add(name)
+        out.append(name)
+    return out
+
+
 def canonical_channel(name: str) -> str:
     """``"xROTATION"`` -> ``"Xrotation"``; raises ``ValueError`` for unknown names."""
     try:

@@ -43,7 +43,7 @@ import numpy as np
 from keyfill import limits, progress
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError, KeyfillError, UsageError
-from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton
+from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton, unique_names
 
 INSTALL = "pip install 'keyfill[fbx]'"
 #: ufbx's RotationOrder (XYZ .. ZYX; 6, spheric, is read as XYZ) -> BVH rotation channels in keyfill's
@@ -284,8 +284,9 @@ def read(path: str | Path, label=None, animation: str | int | None = None) -> Mo
     moving = np.abs(pos - rest).max(axis=(0, 2), initial=0.0) > 1e-6 * max(1.0, float(np.abs(rest).max(initial=0)))
     channels = tuple((POSITION_CHANNELS if sc.parents[j] < 0 or moving[j] else ())
                      + EULER_CHANNELS[sc.orders[j] if sc.orders[j] < 6 else 0] for j in range(J))
+    names = unique_names(sc.names, [f"joint{j}" for j in range(J)])
     try:
-        skeleton = Skeleton(names=tuple(_names(sc.names)), parents=sc.parents, offsets=rest, channels=channels,
+        skeleton = Skeleton(names=tuple(names), parents=sc.parents, offsets=rest, channels=channels,
                             meters_per_unit=sc.unit_meters * (unit or 1.0), up_axis=sc.up)
         return Motion(skeleton, sc.fps, rot, pos)
     except FormatError:
@@ -293,14 +294,3 @@ def read(path: str | Path, label=None, animation: str | int | None = None) -> Mo
     except KeyfillError as e:  # arrays that do not make a motion: bad data in this file
         raise FormatError(str(e).removeprefix(f"{label}: "), label) from None
 
-
-def _names(names: list[str]) -> list[str]:
-    out, used = [], set()
-    for i, n in enumerate(names):
-        base = "_".join(str(n).split()) or f"joint{i}"
-        name, k = base, 1
-        while name in used:
-            name, k = f"{base}_{k}", k + 1
-        used.add(name)
-        out.append(name)
-    return out

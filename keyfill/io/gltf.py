@@ -47,7 +47,7 @@ from keyfill import limits, progress
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError, KeyfillError
 from keyfill.io.gltf_buffers import Document, load_document, read_accessor
-from keyfill.motion import FULL_CHANNELS, FULL_ROOT_CHANNELS, Keys, Motion, Skeleton
+from keyfill.motion import FULL_CHANNELS, FULL_ROOT_CHANNELS, Keys, Motion, Skeleton, unique_names
 
 EXTRAS = "keyfill"
 #: rotation that turns a Z-up world into glTF's Y-up one (-90 degrees about X), w-x-y-z
@@ -180,16 +180,9 @@ def decompose_all(m: np.ndarray, whats: list[str], label) -> tuple[np.ndarray, n
 
 
 def joint_names(nodes: list[dict], joints: list[int]) -> list[str]:
-    """Joint names: node names without whitespace, ``node<N>`` when nameless, repeats numbered."""
-    out, used = [], set()
-    for n in joints:
-        base = "_".join(str(nodes[n].get("name", "")).split()) or f"node{n}"
-        name, k = base, 1
-        while name in used:
-            name, k = f"{base}_{k}", k + 1
-        used.add(name)
-        out.append(name)
-    return out
+    """Joint names: node names without whitespace, ``node<N>`` when nameless, repeats numbered
+    (:func:`keyfill.motion.unique_names`)."""
+    return unique_names([nodes[n].get("name", "") for n in joints], [f"node{n}" for n in joints])
 
 
 def rig_of(doc: Document, skin: str | int | None, note: bool = True) -> Rig:

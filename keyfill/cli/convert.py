@@ -40,7 +40,8 @@ from keyfill.cli.common import (
 @click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
 def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, usd_layer, curves, keys_text, key_every,
             workers, scheduler, connect_timeout, force, batch_size, as_json):
-    """Convert a motion file between BVH, USD (.usda, .usdc, .usd, .usdz) and glTF (.glb, .gltf).
+    """Convert a motion file between BVH, USD (.usda, .usdc, .usd, .usdz) and glTF (.glb, .gltf); FBX (.fbx,
+    pip install 'keyfill[fbx]') is read, not written.
 
     Formats come from the suffixes; '-' reads standard input or writes
     standard output (then give --in-format / --format). BVH -> USD -> BVH and

@@ -105,7 +105,7 @@ class LazyGroup(SuggestingGroup):
 def cli(ctx, quiet, verbose, debug):
     """keyfill fills in the frames between keyframes of character animation.
 
-    It reads and writes BVH, USD and glTF files and offers spline baselines,
+    It reads and writes BVH, USD and glTF files (and reads FBX) and offers spline baselines,
     learned in-betweening (ARNN, transformer, generative-tweening GAN; many
     files at once, ONNX export; the human models on any humanoid rig through
     retargeting, feet locked on request), a physics-based hopping-lamp dataset

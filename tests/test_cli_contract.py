@@ -343,3 +343,17 @@ def test_the_table_in_the_docs_is_the_table_run():
         assert rows[command].split("|")[2 + cell].strip() == str(code), (command, misuse, columns[cell])
     for args in MISSING:
         assert rows[args[0]].split("|")[3].strip() == "2", args[0]
+
+
+def test_help_states_the_exit_codes_and_the_interrupt_behaviour_of_the_docs(capsys):
+    """``keyfill --help`` gives the docs' codes (0, 1, 2, 128 + N with 130/143/129) and what an interrupt
+    leaves behind, as tests/test_signals.py checks it."""
+    code, out, _ = run(capsys, "--help")
+    assert code == 0
+    text = " ".join(out.split())
+    docs = (ROOT / "docs" / "robustness.md").read_text()
+    for figure in ("SIGINT 130", "SIGTERM 143", "SIGHUP 129"):
+        assert figure in docs
+    for said in ("0 success", "1 the work failed", "2 usage error", "128 + N signal N",
+                 "130 Ctrl-C", "143 SIGTERM", "129 SIGHUP", "whole or absent", "same command again"):
+        assert said in text, said

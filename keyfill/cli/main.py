@@ -117,7 +117,12 @@ def cli(ctx, quiet, verbose, debug):
       keyfill convert walk.bvh walk.usda
       keyfill complete keys.usda -o filled.bvh --method cubic
 
-    Exit codes: 0 success, 1 the work failed, 2 usage error.
+    \b
+    Exit codes: 0 success, 1 the work failed, 2 usage error,
+    128 + N signal N (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
+    Interrupted at any moment, a command removes its temporary files and
+    leaves each output whole or absent; an interrupted batch records what it
+    finished and the same command again does the rest (docs/robustness.md).
     """
     ctx.ensure_object(dict)
     ctx.obj["verbosity"] = verbose - quiet

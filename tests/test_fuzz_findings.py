@@ -416,3 +416,23 @@ def test_an_output_name_too_long_for_the_file_system_is_one_line(capsys, tmp_pat
     line = one_error_line(err)
     assert code in (1, 2) and "internal error" not in line and str(out)[:40] in line
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args", [
+    ("convert", "{long}.bvh", "{tmp}/o.bvh"),  # one input
+    ("convert", CMU, "{long}", "-o", "{tmp}/o/"),  # make fuzz seed 20261205, case 12011: a batch's input
+    ("complete", LAMP_KEYS, "{long}", "-o", "{tmp}/o/", "--method", "linear"),  # case 13937
+    ("info", "{long}.glb"),
+    ("edit-tangents", "{long}.usda", "--edit", "{long}.toml", "-o", "{tmp}/o.usda"),
+])
+def test_an_input_name_too_long_for_the_file_system_is_a_usage_error(capsys, tmp_path, args):
+    """Found by the option fuzzer (seed 20261205): an input of 300 characters was an internal OSError wherever
+    a path's kind was asked (Path.is_dir and is_file raise ENAMETOOLONG); now exit 2 naming the path, as a
+    missing path is."""
+    long = "x" * 300
+    args = [str(a).replace("{long}", long).replace("{tmp}", str(tmp_path)) for a in args]
+    code, _, err = _clean_run(capsys, *args)
+    line = one_error_line(err)
+    assert code == 2 and "internal error" not in line and long[:40] in line, line
+    assert "name too long" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -262,6 +262,10 @@ def _main(args: list[str], debug: bool) -> int:
             _drop_stdout()
             _error(f"cannot write standard output ({e.strerror})")
             return 1
+        if isinstance(e, OSError) and e.errno == errno.ENAMETOOLONG and e.filename is not None:
+            # a path given (or made from one given) that no file system holds: a usage error, like a missing path
+            _error(f"{e.filename}: {e.strerror.lower()}", 2)
+            return 2
         _error(f"internal error: {type(e).__name__}: {e} (run with --debug for the traceback)")
         return 1
 

@@ -69,6 +69,11 @@ def _curves(cb, pb, prop: str, n: int) -> list:
     return [cb.fcurves.find(path, index=i) if cb is not None else None for i in range(n)]
 
 
+def bvh_orders(obj, rig: convert.Rig) -> tuple[str, ...]:
+    """Each bone's keyfill Euler order as Blender's BVH exporter writes it (:func:`.convert.bvh_order`)."""
+    return tuple(convert.bvh_order(obj.pose.bones[name].rotation_mode) for name in rig.names)
+
+
 def read_basis(obj, rig: convert.Rig, frames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(rotations (F, J, 4), locations (F, J, 3), moving (J,))``: every bone's basis at ``frames``, evaluated
     from the action's F-curves (a channel without one keeps its pose value); ``moving``: the bone has

@@ -3,7 +3,10 @@
 In process, the armature's keys go to :func:`keyfill.learn.registry.complete` as a keyfill ``Motion``
 (:mod:`.convert`), with no file in between. Through the executable (the preferences' path, or ``keyfill``
 on ``PATH``), they go as a BVH file in a temporary folder (written and read back here, in the layout
-:mod:`.convert` gives: translations where bones move, ZXY rotations), with ``keyfill complete --keys``.
+:mod:`.convert` gives: translations where bones move, rotations in the Euler orders Blender's BVH exporter
+writes, the angles it would write), with ``keyfill complete --keys``. Either way keyfill gets what it would
+read from Blender's BVH export of the keys: the same quaternions (signs included) and the frame rate its BVH
+reader gives (:func:`frame_rate`).
 """
 
 from __future__ import annotations
@@ -84,24 +87,26 @@ def _toml_str(s: str) -> str:
 
 
 def complete(rig: convert.Rig, basis_rot, basis_loc, moving, fps: float, keys, settings: Settings, where: str,
-             executable: str = "") -> tuple[np.ndarray, np.ndarray, dict]:
+             executable: str = "", orders=None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Complete the basis arrays between ``keys`` (frame indices into them); returns the Blender basis
-    ``(rotations, locations)`` at every frame and keyfill's report."""
+    ``(rotations, locations)`` at every frame and keyfill's report. ``orders``: each bone's keyfill Euler order
+    as Blender's BVH exporter writes it (:func:`.action.bvh_orders`; default XYZ)."""
     with tempfile.TemporaryDirectory(prefix="keyfill-blender-") as tmp:
         rig_map = _rig_map_file(settings.rig_map, tmp) if settings.rig_map else None
         if where == "python":
-            return _in_process(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map)
-        return _through_executable(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map, executable, tmp)
+            return _in_process(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map, orders)
+        return _through_executable(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map, executable, tmp,
+                                   orders)
 
 
-def _in_process(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map):
+def _in_process(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map, orders=None):
     from keyfill.errors import KeyfillError
     from keyfill.learn.completion import CompleteOptions
     from keyfill.learn.registry import complete
     from keyfill.motion import Keys
 
     try:
-        motion = convert.to_motion(rig, basis_rot, basis_loc, fps, moving=moving)
+        motion = convert.to_motion(rig, basis_rot, basis_loc, fps, moving=moving, orders=orders)
         options = CompleteOptions(model=settings.model or None, seed=settings.seed,
                                   feet=None if settings.feet == "DEFAULT" else settings.feet.lower(),
                                   guard=None if settings.guard == "DEFAULT" else settings.guard.lower(),
@@ -113,13 +118,14 @@ def _in_process(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map)
     return rot, loc, dict(result.info or {})
 
 
-def _through_executable(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map, executable, tmp):
+def _through_executable(rig, basis_rot, basis_loc, moving, fps, keys, settings, rig_map, executable, tmp,
+                        orders=None):
     exe = find_executable(executable)
     if exe is None:
         raise BackendError(f"no keyfill executable {executable or 'keyfill'!r}")
     src, dst = Path(tmp) / "keys.bvh", Path(tmp) / "filled.bvh"
     rot, pos = convert.to_keyfill(rig, basis_rot, basis_loc)
-    chans = convert.channels(rig, np.asarray(moving, bool))
+    chans = convert.channels(rig, np.asarray(moving, bool), orders)
     write_bvh(src, rig, chans, rot, pos, fps)
     cmd = [exe, "complete", str(src), "-o", str(dst), "--method", settings.method, "--seed", str(settings.seed),
            "--keys", ",".join(str(int(k)) for k in keys), "--bvh-layout", "source"]
@@ -142,16 +148,10 @@ def _through_executable(rig, basis_rot, basis_loc, moving, fps, keys, settings, 
 
 # --- the BVH of the executable fallback (our own layout only) ----------------------------------------------
 
-def _euler_zxy(q: np.ndarray) -> np.ndarray:
-    """Intrinsic ZXY angles (degrees, in channel order Z, X, Y) of quaternions: R = Rz Rx Ry."""
-    m = convert.quat_to_matrix(q)
-    x = np.arcsin(np.clip(m[..., 2, 1], -1.0, 1.0))
-    y = np.arctan2(-m[..., 2, 0], m[..., 2, 2])
-    z = np.arctan2(-m[..., 0, 1], m[..., 1, 1])
-    return np.degrees(np.stack([z, x, y], axis=-1))
-
-
 def write_bvh(path: Path, rig: convert.Rig, chans, rot: np.ndarray, pos: np.ndarray, fps: float) -> None:
+    """keyfill local ``rot``/``pos`` as BVH with channel lists ``chans`` (:func:`.convert.channels`): the angles
+    :func:`.convert.euler_angles` gives in each joint's order, so keyfill reads back the quaternions
+    :func:`.convert.bvh_hemisphere` gives in process (signs included)."""
     lines = ["HIERARCHY"]
     children = {j: [k for k in range(rig.num_bones) if rig.parents[k] == j] for j in range(rig.num_bones)}
 
@@ -170,7 +170,8 @@ def write_bvh(path: Path, rig: convert.Rig, chans, rot: np.ndarray, pos: np.ndar
     for j in range(rig.num_bones):
         if rig.parents[j] < 0:
             joint(j, 0)
-    ang = _euler_zxy(rot)
+    ang = np.stack([np.degrees(convert.euler_angles(rot[:, j], "".join(c[0] for c in chans[j][-3:])))
+                    for j in range(rig.num_bones)], axis=1)
     lines += ["MOTION", f"Frames: {rot.shape[0]}", f"Frame Time: {1.0 / fps!r}"]
     for f in range(rot.shape[0]):
         row = []
@@ -218,7 +219,14 @@ def read_bvh(path: Path, rig: convert.Rig) -> tuple[np.ndarray, np.ndarray]:
 
 
 def frame_rate(scene) -> float:
+    """The scene's frames per second as keyfill's BVH reader would read them from Blender's export: snapped to a
+    whole rate when the frame time is within 5e-7 s of ``1/n`` (Blender's BVH importer leaves ``fps_base`` at
+    0.999999 for a 30 fps file, 30.00003 fps; keyfill would then take the rate for another than its model's and
+    resample the keys through its rig bridge)."""
     fps = scene.render.fps / scene.render.fps_base
     if not (math.isfinite(fps) and fps > 0):
         raise BackendError("the scene's frame rate is not positive")
+    whole = round(fps)
+    if whole > 0 and abs(1.0 / fps - 1.0 / whole) < 5e-7:
+        return float(whole)
     return fps

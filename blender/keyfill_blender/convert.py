@@ -22,6 +22,14 @@ location in Blender, so its translation is its rest offset. Quaternions are (w, 
 Blender's Euler rotation mode ``"XYZ"`` is the matrix ``Rz Ry Rx``: keyfill's (and BVH's) intrinsic order
 ``ZYX``, the mode's letters reversed.
 
+A rotation is two quaternions, ``q`` and ``-q``, and keyfill's learned methods are not indifferent to which
+one they get (the transformer's result moves by up to 3 % of the height when one joint's sign at the first key
+flips: docs/blender.md). So the Motion gets the sign keyfill's own BVH reader would give the same rotations
+written as Blender's BVH exporter writes them (rotate mode *Native*): each bone's Euler angles in its
+:func:`bvh_order` (of the two Euler solutions, the one the exporter picks on its first frame), read back as the
+product of the three axis quaternions (:func:`bvh_hemisphere`). The executable fallback writes exactly those
+angles, so both backends and ``keyfill complete`` on Blender's export see the same quaternions.
+
 This module needs numpy and the armature's rest data only (no keyfill import: :func:`to_motion` and
 :func:`from_motion` import it, and the executable fallback of :mod:`.backend` uses the arrays directly);
 ``tests/test_blender_addon.py`` checks it against keyfill's own BVH reader (world positions to 1e-5 of the
@@ -38,9 +46,10 @@ import numpy as np
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 #: the Euler modes of a pose bone (the others: QUATERNION, AXIS_ANGLE)
 EULER_MODES = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
-#: the channels a keyfill joint gets: translations where a bone moves, rotations in mocap's order
+#: the channels a keyfill joint gets: translations where a bone moves, rotations in its :func:`bvh_order`
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
-ROTATION_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
+#: the keyfill Euler order of a bone without one (Blender's BVH exporter writes quaternion bones as XYZ)
+DEFAULT_ORDER = "XYZ"
 
 
 class ConversionError(ValueError):
@@ -201,6 +210,54 @@ def keyfill_order(mode: str) -> str:
     return mode[::-1]
 
 
+def bvh_order(mode: str) -> str:
+    """The keyfill Euler order (BVH channel order) Blender's BVH exporter writes a bone of rotation mode ``mode``
+    in with rotate mode *Native*: the mode's own letters (it decomposes in the reversed mode, so the channels
+    ``X Y Z`` of mode ``XYZ`` mean ``Rx Ry Rz``), ``XYZ`` for quaternion and axis-angle bones."""
+    return mode if mode in EULER_MODES else DEFAULT_ORDER
+
+
+def euler_angles(q: np.ndarray, order: str) -> np.ndarray:
+    """Intrinsic Euler angles ``(..., 3)`` (radians, in ``order``'s slots: ``R = R_o0(a) R_o1(b) R_o2(c)``) of
+    quaternions ``(..., 4)``; of the two solutions, the one with the smaller sum of absolute angles (the one
+    Blender's ``to_euler`` picks against a zero Euler, as its BVH exporter does on its first frame), the
+    middle angle in [-90, 90] degrees on a tie."""
+    m = quat_to_matrix(np.asarray(q, dtype=np.float64))
+    i, j, k = ("XYZ".index(c) for c in order)
+    s = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = s e_k
+
+    def e(r, c):
+        return m[..., r, c]
+
+    sb = np.clip(s * e(i, k), -1.0, 1.0)
+    cb = np.hypot(e(i, i), e(i, j))
+    first = np.stack([np.arctan2(-s * e(j, k), e(k, k)), np.arctan2(sb, cb), np.arctan2(-s * e(i, j), e(i, i))], -1)
+    second = np.stack([np.arctan2(s * e(j, k), -e(k, k)), np.arctan2(sb, -cb), np.arctan2(s * e(i, j), -e(i, i))],
+                      -1)
+    pick = np.abs(second).sum(axis=-1) < np.abs(first).sum(axis=-1)
+    return np.where(pick[..., None], second, first)
+
+
+def euler_product(angles: np.ndarray, order: str) -> np.ndarray:
+    """The quaternion keyfill's BVH reader makes of intrinsic Euler ``angles (..., 3)`` in ``order``'s slots:
+    the product of the three axis quaternions (each with ``w = cos(angle / 2)``)."""
+    xyz = np.empty_like(np.asarray(angles, dtype=np.float64))
+    for slot, axis in enumerate(order):
+        xyz[..., "XYZ".index(axis)] = angles[..., slot]
+    return euler_to_quat(xyz, order[::-1])  # Blender mode = the keyfill order reversed
+
+
+def bvh_hemisphere(rotations: np.ndarray, orders) -> np.ndarray:
+    """``rotations (F, J, 4)`` with each quaternion's sign as keyfill's BVH reader gives it for the Euler angles
+    :func:`euler_angles` in joint ``j``'s ``orders[j]`` (see the module docstring: what Blender's BVH exporter
+    writes, read by ``keyfill complete``)."""
+    out = np.array(rotations, dtype=np.float64, copy=True)
+    for j, order in enumerate(orders):
+        ref = euler_product(euler_angles(out[:, j], order), order)
+        out[:, j] *= np.where(np.sum(ref * out[:, j], axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    return out
+
+
 # --- the conversion -------------------------------------------------------------------------------------------
 
 def axes_quat(rig: Rig) -> np.ndarray:
@@ -249,20 +306,34 @@ def keyfill_to_scene(rig: Rig, points: np.ndarray) -> np.ndarray:
     return points @ Z_UP_TO_Y_UP * rig.meters_per_unit  # K^-1 = K^T
 
 
-def channels(rig: Rig, moving: np.ndarray) -> tuple[tuple[str, ...], ...]:
-    """keyfill channel lists: translations on roots and on unconnected bones that ``moving (J,)`` says move."""
-    return tuple(POSITION_CHANNELS + ROTATION_CHANNELS if (p < 0 or (m and not c)) else ROTATION_CHANNELS
-                 for p, m, c in zip(rig.parents, moving, rig.connected))
+def channels(rig: Rig, moving: np.ndarray, orders=None) -> tuple[tuple[str, ...], ...]:
+    """keyfill channel lists: translations on roots and on unconnected bones that ``moving (J,)`` says move,
+    rotations in each bone's ``orders[j]`` (keyfill Euler orders, :func:`bvh_order`; default XYZ)."""
+    orders = _orders(rig, orders)
+    return tuple((POSITION_CHANNELS if (p < 0 or (m and not c)) else ()) + tuple(f"{a}rotation" for a in o)
+                 for p, m, c, o in zip(rig.parents, moving, rig.connected, orders))
 
 
-def to_motion(rig: Rig, basis_rot: np.ndarray, basis_loc: np.ndarray, fps: float, keys=None, moving=None):
-    """A keyfill :class:`~keyfill.motion.Motion` of the basis arrays (needs keyfill importable)."""
+def _orders(rig: Rig, orders) -> tuple[str, ...]:
+    orders = (DEFAULT_ORDER,) * rig.num_bones if orders is None else tuple(orders)
+    if len(orders) != rig.num_bones or any(sorted(o) != ["X", "Y", "Z"] for o in orders):
+        raise ConversionError(f"need one Euler order (a permutation of XYZ) per bone, not {orders!r}")
+    return orders
+
+
+def to_motion(rig: Rig, basis_rot: np.ndarray, basis_loc: np.ndarray, fps: float, keys=None, moving=None,
+              orders=None):
+    """A keyfill :class:`~keyfill.motion.Motion` of the basis arrays (needs keyfill importable); rotations signed
+    as keyfill reads them from Blender's BVH export (:func:`bvh_hemisphere` with ``orders``, :func:`bvh_order`
+    of each bone's rotation mode; default XYZ)."""
     from keyfill.motion import Motion, Skeleton
 
+    orders = _orders(rig, orders)
     rot, pos = to_keyfill(rig, basis_rot, basis_loc)
+    rot = bvh_hemisphere(rot, orders)
     moving = np.ones(rig.num_bones, bool) if moving is None else np.asarray(moving, bool)
-    sk = Skeleton(names=rig.names, parents=rig.parents, offsets=rig.offsets, channels=channels(rig, moving),
-                  meters_per_unit=rig.meters_per_unit, up_axis="Y")
+    sk = Skeleton(names=rig.names, parents=rig.parents, offsets=rig.offsets,
+                  channels=channels(rig, moving, orders), meters_per_unit=rig.meters_per_unit, up_axis="Y")
     return Motion(sk, fps, rot, pos, keys=keys)
 
 

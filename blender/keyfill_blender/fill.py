@@ -129,7 +129,8 @@ class KEYFILL_OT_fill_inbetweens(bpy.types.Operator):
         settings = backend.Settings(self.method, self.model.strip(), self.seed, self.feet, self.guard, rig_map_of(obj))
         self._status(context, wm, 2, f"{self.method} over {len(frames)} frames")
         out_rot, out_loc, _report = backend.complete(rig, rot, loc, moving, backend.frame_rate(context.scene),
-                                                     keys - first, settings, where, exe)
+                                                     keys - first, settings, where, exe,
+                                                     orders=action.bvh_orders(obj, rig))
         self._status(context, wm, 3, "keying the in-betweens")
         at_keys = keys - first
         out_rot[at_keys], out_loc[at_keys] = krot, kloc  # the keys exactly as they were

@@ -259,7 +259,9 @@ def hold_windows(skeleton, quats: np.ndarray, root: np.ndarray, keys) -> tuple[n
 def _hold_outside(q: np.ndarray, r: np.ndarray, quats: np.ndarray, root: np.ndarray, k: np.ndarray):
     """Copy the key frames of ``quats``, ``root`` into ``q``, ``r`` (in place) and hold the end keys outside them."""
     src = np.clip(np.arange(quats.shape[1]), k[0], k[-1])
-    copy = np.union1d(k, np.flatnonzero(src != np.arange(quats.shape[1])))  # keys, and frames that hold one
+    held = src != np.arange(quats.shape[1])
+    held[k] = True
+    copy = np.flatnonzero(held)  # keys, and frames that hold one (np.union1d would import numpy.ma: 9 ms)
     q[:, copy], r[:, copy] = quats[:, src[copy]], root[:, src[copy]]
     return q, r
 

@@ -11,23 +11,27 @@ may share one, a sparse one is mostly zeros), against what the file's size allow
 (:func:`keyfill.limits.check_reads`). Values read are finite and within
 :func:`keyfill.limits.max_abs`; JSON numbers are finite 64-bit floats and whole
 numbers fit in 64 bits (:func:`keyfill.limits.json_int64`).
+A buffer in a file (the ``.glb``'s BIN chunk, a ``.bin``) is never read whole:
+:class:`Stored` names its bytes, and each accessor reads its own range,
+:data:`BLOCK` bytes at a time, straight into its float64 array, so reading a long
+take holds little beside the motion's own arrays (issue 44).
 The JSON is read as JSON and its types checked against :data:`SCHEMA` (the
 properties keyfill uses) rather than through pygltflib, whose decoder coerces
 wrong types silently (a ``count`` of 3.5 becomes 3) and fails on valid files
 (``extras`` that are not objects).
 
-Writing: :class:`BufferWriter` appends arrays as accessors (one buffer view
-each, 4-byte aligned, ``min``/``max`` given) and :func:`glb_bytes` wraps the
-JSON and the binary chunk in a ``.glb``.
+Writing is :mod:`keyfill.io.gltf_blob`'s.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import os
 import struct
 import urllib.parse
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +51,8 @@ WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "M
 #: image suffix -> MIME type, for embedding a template's images
 IMAGE_TYPES = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
                ".ktx2": "image/ktx2"}
+#: bytes of a buffer's file read (or copied into an output) at a time: what a long take holds beside its arrays
+BLOCK = 1 << 22
 
 
 _INT, _STR, _BOOL, _OBJ, _NUMS, _INTS, _OBJS = "int", "str", "bool", "obj", "nums", "ints", "objs"
@@ -111,13 +117,62 @@ def _objects(raw: dict, key: str, label) -> list:
     return items
 
 
+@dataclass(frozen=True)
+class Stored:
+    """``length`` bytes of a buffer or an image: ``data`` held in memory (a ``data:`` URI), or else those of
+    the file ``path`` from byte ``start``, read only where they are asked for (:meth:`read`, :meth:`blocks`).
+    ``what`` (``"buffer 0"``) and ``label`` name them in errors."""
+
+    length: int
+    what: str
+    label: object
+    path: Path | None = None
+    start: int = 0
+    data: bytes | memoryview | np.ndarray | None = None
+
+    def part(self, at: int, size: int) -> Stored:
+        """Its bytes ``at`` to ``at + size`` (inside it) as a :class:`Stored` of their own."""
+        if self.data is not None:
+            return replace(self, length=size, data=memoryview(self.data)[at: at + size])
+        return replace(self, length=size, start=self.start + at)
+
+    def read(self, at: int, size: int) -> np.ndarray:
+        """``(size,)`` uint8: its bytes ``at`` to ``at + size``; a :class:`FormatError` when its file cannot
+        give them (removed, cut short since it was opened)."""
+        if self.data is not None:
+            return np.frombuffer(self.data, dtype=np.uint8, count=size, offset=at)
+        out = np.empty(size, dtype=np.uint8)
+        view, got = memoryview(out), 0
+        try:
+            with open(self.path, "rb") as f:
+                f.seek(self.start + at)
+                while got < size:
+                    n = f.readinto(view[got:])
+                    if not n:
+                        break
+                    got += n
+        except OSError as e:
+            raise FormatError(f"{self.what}: the file {self.path.name[:60]!r} it names cannot be read "
+                              f"({e.strerror or e})", self.label) from None
+        if got < size:
+            raise FormatError(f"{self.what}: the file {self.path.name[:60]!r} it names ends before byte "
+                              f"{self.start + at + size} (changed while it was read?)", self.label)
+        return out
+
+    def blocks(self) -> Iterator[np.ndarray]:
+        """All its bytes, ``(n,)`` uint8 arrays of at most :data:`BLOCK`, in order."""
+        for at in range(0, self.length, BLOCK):
+            yield self.read(at, min(BLOCK, self.length - at))
+
+
 @dataclass
 class Document:
-    """A glTF file as read: its JSON (checked by :func:`check_schema`), each buffer's bytes, its folder."""
+    """A glTF file as read: its JSON (checked by :func:`check_schema`), where each buffer's bytes are, its
+    folder."""
 
     json: dict
-    #: per buffer its bytes, or None for a buffer without data (no URI and no BIN chunk: an extension's)
-    buffers: list[bytes | None]
+    #: per buffer where its bytes are, or None for a buffer without data (no URI and no BIN chunk: an extension's)
+    buffers: list[Stored | None]
     folder: Path
     label: object
     size: int  #: bytes of the file and of the buffer files it names (the bound of what it may describe)
@@ -142,42 +197,52 @@ def _strict_json(text: str, label):
         raise FormatError("not glTF: the JSON is nested too deeply", label) from None
 
 
-def split_glb(data: bytes, label) -> tuple[bytes, memoryview | None]:
-    """``(JSON chunk, BIN chunk or None)`` of a ``.glb``; :class:`FormatError` for a broken container."""
-    if len(data) < 12:
-        raise FormatError(f"not a glTF binary: {len(data)} bytes, shorter than the 12-byte header", label)
-    if data[:4] != MAGIC:
-        raise FormatError(f"not a glTF binary: the file starts with {data[:4]!r}, not b'glTF'", label)
-    version, length = struct.unpack_from("<II", data, 4)
+def split_glb(f, size: int, label) -> tuple[bytes, tuple[int, int] | None]:
+    """``(JSON chunk, (offset, length) of the BIN chunk in the file, or None)`` of the ``.glb`` open as ``f``
+    (binary, ``size`` bytes); :class:`FormatError` for a broken container. Only the chunk headers and the JSON
+    are read."""
+    f.seek(0)
+    head = f.read(12)
+    if size < 12:
+        raise FormatError(f"not a glTF binary: {size} bytes, shorter than the 12-byte header", label)
+    if head[:4] != MAGIC:
+        raise FormatError(f"not a glTF binary: the file starts with {head[:4]!r}, not b'glTF'", label)
+    version, length = struct.unpack_from("<II", head, 4)
     if version != 2:
         raise FormatError(f"glTF binary version {version}; keyfill reads version 2", label)
-    if length != len(data):
-        raise FormatError(f"the glTF header gives a length of {length} bytes, the file has {len(data)} "
+    if length != size:
+        raise FormatError(f"the glTF header gives a length of {length} bytes, the file has {size} "
                           "(cut short or padded?)", label)
-    chunks = []
+    chunks = []  # (kind, offset, length) of each chunk's data
     at = 12
     while at < length:
         if at + 8 > length:
             raise FormatError(f"a chunk header at byte {at} runs past the end of the file", label)
-        size, kind = struct.unpack_from("<II", data, at)
-        if at + 8 + size > length:
-            raise FormatError(f"a chunk at byte {at} gives a length of {size} bytes, past the end of the file", label)
-        chunks.append((kind, memoryview(data)[at + 8: at + 8 + size]))  # a view: the binary chunk is not copied
-        at += 8 + size
+        f.seek(at)
+        chunk, kind = struct.unpack("<II", f.read(8))
+        if at + 8 + chunk > length:
+            raise FormatError(f"a chunk at byte {at} gives a length of {chunk} bytes, past the end of the file", label)
+        chunks.append((kind, at + 8, chunk))
+        at += 8 + chunk
     if not chunks or chunks[0][0] != CHUNK_JSON:
         raise FormatError("the first chunk of a glTF binary must be its JSON", label)
-    binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None
-    return bytes(chunks[0][1]), binary
+    f.seek(chunks[0][1])
+    text = f.read(chunks[0][2])
+    binary = chunks[1][1:] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None
+    return text, binary
 
 
 def load_document(path: Path, label) -> Document:
-    """Read and check a ``.glb`` or ``.gltf`` file and its buffers."""
-    data = path.read_bytes()
-    binary = None
-    if data[:4] == MAGIC or path.suffix.lower() == ".glb":
-        text_bytes, binary = split_glb(data, label)
-    else:
-        text_bytes = data
+    """Read and check a ``.glb`` or ``.gltf`` file's JSON and find its buffers (:class:`Stored`: their bytes
+    are read where accessors ask)."""
+    with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        head = f.read(4)
+        binary = None
+        if head == MAGIC or path.suffix.lower() == ".glb":
+            text_bytes, binary = split_glb(f, size, label)
+        else:
+            text_bytes = head + f.read()
     try:
         text = text_bytes.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -191,10 +256,11 @@ def load_document(path: Path, label) -> Document:
         raise FormatError(f"not glTF 2.0: asset.version is {version!r}", label)
     check_schema(raw, label)
     specs = raw.get("buffers", [])
-    buffers = [_buffer(b, i, binary, path.parent, label) for i, b in enumerate(specs)]
+    chunk = None if binary is None else Stored(binary[1], "buffer 0", label, path=path, start=binary[0])
+    buffers = [_buffer(b, i, chunk, path.parent, label) for i, b in enumerate(specs)]
     # what the file brings: its own bytes and those of the buffer files it names (a .gltf's .bin)
-    outside = sum(len(b) for b, spec in zip(buffers, specs) if b is not None and "uri" in spec)
-    return Document(raw, buffers, path.parent, label, len(data) + outside)
+    outside = sum(b.length for b, spec in zip(buffers, specs) if b is not None and "uri" in spec)
+    return Document(raw, buffers, path.parent, label, size + outside)
 
 
 def _whole(value, what: str, label, low: int = 0) -> int:
@@ -229,14 +295,16 @@ def resolve_uri(folder: Path, uri: str, label, what: str) -> Path:
     return target
 
 
-def read_named(path: Path, label, what: str) -> bytes:
-    """The bytes of the file ``path`` that :func:`resolve_uri` found; a :class:`FormatError` when it cannot be
-    read (no permission, removed since)."""
+def stored_file(path: Path, label, what: str) -> Stored:
+    """The file ``path`` that :func:`resolve_uri` found, as a :class:`Stored` (opened to learn its size, not
+    read); a :class:`FormatError` when it cannot be opened (no permission, removed since)."""
     try:
-        return path.read_bytes()
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
     except OSError as e:
         raise FormatError(f"{what}: the file {path.name[:60]!r} it names cannot be read ({e.strerror or e})",
                           label) from None
+    return Stored(size, what, label, path=path)
 
 
 def data_uri(uri: str, label, what: str) -> bytes:
@@ -250,7 +318,7 @@ def data_uri(uri: str, label, what: str) -> bytes:
         raise FormatError(f"{what} is a data URI whose base64 data is broken", label) from None
 
 
-def _buffer(buf: dict, i: int, binary: bytes | None, folder: Path, label) -> bytes | None:
+def _buffer(buf: dict, i: int, binary: Stored | None, folder: Path, label) -> Stored | None:
     what = f"buffer {i}"
     length = _whole(buf.get("byteLength"), f"{what}'s byteLength", label, 1)
     uri = buf.get("uri")
@@ -259,12 +327,13 @@ def _buffer(buf: dict, i: int, binary: bytes | None, folder: Path, label) -> byt
             return None
         data = binary
     elif uri.startswith("data:"):
-        data = data_uri(uri, label, what)
+        decoded = data_uri(uri, label, what)
+        data = Stored(len(decoded), what, label, data=decoded)
     else:
-        data = read_named(resolve_uri(folder, uri, label, what), label, what)
-    if len(data) < length:
-        raise FormatError(f"{what} has {len(data)} bytes; its byteLength says {length}", label)
-    return data[:length]
+        data = stored_file(resolve_uri(folder, uri, label, what), label, what)
+    if data.length < length:
+        raise FormatError(f"{what} has {data.length} bytes; its byteLength says {length}", label)
+    return data.part(0, length)
 
 
 def read_accessor(doc: Document, index, what: str, types: tuple[str, ...], floats_only: bool = False) -> np.ndarray:
@@ -316,7 +385,8 @@ def read_accessor(doc: Document, index, what: str, types: tuple[str, ...], float
 
 
 def _view_elements(doc: Document, view_index, offset, count: int, width: int, dtype, name: str) -> np.ndarray:
-    """``(count, width)`` float64 elements of a buffer view, every byte checked to be inside it."""
+    """``(count, width)`` float64 elements of a buffer view, every byte checked to be inside it; read from the
+    buffer :data:`BLOCK` bytes at a time, each block widened into the array made for them."""
     label = doc.label
     views = doc.items("bufferViews")
     if type(view_index) is not int or not 0 <= view_index < len(views):
@@ -331,9 +401,9 @@ def _view_elements(doc: Document, view_index, offset, count: int, width: int, dt
     data = doc.buffers[buffer]
     if data is None:
         raise FormatError(f"{vname} is in buffer {buffer}, which has no URI and no binary chunk", label)
-    if start + length > len(data):
+    if start + length > data.length:
         raise FormatError(f"{vname} (bytes {start} to {start + length}) runs past the end of buffer {buffer} "
-                          f"({len(data)} bytes)", label)
+                          f"({data.length} bytes)", label)
     offset = _whole(offset, f"{name}'s byteOffset", label)
     element = width * dtype.itemsize
     stride = _whole(view.get("byteStride", element), f"{vname}'s byteStride", label, 1)
@@ -342,10 +412,15 @@ def _view_elements(doc: Document, view_index, offset, count: int, width: int, dt
     end = offset + stride * (count - 1) + element
     if end > length:
         raise FormatError(f"{name} needs {end} bytes of {vname}, which has {length}", label)
-    block = np.frombuffer(data, dtype=np.uint8, count=end, offset=start)
-    rows = np.lib.stride_tricks.as_strided(block[offset:], shape=(count, element), strides=(stride, 1))
-    with np.errstate(invalid="ignore"):  # a signalling NaN warns as it widens; read_accessor refuses it next
-        return np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
+    out = np.empty((count, width))
+    step = max(1, BLOCK // stride)  # rows a block
+    for r in range(0, count, step):
+        n = min(step, count - r)
+        block = data.read(start + offset + r * stride, stride * (n - 1) + element)
+        rows = np.lib.stride_tricks.as_strided(block, shape=(n, element), strides=(stride, 1))
+        with np.errstate(invalid="ignore"):  # a signalling NaN warns as it widens; read_accessor refuses it next
+            out[r: r + n] = np.ascontiguousarray(rows).view(dtype).reshape(n, width)
+    return out
 
 
 def _apply_sparse(doc: Document, sparse: dict, values: np.ndarray, width: int, dtype, name: str) -> None:
@@ -363,47 +438,3 @@ def _apply_sparse(doc: Document, sparse: dict, values: np.ndarray, width: int, d
         raise FormatError(f"{name}'s sparse indices are not increasing indices inside the accessor", label)
     values[idx] = _view_elements(doc, given.get("bufferView"), given.get("byteOffset", 0), n, width, dtype,
                                  name + " sparse values")
-
-
-class BufferWriter:
-    """The binary buffer of a file being written: arrays in, accessors and buffer views out."""
-
-    def __init__(self, gltf, data: bytes = b""):
-        self.gltf = gltf
-        self.data = bytearray(data)
-
-    def add_bytes(self, payload: bytes) -> int:
-        """A buffer view (of buffer 0) holding ``payload``, 4-byte aligned; returns its index."""
-        from pygltflib import BufferView
-
-        self.data += b"\0" * (-len(self.data) % 4)
-        self.gltf.bufferViews.append(BufferView(buffer=0, byteOffset=len(self.data), byteLength=len(payload)))
-        self.data += payload
-        return len(self.gltf.bufferViews) - 1
-
-    def add(self, array: np.ndarray, kind: str, bounds: bool = False) -> int:
-        """An accessor of float32 ``array`` ``(count, width)`` of glTF type ``kind``; returns its index.
-
-        ``bounds`` gives ``min`` and ``max`` (required for animation inputs).
-        """
-        from pygltflib import Accessor
-
-        values = np.ascontiguousarray(array, dtype="<f4").reshape(len(array), -1)
-        view = self.add_bytes(values.tobytes())
-        acc = Accessor(bufferView=view, componentType=FLOAT, count=len(values), type=kind)
-        if bounds:
-            acc.min = [float(v) for v in values.min(axis=0)]
-            acc.max = [float(v) for v in values.max(axis=0)]
-        self.gltf.accessors.append(acc)
-        return len(self.gltf.accessors) - 1
-
-
-def glb_bytes(json_text: str, binary: bytes) -> bytes:
-    """A ``.glb``: header, the JSON chunk (padded with spaces) and the BIN chunk (padded with zeros)."""
-    text = json_text.encode("utf-8")
-    text += b" " * (-len(text) % 4)
-    binary = bytes(binary) + b"\0" * (-len(binary) % 4)
-    chunks = struct.pack("<II", len(text), CHUNK_JSON) + text
-    if binary:
-        chunks += struct.pack("<II", len(binary), CHUNK_BIN) + binary
-    return MAGIC + struct.pack("<II", 2, 12 + len(chunks)) + chunks

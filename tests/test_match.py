@@ -17,7 +17,7 @@ from keyfill.learn import registry
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.library import store
 from keyfill.learn.library.features import describe
-from keyfill.learn.library.index import THRESHOLD, library_index
+from keyfill.learn.library.index import POSE_INDEX, THRESHOLD, PoseIndex, library_index, load_pose_index
 from keyfill.learn.library.matcher import Matcher, MatchSettings
 from keyfill.motion import Keys, Motion
 
@@ -176,6 +176,30 @@ def _copy(library, tmp_path):
     target = tmp_path / "lib"
     shutil.copytree(library, target)
     return target
+
+
+def test_a_saved_pose_index_keeps_its_axes_and_scores_as_one_computed_at_load(library, tmp_path):
+    """A model folder's pose_index.npz holds the tree's axes (saving the SVD at every start-up, issue 44): the
+    loaded index scores exactly as one whose axes are computed from its features, a file of the older three
+    fields still loads, and axes of the wrong shape are refused."""
+    lib = store.load(library)
+    poses = np.asarray(lib.features, dtype=np.float32)
+    library_index(lib).save(tmp_path)
+    saved = load_pose_index(tmp_path, "saved")
+    assert saved.stored_axes is not None
+    computed = PoseIndex(saved.features, saved.spread, saved.threshold, "computed")
+    for got, want in zip(saved.axes(), computed.axes()):
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+    queries = poses[::7] + np.float32(0.01)
+    assert np.array_equal(saved.familiarity(queries), computed.familiarity(queries))
+    with np.load(tmp_path / POSE_INDEX) as z:
+        fields = {k: z[k] for k in z.files}
+    np.savez_compressed(tmp_path / POSE_INDEX, **{k: fields[k] for k in ("features", "spread", "threshold")})
+    old = load_pose_index(tmp_path, "old")
+    assert old.stored_axes is None and np.array_equal(old.familiarity(queries), computed.familiarity(queries))
+    np.savez(tmp_path / POSE_INDEX, **{**fields, "basis": fields["basis"][:, :3]})
+    with pytest.raises(ModelError, match="damaged pose index \\(axes"):
+        load_pose_index(tmp_path, "bad")
 
 
 def test_damaged_libraries_are_refused_with_what_is_wrong(library, tmp_path):

@@ -25,8 +25,9 @@ from keyfill.errors import ModelError
 
 #: poses sampled for :func:`spread`
 SPREAD_SAMPLE = 2000
-#: the file of a model folder's pose index
+#: the file of a model folder's pose index, and its arrays
 POSE_INDEX = "pose_index.npz"
+_INDEX_FIELDS = ("features", "spread", "threshold", "mean", "basis")
 #: a gap whose largest distance to the known poses exceeds this many spreads is unfamiliar (the guard's,
 #: :mod:`keyfill.learn.library.guard`; calibrated in docs/match.md)
 THRESHOLD = 12.0
@@ -126,12 +127,20 @@ class PoseIndex:
     spread: float
     threshold: float
     name: str
+    #: the tree's ``(mean (D,), basis (D, d))`` as :meth:`axes` computes them, when a file holds them
+    stored_axes: tuple[np.ndarray, np.ndarray] | None = None
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """The principal axes of :attr:`features` the candidates are searched on (:func:`principal_axes` on
+        :data:`INDEX_AXES_ROWS` rows; a model folder's file keeps them, saving the SVD at start-up)."""
+        if self.stored_axes is not None:
+            return self.stored_axes
+        return principal_axes(self.features, TREE_DIMS, rows=INDEX_AXES_ROWS)
 
     def _tree(self) -> Tree:
         tree = self.__dict__.get("_cached_tree")
         if tree is None:
-            mean, basis = principal_axes(self.features, TREE_DIMS, rows=INDEX_AXES_ROWS)
-            tree = Tree(self.features, mean, basis)
+            tree = Tree(self.features, *self.axes())
             object.__setattr__(self, "_cached_tree", tree)
         return tree
 
@@ -149,10 +158,13 @@ class PoseIndex:
         return np.sqrt(d2.min(axis=1).astype(np.float64)) / np.sqrt(J) / self.spread
 
     def save(self, folder: str | os.PathLike) -> Path:
-        """Write ``pose_index.npz`` into a model folder (float16 features; no pickles)."""
+        """Write ``pose_index.npz`` into a model folder: float16 features and the float32 axes the loader's
+        features give (:meth:`axes`), uncompressed (read in 2 ms at every start-up, not 18), no pickles."""
         path = Path(folder) / POSE_INDEX
-        np.savez_compressed(path, features=np.asarray(self.features, dtype=np.float16),
-                            spread=np.float64(self.spread), threshold=np.float64(self.threshold))
+        half = np.asarray(self.features, dtype=np.float16)
+        mean, basis = PoseIndex(half.astype(np.float32), self.spread, self.threshold, self.name).axes()
+        np.savez(path, features=half, spread=np.float64(self.spread), threshold=np.float64(self.threshold),
+                 mean=mean, basis=basis)
         return path
 
 
@@ -164,9 +176,10 @@ def load_pose_index(folder: str | os.PathLike, name: str) -> PoseIndex | None:
         return None
     try:
         with np.load(path, allow_pickle=False) as z:
-            if set(z.files) != {"features", "spread", "threshold"}:
+            if set(z.files) not in ({"features", "spread", "threshold"}, set(_INDEX_FIELDS)):
                 raise ValueError(f"fields {sorted(z.files)}")
             feats, spread_m, threshold = z["features"], float(z["spread"]), float(z["threshold"])
+            axes = (z["mean"], z["basis"]) if "mean" in z.files else None  # files before 2026-12-03 lack them
     except (OSError, ValueError, EOFError, KeyError) as e:
         raise ModelError(f"{path}: damaged pose index ({' '.join(str(e).split())[:200]})") from None
     if feats.dtype != np.float16 or feats.ndim != 2 or feats.shape[1] % 3 or not len(feats):
@@ -175,7 +188,13 @@ def load_pose_index(folder: str | os.PathLike, name: str) -> PoseIndex | None:
         raise ModelError(f"{path}: damaged pose index (spread {spread_m}, threshold {threshold})")
     if not np.isfinite(feats).all():
         raise ModelError(f"{path}: damaged pose index (features that are not finite)")
-    return PoseIndex(feats.astype(np.float32), spread_m, threshold, name)
+    D = feats.shape[1]
+    if axes is not None and not (axes[0].dtype == axes[1].dtype == np.float32 and axes[0].shape == (D,)
+                                 and axes[1].shape == (D, min(TREE_DIMS, D)) and np.isfinite(axes[1]).all()
+                                 and np.isfinite(axes[0]).all()):
+        raise ModelError(f"{path}: damaged pose index (axes {axes[0].dtype} {axes[0].shape}, "
+                         f"{axes[1].dtype} {axes[1].shape})")
+    return PoseIndex(feats.astype(np.float32), spread_m, threshold, name, axes)
 
 
 def library_index(library) -> PoseIndex:

@@ -200,6 +200,11 @@ def test_a_saved_pose_index_keeps_its_axes_and_scores_as_one_computed_at_load(li
     np.savez(tmp_path / POSE_INDEX, **{**fields, "basis": fields["basis"][:, :3]})
     with pytest.raises(ModelError, match="damaged pose index \\(axes"):
         load_pose_index(tmp_path, "bad")
+    features = fields["features"].copy()
+    features[3, 5] = np.inf
+    np.savez(tmp_path / POSE_INDEX, **{**fields, "features": features})
+    with pytest.raises(ModelError, match="damaged pose index \\(features that are not finite"):
+        load_pose_index(tmp_path, "bad")
 
 
 def test_damaged_libraries_are_refused_with_what_is_wrong(library, tmp_path):

@@ -34,6 +34,11 @@ Mapping (both ways; :mod:`keyfill.io.gltf_write` writes, this module reads):
 glTF stores animation in 32-bit floats: a round trip keeps about 7 significant
 digits of every rotation and translation (rest offsets and the extras keep all
 of theirs). See ``docs/formats.md``.
+
+Memory (issue 44): the buffers are not held (each channel's accessor is read
+from the file when it is resampled into the motion's arrays, one channel at a
+time), and what runs over every frame afterwards runs :data:`BLOCK_FRAMES`
+frames at a time, so reading holds little beside the motion's own arrays.
 """
 
 from __future__ import annotations
@@ -55,6 +60,8 @@ Z_TO_Y = np.array([np.sqrt(0.5), -np.sqrt(0.5), 0.0, 0.0])
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 #: a sample time within this many frames of a frame is on that frame
 ON_GRID = 1e-3
+#: frames whose rotations are normalised (or positions compared with the rest) at once
+BLOCK_FRAMES = 4096
 
 
 @dataclass
@@ -378,7 +385,7 @@ def resample(track: Track, x: np.ndarray, seconds: float, near: np.ndarray) -> n
     keys = values[1::3] if track.interpolation == "CUBICSPLINE" else values
     t = track.times
     k = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 1)
-    out = keys[k].copy()
+    out = keys[k]  # indexed: a new array
     if len(t) == 1:
         return out
     hi = np.minimum(k + 1, len(t) - 1)
@@ -474,10 +481,12 @@ def read(path: str | Path, label=None, skin: str | int | None = None, animation:
                                 f"{int(np.argmax(dev > 1e-3))}; keyfill motions have no scale")
         else:
             (rot if tr.path == "rotation" else pos)[:, tr.joint] = values
-    norms = np.linalg.norm(rot, axis=-1, keepdims=True)
-    if np.any(norms < 1e-6):
-        raise FormatError("a rotation is zero (not a quaternion)", label)
-    rot /= norms
+    for a in range(0, num_frames, BLOCK_FRAMES):
+        block = rot[a: a + BLOCK_FRAMES]
+        norms = np.linalg.norm(block, axis=-1, keepdims=True)
+        if np.any(norms < 1e-6):
+            raise FormatError("a rotation is zero (not a quaternion)", label)
+        block /= norms
     rest = rig.rest_pos.copy()
     mpu, up = layout.get("metersPerUnit", rig.scale), layout.get("upAxis", "Y")
     if type(mpu) not in (int, float) or not 0 < mpu < 1e12 or up not in ("Y", "Z"):
@@ -502,7 +511,10 @@ def _skeleton(layout: dict, rig: Rig, rest, rot, pos, mpu: float, up: str, label
                                  or not all(isinstance(c, str) for c in channels)):
         raise FormatError(f"extras.{EXTRAS}.channels must be {J} strings, one per joint", label)
     if channels is None:
-        moving = np.abs(pos - rest).max(axis=(0, 2), initial=0.0) > 1e-6 * max(1.0, np.abs(rest).max())
+        move = np.zeros(J)
+        for a in range(0, len(pos), BLOCK_FRAMES):
+            move = np.maximum(move, np.abs(pos[a: a + BLOCK_FRAMES] - rest).max(axis=(0, 2)))
+        moving = move > 1e-6 * max(1.0, np.abs(rest).max())
         channels = [FULL_ROOT_CHANNELS if rig.parents[j] < 0 or moving[j] else FULL_CHANNELS for j in range(J)]
     else:
         channels = [tuple(c.split()) for c in channels]

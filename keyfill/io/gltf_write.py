@@ -21,11 +21,15 @@ With ``template`` (a glTF file whose chosen skin has the motion's joints, see
 animation: meshes, materials, textures, other nodes and other animations are
 kept; the buffers and images the template refers to are put into the one
 buffer of the output, so it does not depend on files beside the template.
+
+The buffer is written as it is made (:mod:`keyfill.io.gltf_blob`): each
+channel's values are turned into glTF's frame and written one at a time, and a
+template's bytes are copied a block at a time, so writing a long take holds
+little beside the motion itself (issue 44).
 """
 
 from __future__ import annotations
 
-import base64
 import json
 import urllib.parse
 from pathlib import Path
@@ -36,7 +40,8 @@ from keyfill import limits
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError, UsageError
 from keyfill.io.gltf import EXTRAS, Z_TO_Y, pick, rig_of
-from keyfill.io.gltf_buffers import IMAGE_TYPES, BufferWriter, glb_bytes, load_document, read_named, resolve_uri
+from keyfill.io.gltf_blob import Blob, BufferWriter, write_bin, write_glb, write_gltf
+from keyfill.io.gltf_buffers import IMAGE_TYPES, load_document, resolve_uri, stored_file
 from keyfill.kinematics import fk
 from keyfill.motion import POSITION_CHANNELS, ROTATION_CHANNELS, Motion
 
@@ -46,24 +51,36 @@ BESIDE = "beside"
 DEFAULT_NAME = "keyfill"
 
 
-def from_source(rot: np.ndarray, pos: np.ndarray, rest: np.ndarray, above: dict, scale: float, mpu: float,
-                up: str) -> None:
-    """In place, the inverse of :func:`keyfill.io.gltf.to_source`: from ``mpu`` and ``up`` to glTF's metres and
-    Y axis, then into the frame of the nodes ``above`` each root (``{root: (rotation (4,), translation (3,))}``)
-    whose uniform scale is ``scale``. ``rot (F, J, 4)``, ``pos (F, J, 3)``, ``rest (J, 3)``."""
-    if up == "Z":
-        for j in above:
-            rot[:, j] = R.quat_mul(Z_TO_Y, rot[:, j])
-            pos[:, j] = R.quat_rotate(Z_TO_Y, pos[:, j])
-            rest[j] = R.quat_rotate(Z_TO_Y, rest[j])
-    k = mpu / scale
-    pos *= k
-    rest *= k
-    for j, (q, t) in above.items():
-        back = R.quat_conjugate(q)
-        rot[:, j] = R.quat_mul(back, rot[:, j])
-        pos[:, j] = R.quat_rotate(back, pos[:, j] - t / scale)
-        rest[j] = R.quat_rotate(back, rest[j] - t / scale)
+def from_source(values: np.ndarray, path: str, above: tuple[np.ndarray, np.ndarray] | None, scale: float,
+                mpu: float, up: str) -> np.ndarray:
+    """One joint's ``values`` in glTF's frame: the inverse of :func:`keyfill.io.gltf.to_source`.
+
+    ``values``: ``(..., 4)`` rotations (``path`` ``"rotation"``) or ``(..., 3)`` translations (a rest offset
+    too), from ``mpu`` and ``up`` into glTF's metres and Y axis, then, for a root joint, into the frame of the
+    nodes above it (``above``: their ``(rotation (4,), translation (3,))``, whose uniform scale is ``scale``;
+    None for a joint under another). A new array, but for the rotations of a joint that is no root (then
+    ``values`` itself).
+    """
+    if path == "rotation":
+        if above is None:
+            return values
+        if up == "Z":
+            values = R.quat_mul(Z_TO_Y, values)
+        return R.quat_mul(R.quat_conjugate(above[0]), values)
+    if above is not None and up == "Z":
+        values = R.quat_rotate(Z_TO_Y, values)
+    values = values * (mpu / scale)
+    if above is None:
+        return values
+    q, t = above
+    return R.quat_rotate(R.quat_conjugate(q), values - t / scale)
+
+
+def _rest(motion: Motion, above: dict, scale: float) -> np.ndarray:
+    """``(J, 3)`` the rest offsets in glTF's frame (:func:`from_source`; ``above`` per root joint)."""
+    sk = motion.skeleton
+    return np.stack([from_source(sk.offsets[j], "translation", above.get(j), scale, sk.meters_per_unit, sk.up_axis)
+                     for j in range(sk.num_joints)])
 
 
 def _layout(motion: Motion) -> dict:
@@ -83,12 +100,15 @@ def _timing(motion: Motion) -> dict:
     return out
 
 
-def _animation(writer: BufferWriter, motion: Motion, rot, pos, rest_rot, rest_pos, nodes: list[int], name: str):
-    """The pygltflib Animation ``name`` of ``rot (F, J, 4)`` and ``pos (F, J, 3)`` (glTF frame) for joint ``nodes``.
+def _animation(writer: BufferWriter, motion: Motion, above: dict, scale: float, rest_rot, rest_pos,
+               nodes: list[int], name: str):
+    """The pygltflib Animation ``name`` of ``motion`` for joint ``nodes``, in glTF's frame (:func:`from_source`
+    with ``above`` per root joint and ``scale``); ``rest_rot (J, 4)`` and ``rest_pos (J, 3)`` there too.
 
-    A skeleton with nothing to animate (every joint without channels and at rest) still gets one channel, its
-    first joint's rotation held at every frame: glTF allows no animation without channels, and the samples
-    keep the frame count.
+    A joint's values are turned into glTF's frame to see whether it moves, and again, one channel at a time,
+    when the buffer is written (:class:`~keyfill.io.gltf_blob.BufferWriter`). A skeleton with nothing to
+    animate (every joint without channels and at rest) still gets one channel, its first joint's rotation
+    held at every frame: glTF allows no animation without channels, and the samples keep the frame count.
     """
     from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
 
@@ -98,27 +118,35 @@ def _animation(writer: BufferWriter, motion: Motion, rot, pos, rest_rot, rest_po
                         "in glTF's 32-bit float times")
     anim = Animation(name=name, extras={EXTRAS: _timing(motion)})
     time_acc = writer.add(times[:, None], "SCALAR", bounds=True)
-    chans = motion.skeleton.channels
+    sk = motion.skeleton
+    chans = sk.channels
+
+    def joint(j: int, path: str) -> np.ndarray:  # (F, 4) w-x-y-z or (F, 3)
+        values = motion.rotations[:, j] if path == "rotation" else motion.positions[:, j]
+        return from_source(values, path, above.get(j), scale, sk.meters_per_unit, sk.up_axis)
 
     def add(j: int, path: str) -> None:
-        values, kind = (pos[:, j], "VEC3") if path == "translation" else (rot[:, j][:, [1, 2, 3, 0]], "VEC4")
-        anim.samplers.append(AnimationSampler(input=time_acc, output=writer.add(values, kind), interpolation="LINEAR"))
+        if path == "translation":
+            output = writer.add(lambda: joint(j, path), "VEC3", count=motion.num_frames)
+        else:
+            output = writer.add(lambda: joint(j, path)[:, [1, 2, 3, 0]], "VEC4", count=motion.num_frames)
+        anim.samplers.append(AnimationSampler(input=time_acc, output=output, interpolation="LINEAR"))
         anim.channels.append(AnimationChannel(sampler=len(anim.samplers) - 1,
                                               target=AnimationChannelTarget(node=nodes[j], path=path)))
 
     for j in range(len(nodes)):
-        if any(c in POSITION_CHANNELS for c in chans[j]) or np.abs(pos[:, j] - rest_pos[j]).max(
+        if any(c in POSITION_CHANNELS for c in chans[j]) or np.abs(joint(j, "translation") - rest_pos[j]).max(
                 initial=0.0) > 1e-9 * max(1.0, float(np.abs(rest_pos).max())):
             add(j, "translation")
-        if any(c in ROTATION_CHANNELS for c in chans[j]) or np.abs(R.quat_angle(rot[:, j], rest_rot[j])).max(
-                initial=0.0) > 1e-9:
+        if any(c in ROTATION_CHANNELS for c in chans[j]) or np.abs(R.quat_angle(joint(j, "rotation"),
+                                                                                rest_rot[j])).max(initial=0.0) > 1e-9:
             add(j, "rotation")
     if not anim.channels:
         add(0, "rotation")
     return anim
 
 
-def _fresh(motion: Motion, name: str) -> tuple[dict, bytes]:
+def _fresh(motion: Motion, name: str) -> tuple[dict, Blob]:
     """The JSON and binary buffer of a glTF file holding ``motion`` alone."""
     from pygltflib import GLTF2, Asset, Buffer, Node, Scene, Skin
 
@@ -127,9 +155,9 @@ def _fresh(motion: Motion, name: str) -> tuple[dict, bytes]:
     sk = motion.skeleton
     J = sk.num_joints
     roots = [j for j in range(J) if sk.parents[j] < 0]
-    rot, pos, rest = motion.rotations.copy(), motion.positions.copy(), sk.offsets.copy()
     ident = np.tile([1.0, 0.0, 0.0, 0.0], (J, 1))
-    from_source(rot, pos, rest, {r: (ident[0], np.zeros(3)) for r in roots}, 1.0, sk.meters_per_unit, sk.up_axis)
+    above = {r: (ident[0], np.zeros(3)) for r in roots}
+    rest = _rest(motion, above, 1.0)
     gltf = GLTF2(asset=Asset(generator=f"keyfill {__version__}"), scene=0)
     writer = BufferWriter(gltf)
     kids: dict[int, list[int]] = {}
@@ -144,9 +172,9 @@ def _fresh(motion: Motion, name: str) -> tuple[dict, bytes]:
     gltf.skins = [Skin(joints=list(range(J)), inverseBindMatrices=writer.add(ibm.transpose(0, 2, 1).reshape(J, 16),
                                                                             "MAT4"),
                        skeleton=roots[0] if len(roots) == 1 else None, extras={EXTRAS: _layout(motion)})]
-    gltf.animations = [_animation(writer, motion, rot, pos, ident, rest, list(range(J)), name)]
-    gltf.buffers = [Buffer(byteLength=len(writer.data))]
-    return json.loads(gltf.gltf_to_json()), bytes(writer.data)
+    gltf.animations = [_animation(writer, motion, above, 1.0, ident, rest, list(range(J)), name)]
+    gltf.buffers = [Buffer(byteLength=writer.blob.size)]
+    return json.loads(gltf.gltf_to_json()), writer.blob
 
 
 #: extensions that refer to no accessor and no buffer view (the others may: then nothing is pruned)
@@ -203,7 +231,7 @@ def _drop_animation(raw: dict, a: int) -> None:
                                    refs)
 
 
-def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, bytes]:
+def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, Blob]:
     """The JSON and buffer of ``template`` with ``motion`` as the animation of its skin."""
     from pygltflib import GLTF2
 
@@ -220,17 +248,15 @@ def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, byt
     replaced = pick(anims, None, "animation", template, note=False) if anims else 0
     if anims:
         _drop_animation(raw, replaced)
-    blob = bytearray()
+    blob = Blob()
     for i, view in enumerate(raw.get("bufferViews", [])):  # each view's bytes, at its offset's residue mod 8
         b = view.get("buffer")
         data = doc.buffers[b] if type(b) is int and 0 <= b < len(doc.buffers) else None
         start, length = view.get("byteOffset", 0), view.get("byteLength", 0)
-        if data is None or not 0 <= start <= start + length <= len(data):
+        if data is None or not 0 <= start <= start + length <= data.length:
             raise FormatError(f"bufferView {i} does not lie in a buffer keyfill can read (one an extension fills?); "
                               "the file's meshes cannot be kept", template)
-        blob += b"\0" * ((start - len(blob)) % 8)
-        view.update(buffer=0, byteOffset=len(blob))
-        blob += data[start: start + length]
+        view.update(buffer=0, byteOffset=blob.put(data.part(start, length), length, residue=start, modulus=8))
     scratch = GLTF2()
     writer = BufferWriter(scratch)  # the images and the animation, appended to the template's views below
     embedded = []
@@ -242,17 +268,15 @@ def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, byt
         mime = image.get("mimeType") or IMAGE_TYPES.get(source.suffix.lower())
         if mime is None:
             raise FormatError(f"image {i} ({uri[:60]!r}) is of no image type glTF knows", template)
-        image.update(bufferView=writer.add_bytes(read_named(source, template, f"image {i}")), mimeType=mime)
+        image.update(bufferView=writer.add_bytes(stored_file(source, template, f"image {i}")), mimeType=mime)
         del image["uri"]
         embedded.append(image)
-    rot, pos, rest = motion.rotations.copy(), motion.positions.copy(), sk.offsets.copy()
-    from_source(rot, pos, rest, rig.above, rig.scale, sk.meters_per_unit, sk.up_axis)
-    scratch.animations = [_animation(writer, motion, rot, pos, rig.rest_rot, rig.rest_pos, rig.nodes, name)]
+    scratch.animations = [_animation(writer, motion, rig.above, rig.scale, rig.rest_rot, rig.rest_pos, rig.nodes,
+                                     name)]
     part = json.loads(scratch.gltf_to_json())
     views, accessors = raw.setdefault("bufferViews", []), raw.setdefault("accessors", [])
     offset_views, offset_acc = len(views), len(accessors)
-    start = len(blob) + (-len(blob) % 8)
-    blob += b"\0" * (start - len(blob)) + writer.data
+    start = blob.extend(writer.blob, 8)
     for view in part.get("bufferViews", []):
         view["byteOffset"] = view.get("byteOffset", 0) + start
         views.append(view)
@@ -269,8 +293,8 @@ def _with_template(motion: Motion, template: Path, name: str) -> tuple[dict, byt
     skin = raw["skins"][rig.skin]
     skin["extras"] = {**(skin["extras"] if isinstance(skin.get("extras"), dict) else {}), EXTRAS: _layout(motion)}
     raw["asset"]["generator"] = f"keyfill {__version__}"
-    raw["buffers"] = [{"byteLength": len(blob)}]
-    return raw, bytes(blob)
+    raw["buffers"] = [{"byteLength": blob.size}]
+    return raw, blob
 
 
 def write(motion: Motion, path: str | Path, sidecar=BESIDE, template: str | Path | None = None,
@@ -293,13 +317,14 @@ def write(motion: Motion, path: str | Path, sidecar=BESIDE, template: str | Path
     name = DEFAULT_NAME if name is None else name
     doc, blob = _fresh(motion, name) if template is None else _with_template(motion, Path(template), name)
     if path.suffix.lower() == ".glb":
-        path.write_bytes(glb_bytes(json.dumps(doc, separators=(",", ":"), allow_nan=False), blob))
+        blob.hold([path])
+        write_glb(path, json.dumps(doc, separators=(",", ":"), allow_nan=False), blob)
         return
     if sidecar is None:
-        uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
-    else:
-        target, name = (path.with_suffix(".bin"), path.with_suffix(".bin").name) if sidecar == BESIDE else sidecar
-        Path(target).write_bytes(blob)
-        uri = urllib.parse.quote(name)
-    doc["buffers"] = [{"uri": uri, "byteLength": len(blob)}]
-    path.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+        blob.hold([path])
+        write_gltf(path, doc, blob, None)
+        return
+    target, name = (path.with_suffix(".bin"), path.with_suffix(".bin").name) if sidecar == BESIDE else sidecar
+    blob.hold([path, Path(target)])
+    write_bin(Path(target), blob)
+    write_gltf(path, doc, blob, urllib.parse.quote(name))

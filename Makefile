@@ -15,7 +15,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop blender-extension test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
+.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 library pose-indexes gltf-validator clean
 
 $(DEMO_STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -265,6 +265,10 @@ $(BLENDER_ZIP): $(wildcard blender/keyfill_blender/*.py) blender/keyfill_blender
 
 test-interop: $(STAMP) $(BLENDER_STAMP) $(BLENDER_KEYFILL_STAMP) $(BLENDER_ZIP)
 	$(BIN)/python -m pytest -q -m interop
+
+# The pictures of docs/blender.md: both operators run in bpy and rendered headless (Workbench through EGL).
+blender-pictures: $(BLENDER_STAMP) $(BLENDER_KEYFILL_STAMP)
+	$(BLENDER_VENV)/bin/python blender/render_pictures.py
 
 clean:
 	rm -rf $(VENV) $(BLENDER_VENV) $(FLOORS_VENV) $(GLTF_VALIDATOR) out .pytest_cache

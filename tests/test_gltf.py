@@ -599,3 +599,143 @@ def test_the_khronos_validator_finds_no_error_in_what_keyfill_writes(capsys, tmp
     for file, r in report.items():
         assert r["errors"] == 0 and r["warnings"] == 0, (file, r["messages"])
     print("validator:", {Path(f).name: (r["errors"], r["warnings"], r["infos"], r["hints"]) for f, r in report.items()})
+
+
+# --- long takes in bounded memory (issue 44) -----------------------------------------------------------
+
+
+def _long_take():
+    """MIXAMO's 69 frames 60 times over: 4,140 frames of 55 joints, 12 MiB of arrays."""
+    from keyfill.motion import Motion
+
+    m = io.load(MIXAMO)
+    return Motion(m.skeleton, m.fps, np.tile(m.rotations, (60, 1, 1)), np.tile(m.positions, (60, 1, 1)))
+
+
+def _peak_beyond(work, *args, **kwargs) -> tuple[int, object]:
+    """``(bytes allocated at the peak of work(*args, **kwargs) beyond what was held before, its result)``: numpy's
+    arrays are traced."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        result = work(*args, **kwargs)
+        return tracemalloc.get_traced_memory()[1] - before, result
+    finally:
+        tracemalloc.stop()
+
+
+def test_long_takes_are_read_and_written_in_bounded_memory(monkeypatch, tmp_path):
+    """Neither the buffer nor a converted copy of the motion is held whole: writing allocates less than the
+    motion's float32 buffer would take (0.5x; 1.6x to 2.2x before), reading the motion and little more (1.2x
+    beyond it before: the file's bytes, float copies)."""
+    from keyfill.io import gltf, gltf_buffers, gltf_write
+
+    monkeypatch.setattr(gltf_buffers, "BLOCK", 1 << 16)  # a block small beside this take, as 4 MiB beside a long one
+    monkeypatch.setattr(gltf, "BLOCK", 1 << 16)
+    motion = _long_take()
+    own = motion.rotations.nbytes + motion.positions.nbytes
+    for suffix in (".glb", ".gltf"):  # the imports and first calls, before anything is measured
+        gltf_write.write(motion.frames(slice(0, 3)), tmp_path / f"warm{suffix}")
+        gltf.read(tmp_path / f"warm{suffix}")
+    for suffix in (".glb", ".gltf"):
+        path = tmp_path / f"long{suffix}"
+        # limits.check_values takes 0.48x (the magnitudes of the positions) before the writer starts
+        assert _peak_beyond(gltf_write.write, motion, path)[0] < 0.7 * own
+        assert _peak_beyond(gltf_write.write, motion, tmp_path / f"kept{suffix}", template=path)[0] < 0.7 * own
+        peak, back = _peak_beyond(gltf.read, path)
+        assert peak < 1.4 * own
+        assert np.abs(back.positions - motion.positions).max() < 1e-3 * height(motion)
+
+
+def test_blocks_change_no_value_and_no_byte(monkeypatch, tmp_path):
+    """Accessors interleaved in one strided view, sparse values, a template's bytes and an embedded buffer,
+    read and written 100 bytes at a time (a multiple of no element and no stride), give what 4 MiB blocks
+    give."""
+    from keyfill.io import gltf, gltf_buffers, gltf_write
+
+    doc, binary = _keyfill_glb(tmp_path)
+    move, turn = _sampler(doc), _sampler(doc, "rotation")
+    a, b = doc["accessors"][move["output"]], doc["accessors"][turn["output"]]
+    count = a["count"]
+    rows = []
+    for acc, width in ((a, 3), (b, 4)):
+        at = doc["bufferViews"][acc["bufferView"]]["byteOffset"]
+        rows.append(np.frombuffer(binary, "<f4", count * width, at).reshape(count, width))
+    stride = 4 * 7 + 4  # translation, rotation and 4 spare bytes per element
+    interleaved = np.zeros((count, stride // 4), "<f4")
+    interleaved[:, :3], interleaved[:, 3:7] = rows
+    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": interleaved.nbytes,
+                               "byteStride": stride})
+    binary += interleaved.tobytes()
+    a.update(bufferView=len(doc["bufferViews"]) - 1, byteOffset=0)
+    b.update(bufferView=len(doc["bufferViews"]) - 1, byteOffset=12)
+    # and one sparse value over the translation: element 2 holds what it held (read through the sparse part)
+    doc["bufferViews"] += [{"buffer": 0, "byteOffset": len(binary), "byteLength": 4},
+                           {"buffer": 0, "byteOffset": len(binary) + 4, "byteLength": 12}]
+    binary += struct.pack("<I", 2) + rows[0][2].tobytes()
+    a["sparse"] = {"count": 1, "indices": {"bufferView": len(doc["bufferViews"]) - 2, "componentType": 5125},
+                   "values": {"bufferView": len(doc["bufferViews"]) - 1}}
+    doc["buffers"][0]["byteLength"] = len(binary)
+    src = write_glb(tmp_path / "strided.glb", doc, binary)
+    reference = io.load(tmp_path / "good.glb")
+    outputs = {}
+    for block in (1 << 22, 100):
+        monkeypatch.setattr(gltf_buffers, "BLOCK", block)
+        monkeypatch.setattr(gltf, "BLOCK", block)
+        motion = io.load(src)
+        assert np.array_equal(motion.rotations, reference.rotations)
+        assert np.array_equal(motion.positions, reference.positions)
+        out = tmp_path / str(block)
+        out.mkdir()
+        gltf_write.write(motion, out / "kept.glb", template=src)
+        gltf_write.write(motion, out / "embedded.gltf", template=src, sidecar=None)
+        gltf_write.write(motion, out / "beside.gltf", template=src)
+        outputs[block] = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert outputs[100] == outputs[1 << 22]
+    embedded = json.loads(outputs[100]["embedded.gltf"])
+    data = base64_bytes(embedded["buffers"][0].pop("uri"))
+    assert data == outputs[100]["beside.bin"] == unglb(outputs[100]["kept.glb"])[1][:len(data)]
+    beside = json.loads(outputs[100]["beside.gltf"])
+    assert beside["buffers"][0].pop("uri") == "beside.bin" and beside == embedded
+
+
+def base64_bytes(uri: str) -> bytes:
+    import base64
+
+    head, _, body = uri.partition(",")
+    assert head == "data:application/octet-stream;base64"
+    return base64.b64decode(body, validate=True)
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_a_template_written_over_itself_is_read_first(suffix, tmp_path):
+    """The writer copies a template's bytes as it writes: the one file it writes over is read beforehand."""
+    from keyfill.io import gltf_write
+
+    doc, binary, _ = character()
+    src = write_glb(tmp_path / "source.glb", doc, binary)
+    motion = io.load(src)
+    path = tmp_path / f"char{suffix}"
+    gltf_write.write(motion, tmp_path / f"other{suffix}", template=src)
+    gltf_write.write(motion, path, template=src)
+    gltf_write.write(motion, path, template=path)  # a .gltf: its .bin is both the template's and the output's
+    other = tmp_path / f"other{suffix}"
+    if suffix == ".gltf":
+        assert (tmp_path / "char.bin").read_bytes() == (tmp_path / "other.bin").read_bytes()
+        assert json.loads(path.read_text())["meshes"] == json.loads(other.read_text())["meshes"]
+    else:
+        assert path.read_bytes() == other.read_bytes()
+    assert np.allclose(io.load(path).positions, motion.positions, atol=1e-4)
+
+
+def test_a_buffer_file_cut_short_while_it_is_read_is_one_clean_error(tmp_path):
+    from keyfill.io import gltf_buffers
+
+    io.save(io.load(MIXAMO), tmp_path / "w.gltf")
+    doc = gltf_buffers.load_document(tmp_path / "w.gltf", "w.gltf")
+    acc = _sampler(doc.json)["output"]
+    (tmp_path / "w.bin").write_bytes(b"")
+    with pytest.raises(FormatError, match=r"buffer 0: the file 'w.bin' it names ends before byte \d+"):
+        gltf_buffers.read_accessor(doc, acc, "a channel", ("VEC3",))

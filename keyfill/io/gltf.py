@@ -37,8 +37,9 @@ of theirs). See ``docs/formats.md``.
 
 Memory (issue 44): the buffers are not held (each channel's accessor is read
 from the file when it is resampled into the motion's arrays, one channel at a
-time), and what runs over every frame afterwards runs :data:`BLOCK_FRAMES`
-frames at a time, so reading holds little beside the motion's own arrays.
+time), and what runs over every frame afterwards runs a block of frames at a
+time (:data:`~keyfill.io.gltf_buffers.BLOCK` bytes of rotations), so reading
+holds little beside the motion's own arrays.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ import numpy as np
 from keyfill import limits, progress
 from keyfill import rotations as R
 from keyfill.errors import DataError, FormatError, KeyfillError
-from keyfill.io.gltf_buffers import Document, load_document, read_accessor
+from keyfill.io.gltf_buffers import BLOCK, Document, load_document, read_accessor
 from keyfill.motion import FULL_CHANNELS, FULL_ROOT_CHANNELS, Keys, Motion, Skeleton, unique_names
 
 EXTRAS = "keyfill"
@@ -60,8 +61,6 @@ Z_TO_Y = np.array([np.sqrt(0.5), -np.sqrt(0.5), 0.0, 0.0])
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 #: a sample time within this many frames of a frame is on that frame
 ON_GRID = 1e-3
-#: frames whose rotations are normalised (or positions compared with the rest) at once
-BLOCK_FRAMES = 4096
 
 
 @dataclass
@@ -481,8 +480,9 @@ def read(path: str | Path, label=None, skin: str | int | None = None, animation:
                                 f"{int(np.argmax(dev > 1e-3))}; keyfill motions have no scale")
         else:
             (rot if tr.path == "rotation" else pos)[:, tr.joint] = values
-    for a in range(0, num_frames, BLOCK_FRAMES):
-        block = rot[a: a + BLOCK_FRAMES]
+    step = _block_frames(len(rig.nodes))
+    for a in range(0, num_frames, step):
+        block = rot[a: a + step]
         norms = np.linalg.norm(block, axis=-1, keepdims=True)
         if np.any(norms < 1e-6):
             raise FormatError("a rotation is zero (not a quaternion)", label)
@@ -504,6 +504,11 @@ def read(path: str | Path, label=None, skin: str | int | None = None, animation:
         raise FormatError(str(e).removeprefix(f"{label}: "), label) from None
 
 
+def _block_frames(joints: int) -> int:
+    """Frames of ``joints`` rotations in :data:`~keyfill.io.gltf_buffers.BLOCK` bytes (at least one)."""
+    return max(1, BLOCK // (32 * joints))
+
+
 def _skeleton(layout: dict, rig: Rig, rest, rot, pos, mpu: float, up: str, label) -> Skeleton:
     J = len(rig.nodes)
     channels = layout.get("channels")
@@ -511,9 +516,9 @@ def _skeleton(layout: dict, rig: Rig, rest, rot, pos, mpu: float, up: str, label
                                  or not all(isinstance(c, str) for c in channels)):
         raise FormatError(f"extras.{EXTRAS}.channels must be {J} strings, one per joint", label)
     if channels is None:
-        move = np.zeros(J)
-        for a in range(0, len(pos), BLOCK_FRAMES):
-            move = np.maximum(move, np.abs(pos[a: a + BLOCK_FRAMES] - rest).max(axis=(0, 2)))
+        move, step = np.zeros(J), _block_frames(J)
+        for a in range(0, len(pos), step):
+            move = np.maximum(move, np.abs(pos[a: a + step] - rest).max(axis=(0, 2)))
         moving = move > 1e-6 * max(1.0, np.abs(rest).max())
         channels = [FULL_ROOT_CHANNELS if rig.parents[j] < 0 or moving[j] else FULL_CHANNELS for j in range(J)]
     else:

@@ -1,9 +1,14 @@
-"""Windows of clips: facing and the canonical frame, global poses, a window as a :class:`Motion`.
+"""Windows of clips: facing and the canonical frame, global poses, a window as a :class:`Motion`, a take.
 
 Shared by the LaFAN1 protocol (:mod:`keyfill.learn.protocols.lafan1`), which turns
 each test window to face +X at its last context frame, and by the learned
 methods, which see windows in such a canonical frame. Quaternions are
 ``(w, x, y, z)``; positions are in the units of the motion (cm for Bandai).
+
+A learned method completes a take of any length window by window into one pair of arrays: :func:`model_take`
+makes them (the keys' interpolation in the model's hierarchy), the windows overwrite their frames, and
+:func:`file_take` turns them back into the file's hierarchy. Both work :data:`keyfill.interpolate.BLOCK`
+frames at a time, so a long take costs the result's arrays (56 bytes per joint and frame) and a block's.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import numpy as np
 from keyfill import rotations as R
 from keyfill.errors import UsageError
 from keyfill.kinematics import fk
+from keyfill.interpolate import BLOCK, segment_coordinates
 from keyfill.motion import Motion, Skeleton
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
@@ -116,3 +122,83 @@ def binomial_lowpass(x: np.ndarray, order: int, axis: int) -> np.ndarray:
     padded = np.concatenate([np.repeat(moved[:1], half, axis=0), moved, np.repeat(moved[-1:], half, axis=0)])
     out = sum(w * padded[i: i + len(moved)] for i, w in enumerate(k))
     return np.moveaxis(out, 0, axis)
+
+
+def model_take(model_skeleton: Skeleton, folded: bool, motion: Motion, key_frames: np.ndarray,
+               slerped: np.ndarray | None = None, continuous: bool = False, hint: str = ""):
+    """A take's starting arrays in a model's hierarchy, read from ``motion``'s key frames.
+
+    Every frame of ``motion`` (``F`` frames, ``J`` joints): translations lerped between the keys
+    ``key_frames (K,)``, rotations of the joints ``slerped`` (``(U,)`` indices; None: every joint) slerped
+    (:func:`keyfill.interpolate.linear`'s values), the other rotations ``motion``'s own (for a method that
+    overwrites them), key frames ``motion``'s; frames outside the keys hold the end keys. Then in the model's
+    hierarchy (:func:`keyfill.learn.corpus.model_hierarchy`, checked at the first key: the top joint folded
+    into the hips when ``folded``; its error ends with ``hint``) and, with ``continuous``, rotation signs
+    continuous along time (:func:`keyfill.rotations.quat_continuous_np` of the whole take, a block at a time).
+
+    Returns:
+        ``(quats (F, J, 4), positions (F, J, 3), top)``, float64: ``top`` is the file's top joint's
+        ``(rotations (F, 4), positions (F, 3))`` before folding (for :func:`file_take`), None unless ``folded``.
+    """
+    from keyfill.learn.corpus import fold_root, model_hierarchy
+
+    k = np.asarray(key_frames, dtype=np.int64)
+    k0 = int(k[0])
+    model_hierarchy(model_skeleton, folded, motion.skeleton, motion.rotations[k0: k0 + 1],
+                    motion.positions[k0: k0 + 1], hint=hint)  # the check, before any work
+    F, J = motion.num_frames, motion.num_joints
+    s, u = segment_coordinates(F, k)
+    kq, kp = motion.rotations[k], motion.positions[k]
+    joints = np.arange(J) if slerped is None else np.asarray(slerped, dtype=np.int64)
+    kq = kq[:, joints]
+    quats, positions = np.empty((F, J, 4)), np.empty((F, J, 3))
+    top = (np.empty((F, 4)), np.empty((F, 3))) if folded else None
+    flips = prev = None  # continuous: sign changes so far (J,), and the previous block's last frame unflipped
+    for a in range(0, F, BLOCK):
+        b = min(F, a + BLOCK)
+        ss, uu = s[a:b], u[a:b]
+        p0 = kp[ss]
+        p = p0 + uu[:, None, None] * (kp[ss + 1] - p0)
+        r = motion.rotations[a:b].copy() if slerped is not None else np.empty((b - a, J, 4))
+        if len(joints):
+            r[:, joints] = R.quat_slerp(kq[ss], kq[ss + 1], np.broadcast_to(uu[:, None], (b - a, len(joints))))
+        at = k[(k >= a) & (k < b)]
+        r[at - a], p[at - a] = motion.rotations[at], motion.positions[at]
+        if folded:
+            top[0][a:b], top[1][a:b] = r[:, 0], p[:, 0]
+            r, p = fold_root(r, p, motion.skeleton.parents)
+        if continuous:
+            before = r[:-1] if prev is None else np.concatenate([prev, r[:-1]])
+            last = r[-1:].copy()
+            changes = np.cumsum(np.sum(r[1 if prev is None else 0:] * before, axis=-1) < 0, axis=0)
+            if flips is not None:
+                changes += flips
+            if len(changes):
+                flips = changes[-1]
+                r[len(r) - len(changes):][changes % 2 == 1] *= -1
+            prev = last
+        quats[a:b], positions[a:b] = r, p
+    return quats, positions, top
+
+
+def file_take(quats: np.ndarray, positions: np.ndarray, top, skeleton: Skeleton) -> None:
+    """:func:`model_take`'s arrays back in the file's hierarchy, in place: with ``top`` (a folded take) the
+    hips get their own transform again under the file's top joint, and every rotation is normalised.
+
+    Args:
+        quats: ``(F, J, 4)`` local rotations in the model's hierarchy (the top joint carrying the hips').
+        positions: ``(F, J, 3)`` local translations, the same.
+        top: the file's top joint's ``(rotations (F, 4), positions (F, 3))``, or None (nothing was folded).
+        skeleton: the file's skeleton.
+    """
+    c = skeleton.children(0)[0] if top is not None else None
+    for a in range(0, len(quats), BLOCK):
+        b = min(len(quats), a + BLOCK)
+        q = quats[a:b]
+        if top is not None:
+            top_q, top_p = top[0][a:b], top[1][a:b]
+            inv = R.quat_conjugate(top_q)
+            q[:, c] = R.quat_mul(inv, q[:, 0])
+            positions[a:b, c] = R.quat_rotate(inv, positions[a:b, 0] - top_p)
+            q[:, 0], positions[a:b, 0] = top_q, top_p
+        q /= np.sqrt(np.sum(q * q, axis=-1, keepdims=True))  # R.quat_normalize, in place

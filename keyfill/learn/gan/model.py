@@ -352,27 +352,6 @@ def _undriven(model: GanModel, num_joints: int) -> np.ndarray:
     return np.array(sorted(out), dtype=np.int64)
 
 
-def _interpolated(motion, k: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(rotations, positions)`` of ``motion`` with translations lerped between the keys ``k`` and the
-    rotations of ``joints`` slerped (as :func:`keyfill.interpolate.linear`, only where needed:
-    the other rotations are overwritten by the network, and slerp of every joint costs as much as the networks)."""
-    from keyfill.interpolate import segment_coordinates
-
-    s, u = segment_coordinates(motion.num_frames, k)
-    kp = motion.positions[k]  # (K, J, 3): frames gather from the keys alone
-    p0, pos = kp[s], kp[s + 1]  # p0 + u (p1 - p0) in place: two arrays of the motion's positions at a time
-    pos -= p0
-    pos *= u[:, None, None]
-    pos += p0
-    del p0
-    rot = motion.rotations.copy()
-    if len(joints):
-        kq = motion.rotations[k][:, joints]  # (K, U, 4)
-        rot[:, joints] = R.quat_slerp(kq[s], kq[s + 1], np.broadcast_to(u[:, None], (len(u), len(joints))))
-    rot[k], pos[k] = motion.rotations[k], motion.positions[k]
-    return rot, pos
-
-
 def _key_hemispheres(quats: np.ndarray, key_frames: np.ndarray, key_quats: np.ndarray) -> np.ndarray:
     """``quats (T, J, 4)`` with each key frame on its key's hemisphere (``key_quats (K, J, 4)``) and the frames
     between continuing it: RC-FK's root has ``w >= 0`` and its joints an Euler conversion's sign, where the
@@ -394,7 +373,7 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     DNA (a model of its keys' own DNA, ``dna_source`` ``"own"``: each window's) and one draw of noise, cross-faded
     where they overlap (:mod:`keyfill.learn.gan.long_takes`). Memory: the motion's arrays plus one window's.
     """
-    from keyfill.learn.corpus import model_hierarchy
+    from keyfill.learn.windows import file_take, model_take
     from keyfill.motion import Keys
 
     if model.generator is None:
@@ -408,11 +387,11 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
                              "with partial_keys (see docs/gan.md)")
         coords = keys.coordinate_mask(motion.num_joints)
     check_keys(model, k)
-    lin_q, lin_p = _interpolated(motion, k, _undriven(model, motion.num_joints))
     skel = motion.skeleton
-    q, p = model_hierarchy(model.skeleton, model.folded, skel, lin_q, lin_p, int(k[0]), hint=TRAIN_HINT)
-    top_q, top_p = lin_q[:, 0].copy(), lin_p[:, 0].copy()  # the file's top joint, given back when folded
-    del lin_q, lin_p  # (folded: q and p are new arrays)
+    # the take's arrays: translations and undriven joints interpolated, in the model's hierarchy; the
+    # windows write the root and the driven joints into them, and they become the result's arrays
+    q, p, top = model_take(model.skeleton, model.folded, motion, k, _undriven(model, motion.num_joints),
+                           hint=TRAIN_HINT)
     if model.folded and coords is not None:  # the folded top joint is the hips: keyed where either of them is
         c = skel.children(0)[0]
         coords = coords.copy()
@@ -439,13 +418,7 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     # moves them onto the keys together with the frames inside)
     out_q[:k0], out_q[end + 1 :] = out_q[k0], out_q[end]
     pos[:k0, 0], pos[end + 1 :, 0] = pos[k0, 0], pos[end, 0]
-    if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
-        c = skel.children(0)[0]
-        inv = R.quat_conjugate(top_q)
-        out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
-        pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
-        out_q[:, 0], pos[:, 0] = top_q, top_p
-    out_q /= np.sqrt(np.sum(out_q * out_q, axis=-1, keepdims=True))  # R.quat_normalize in place
+    file_take(out_q, pos, top, skel)
     result = motion.replace(rotations=out_q, positions=pos, keys=keys)
     span = slice(k0, end + 1)
     info = {"seed": int(seed), "max_gap": model.config.max_gap, "frames_generated": int(span.stop - k0),
@@ -553,7 +526,7 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
     from keyfill.learn.corpus import bone_difference
     from keyfill.learn.exact_keys import snap_to_keys
     from keyfill.learn.gan.poses import relative_positions
-    from keyfill.learn.windows import window_motion
+    from keyfill.learn.windows import model_take, window_motion
     from keyfill.motion import Keys
 
     diff = bone_difference(model.skeleton, skeleton)
@@ -581,7 +554,7 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         # frames between keys may hold NaN (the protocol hides them); only key frames are read
         src = window_motion(skeleton, np.nan_to_num(np.asarray(quats[b], dtype=np.float64)),
                             np.nan_to_num(np.asarray(root[b], dtype=np.float64)))
-        rot, pos = _interpolated(src, k, undriven)
+        rot, pos, _ = model_take(skeleton, False, src, k, undriven)
         driven = np.concatenate([[0], model.ranges.driven])
         rot[k0 : end + 1, driven] = snap_in_range(model.ranges, gq[b], k - k0, rot[k])[:, driven]
         pos[k0 : end + 1, 0] = (groot[b] + shifts[b]) / m

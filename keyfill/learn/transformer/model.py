@@ -277,8 +277,7 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
     depends on its batch in float32 rounding only. Without, every window is
     completed alone, in order (what one ``keyfill complete`` does).
     """
-    from keyfill.interpolate import linear
-    from keyfill.learn.corpus import model_hierarchy
+    from keyfill.learn.windows import file_take, model_take
     from keyfill.motion import Keys
 
     results: list = [None] * len(jobs)
@@ -286,15 +285,11 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
     for j, (motion, keys) in enumerate(jobs):
         try:
             k = np.asarray(keys.frames if isinstance(keys, Keys) else keys, dtype=np.int64)
-            lin = linear(motion, Keys(k))  # holds outside the keys; the top joint when folded
-            q, p = model_hierarchy(model.skeleton, model.folded, motion.skeleton, lin.rotations, lin.positions,
-                                   int(k[0]), hint=TRAIN_HINT)
-            q = R.quat_continuous_np(q, axis=0)
+            # the keys' interpolation (held outside them) in the model's hierarchy, signs continuous; the
+            # windows' interiors are written into q and p in place (windows share no frame but keys), and
+            # they become the result's arrays
+            q, p, top = model_take(model.skeleton, model.folded, motion, k, continuous=True, hint=TRAIN_HINT)
             parts = spans(k, model.config.max_frames)
-            # the windows' interiors are written into q and p in place (windows share no frame but keys);
-            # of the interpolation only the top joint stays, for a folded hierarchy
-            top = (lin.rotations[:, 0].copy(), lin.positions[:, 0].copy()) if model.folded else None
-            del lin
             prepared[j] = (k, top, q, p, parts)
         except KeyfillError as e:
             results[j] = e
@@ -316,15 +311,8 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
             out_q, pos = prepared[j][2], prepared[j][3]
             out_q[a + 1: b], pos[a + 1: b, 0] = wq[i, 1:-1], wr[i, 1:-1]
     for j, (k, top, out_q, pos, parts) in prepared.items():
-        motion, skel = jobs[j][0], jobs[j][0].skeleton
-        if model.folded:  # back to the file's hierarchy: the child gets the hips' transform again
-            c = skel.children(0)[0]
-            top_q, top_p = top
-            inv = R.quat_conjugate(top_q)
-            out_q[:, c] = R.quat_mul(inv, out_q[:, 0])
-            pos[:, c] = R.quat_rotate(inv, pos[:, 0] - top_p)
-            out_q[:, 0], pos[:, 0] = top_q, top_p
-        out_q /= np.sqrt(np.sum(out_q * out_q, axis=-1, keepdims=True))  # R.quat_normalize, in place
+        motion = jobs[j][0]
+        file_take(out_q, pos, top, motion.skeleton)
         result = motion.replace(rotations=out_q, positions=pos, keys=Keys(k))
         results[j] = (result, {"spans": len(parts), "max_frames": model.config.max_frames})
     return results

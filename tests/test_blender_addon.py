@@ -9,6 +9,9 @@ there by ``make test-interop``) on a 10 s Bandai-Namco clip (22 bones, 301 frame
   keyed every 15 frames, Fill In-betweens against ``keyfill complete`` on the keys Blender's BVH exporter
   wrote (cubic and transformer: 1e-5 of the height at every frame), at most 2x the CLI's time,
   keys untouched, undo restoring the action, errors as reports;
+* the same through the executable fallback (*Run keyfill: Executable*, ``.venv/bin/keyfill``, keyfill made
+  unimportable in Blender's Python; the operator's report names the backend), and a missing or non-executable
+  *keyfill Executable* refused with one error report naming it, the action unchanged;
 * the conversion's quaternion signs and frame rate: those keyfill's BVH reader gives for Blender's export
   (the transformer's result depends on the sign at the first key: docs/blender.md);
 * Edit Tangents: Hand_L's tail reaches the 3D cursor within 1e-3 of the height, no key value changes.
@@ -34,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = Path(__file__).parent / "interop" / "blender_addon_check.py"
 CLIP = ROOT / "data" / "bandai2" / "bandai_namco_motiondataset2" / "data" / "dataset-2_walk_elderly_001.bvh"
 ZIP = ROOT / "out" / "blender" / "keyfill-0.1.0.zip"
+KEYFILL = ROOT / ".venv" / "bin" / "keyfill"  # the CLI the fills are compared with, and the add-on's executable
 KEYS = list(range(0, 301, 15))
 
 pytestmark = pytest.mark.interop
@@ -83,26 +87,41 @@ def test_conversion_agrees_with_keyfills_bvh_reader(blender, tmp_path):
 
 def _cli(keys_bvh: Path, out: Path, method: str) -> float:
     t0 = time.perf_counter()
-    subprocess.run([str(ROOT / ".venv" / "bin" / "keyfill"), "complete", str(keys_bvh), "-o", str(out), "--method",
+    subprocess.run([str(KEYFILL), "complete", str(keys_bvh), "-o", str(out), "--method",
                     method, "--keys", ",".join(map(str, KEYS))], check=True, capture_output=True)
     return time.perf_counter() - t0
 
 
-def _fill(tmp_path: Path, method: str) -> tuple[dict, np.ndarray, float, float]:
+def _one_line_error(report: str | None, *names: str) -> str:
+    """An operator's ERROR report (as bpy raises it): one line, ``Error: keyfill...``, naming ``names``."""
+    assert report is not None and "Traceback" not in report
+    lines = report.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: keyfill"), report
+    assert all(n in lines[0] for n in names), (names, report)
+    return lines[0]
+
+
+def _fill(tmp_path: Path, method: str, where: str = "python") -> tuple[dict, np.ndarray, float, float]:
+    """Fill In-betweens in Blender against the CLI on the keys Blender exported. ``where``: ``python`` (the add-on's
+    default preferences, keyfill importable in .venv-blender) or ``executable`` (*Run keyfill: Executable* at
+    ``KEYFILL``, keyfill unimportable in Blender's Python)."""
     keys_bvh = tmp_path / "keys.bvh"
+    backend = ["--backend", "EXECUTABLE", "--executable", str(KEYFILL), "--no-import"] if where == "executable" else []
     r = run(tmp_path, "fill", str(CLIP), "--zip", str(ZIP), "--every", "15", "--method", method,
-            "--exported", str(keys_bvh))
+            "--exported", str(keys_bvh), *backend)
     cli_seconds = _cli(keys_bvh, tmp_path / "cli.bvh", method)
     cli = io.load(tmp_path / "cli.bvh")
     idx = [cli.skeleton.names.index(n) for n in r["bones"]]
     dev = np.linalg.norm(np.asarray(r["heads"]) - cli.world_positions()[:, idx], axis=-1).max(axis=-1) / height(cli)
-    print(f"{method}: deviation from the CLI {dev.max():.3g} of the height; operator {r['seconds']:.2f} s, "
+    print(f"{method} ({where}): deviation from the CLI {dev.max():.3g} of the height; operator {r['seconds']:.2f} s, "
           f"CLI {cli_seconds:.2f} s")
     assert r["module"] == "bl_ext.user_default.keyfill" and r["result"] == ["FINISHED"]
+    assert r["keyfill_importable"] == (where == "python")
+    assert f"keyfill {method} ({where}): filled " in r["reports"], r["reports"]  # the backend it used
     assert r["keys_kept"] and r["points_after"] > r["points_before"]
     assert r["undo_restored"]
-    assert r["error_report"] is not None and "no such model" in r["error_report"]
-    assert "Traceback" not in r["error_report"]
+    _one_line_error(r["error_report"], "/nonexistent/model")  # in process "no such model"; the CLI's "does not exist"
+    assert "Traceback" not in r["error_stderr"]
     return r, dev, r["seconds"], cli_seconds
 
 
@@ -120,6 +139,34 @@ def test_fill_transformer_equals_the_cli(blender, tmp_path):
     _, dev, seconds, cli_seconds = _fill(tmp_path, "transformer")
     assert dev.max() < 1e-5
     assert seconds <= 2 * cli_seconds
+
+
+@pytest.mark.parametrize("method", ["cubic", "transformer"])
+def test_fill_through_the_executable_equals_the_cli(blender, tmp_path, method):
+    """The executable fallback: keys written as BVH in a temporary folder, ``keyfill complete --keys`` run, its
+    BVH read back; the same result as the CLI on Blender's own export. keyfill is unimportable in Blender's
+    Python for this run, so an in-process fill would fail, and the operator's report says which backend ran."""
+    _, dev, _, _ = _fill(tmp_path, method, where="executable")
+    assert dev.max() < 1e-5
+
+
+def test_fill_refuses_a_missing_or_non_executable_keyfill(blender, tmp_path):
+    """A *keyfill Executable* that is not there, or not executable (the real launcher without its execute bit):
+    one error report naming it, nothing on stderr, the action unchanged; under *Executable* with keyfill
+    importable (the preference is obeyed) and under *Automatic* with keyfill unimportable (the fallback)."""
+    missing = tmp_path / "nowhere" / "keyfill"
+    plain = tmp_path / "keyfill"
+    plain.write_bytes(KEYFILL.read_bytes())
+    plain.chmod(0o644)
+    r = run(tmp_path, "refuse", str(CLIP), "--zip", str(ZIP), "--executable", str(missing),
+            "--executable", str(plain))
+    cases = r["cases"]
+    assert [(c["backend"], c["executable"], c["keyfill_importable"]) for c in cases] == [
+        ("EXECUTABLE", str(missing), True), ("EXECUTABLE", str(plain), True), ("AUTO", str(missing), False)]
+    for c in cases:
+        print(c["backend"], _one_line_error(c["error"], repr(c["executable"])))
+        assert c["result"] is None and c["stderr"] == ""
+        assert c["unchanged"]
 
 
 def test_edit_tangents_reaches_the_cursor(blender, tmp_path):

@@ -3,6 +3,10 @@
     .venv-blender/bin/python tests/interop/blender_addon_check.py convert CLIP.bvh --out r.json
     .venv-blender/bin/python tests/interop/blender_addon_check.py fill CLIP.bvh --zip keyfill.zip --every 15 \
         --method cubic --exported keys.bvh --out r.json
+    .venv-blender/bin/python tests/interop/blender_addon_check.py fill CLIP.bvh --zip keyfill.zip --every 15 \
+        --method cubic --backend EXECUTABLE --executable .venv/bin/keyfill --no-import --exported keys.bvh --out r.json
+    .venv-blender/bin/python tests/interop/blender_addon_check.py refuse CLIP.bvh --zip keyfill.zip \
+        --executable /no/such/keyfill --executable NOT_EXECUTABLE --out r.json
     .venv-blender/bin/python tests/interop/blender_addon_check.py tangents CLIP.bvh --zip keyfill.zip --out r.json
 
 ``convert``: the clip through Blender's BVH importer (Z-up, metres, as a user imports it; and a second time
@@ -12,7 +16,13 @@ extension's convert module; writes keyfill's local arrays and world positions of
 ``$HOME``), imports the clip with its own axes (the object turned Z-up, scaled to metres: so Blender's BVH
 exporter, which writes armature space, writes the file's own Y-up centimetres), deletes every key but every
 ``--every``-th frame, writes those keys with Blender's BVH exporter, runs Fill In-betweens and writes the bone
-heads (armature space) at every frame, the operator's time, and whether undo restored the action.
+heads (armature space) at every frame, the operator's time and reports (its INFO report names the backend it
+used), and whether undo restored the action. ``--backend``/``--executable`` set the add-on's preferences (*Run
+keyfill*, *keyfill Executable*) as a user would; ``--no-import`` makes keyfill unimportable in this Python the way
+the add-on asks (:func:`_block_keyfill`), so only the executable can fill.
+``refuse``: the clip keyed every ``--every``-th frame, Fill In-betweens with each ``--executable`` under *Run
+keyfill: Executable* (keyfill importable), then the first under *Automatic* with keyfill unimportable: each call's
+error report, what it wrote to stderr, and whether the action is unchanged.
 ``tangents``: the clip (Euler rotations) keyed every 15th frame; Edit Tangents moves Hand_L's tail at frame 9
 by (0, 0.1, 0.1) m (the 3D cursor); writes the distance left, the keys before and after, and the undo check.
 """
@@ -20,6 +30,9 @@ by (0, 0.1, 0.1) m (the 3D cursor); writes the distance left, the keys before an
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib.util
+import io
 import json
 import sys
 import time
@@ -90,6 +103,40 @@ def _install(zip_path: Path) -> str:
     return mod
 
 
+def _use_backend(mod: str, backend: str, executable: str | None) -> None:
+    """The add-on's preferences *Run keyfill* (AUTO, PYTHON, EXECUTABLE) and *keyfill Executable*."""
+    prefs = bpy.context.preferences.addons[mod].preferences
+    prefs.backend = backend
+    if executable is not None:
+        prefs.executable = executable
+
+
+def _block_keyfill() -> bool:
+    """Make keyfill unimportable here, as in a Blender without it: ``None`` in ``sys.modules`` makes
+    ``importlib.util.find_spec`` (what the add-on asks, ``backend.importable``) find nothing and ``import keyfill``
+    fail. Returns whether keyfill still imports (False)."""
+    for name in [n for n in sys.modules if n == "keyfill" or n.startswith("keyfill.")]:
+        del sys.modules[name]
+    sys.modules["keyfill"] = None
+    return importlib.util.find_spec("keyfill") is not None
+
+
+def _fill_op(**kw) -> dict:
+    """Fill In-betweens with ``kw``: its result (None when it raised), its ERROR report (bpy raises it as
+    RuntimeError), its reports (bpy writes an operator's reports to ``sys.stdout``; the INFO one says
+    ``keyfill METHOD (python|executable): ...``), what it wrote to ``sys.stderr`` (a traceback would be there),
+    and its time."""
+    out, err = io.StringIO(), io.StringIO()
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            result, error = sorted(bpy.ops.keyfill.fill_inbetweens(**kw)), None
+        except RuntimeError as e:
+            result, error = None, str(e)
+    return {"result": result, "error": error, "reports": out.getvalue(), "stderr": err.getvalue(),
+            "seconds": time.perf_counter() - t0}
+
+
 def _keep_every(obj, every: int, first: int) -> None:
     from bpy_extras import anim_utils
 
@@ -135,6 +182,9 @@ def _heads(obj, frames) -> list:
 def cmd_fill(args) -> dict:
     obj = _import(args.clip, own_axes=True)
     mod = _install(args.zip)
+    if args.backend:
+        _use_backend(mod, args.backend, args.executable[0] if args.executable else None)
+    importable = _block_keyfill() if args.no_import else importlib.util.find_spec("keyfill") is not None
     scene = bpy.context.scene
     first, last = (round(x) for x in obj.animation_data.action.frame_range)
     last = min(last, first + args.frames - 1)
@@ -144,33 +194,46 @@ def cmd_fill(args) -> dict:
                             rotate_mode="NATIVE", root_transform_only=False)
     before = _keys_snapshot(obj)
     bpy.ops.ed.undo_push(message="before keyfill")
-    t0 = time.perf_counter()
-    result = bpy.ops.keyfill.fill_inbetweens(method=args.method, use_range=True, frame_start=first, frame_end=last)
-    seconds = time.perf_counter() - t0
+    call = _fill_op(method=args.method, use_range=True, frame_start=first, frame_end=last)
+    if call["result"] is None:
+        raise SystemExit(f"Fill In-betweens failed: {call['error']}\n{call['stderr']}")
     obj = bpy.data.objects[obj.name]
     after = _keys_snapshot(obj)
     heads = _heads(obj, range(first, last + 1))
-    kept = all(all(abs(a - b) < 1e-6 for a, b in zip(after[k][1::2], v[1::2]) if True) for k, v in before.items())
     keys_kept = True
     for k, v in before.items():
         got = dict(zip(after[k][0::2], after[k][1::2]))
         keys_kept &= all(abs(got.get(f, np.inf) - x) < 1e-6 for f, x in zip(v[0::2], v[1::2]))
-    del kept
     n_after = sum(len(v) // 2 for v in after.values())
     name = obj.name
     _undo()
     obj = bpy.data.objects[name]
     undone = _keys_snapshot(obj)
     # a failing call: one ERROR report and CANCELLED, no traceback
-    try:
-        bpy.ops.keyfill.fill_inbetweens(method="transformer", model="/nonexistent/model")
-        error = None
-    except RuntimeError as e:
-        error = str(e)
-    return {"module": mod, "result": sorted(result), "seconds": seconds, "first": first, "last": last,
+    failed = _fill_op(method="transformer", model="/nonexistent/model")
+    return {"module": mod, "result": call["result"], "seconds": call["seconds"], "reports": call["reports"],
+            "keyfill_importable": importable, "first": first, "last": last,
             "bones": [pb.name for pb in obj.pose.bones], "heads": heads, "keys_kept": bool(keys_kept),
             "points_before": sum(len(v) // 2 for v in before.values()), "points_after": n_after,
-            "undo_restored": undone == before, "error_report": error}
+            "undo_restored": undone == before, "error_report": failed["error"], "error_stderr": failed["stderr"]}
+
+
+def cmd_refuse(args) -> dict:
+    obj = _import(args.clip, own_axes=True)
+    mod = _install(args.zip)
+    name = obj.name
+    _keep_every(obj, args.every, round(obj.animation_data.action.frame_range[0]))
+    before, actions = _keys_snapshot(obj), len(bpy.data.actions)
+    cases = [("EXECUTABLE", exe, False) for exe in args.executable] + [("AUTO", args.executable[0], True)]
+    out = []
+    for backend, exe, blocked in cases:
+        _use_backend(mod, backend, exe)
+        importable = _block_keyfill() if blocked else importlib.util.find_spec("keyfill") is not None
+        call = _fill_op(method="cubic")
+        obj = bpy.data.objects[name]
+        out.append({"backend": backend, "executable": exe, "keyfill_importable": importable, **call,
+                    "unchanged": _keys_snapshot(obj) == before and len(bpy.data.actions) == actions})
+    return {"module": mod, "cases": out}
 
 
 def cmd_tangents(args) -> dict:
@@ -211,16 +274,19 @@ def cmd_tangents(args) -> dict:
 
 def main(argv):
     p = argparse.ArgumentParser()
-    p.add_argument("command", choices=["convert", "fill", "tangents"])
+    p.add_argument("command", choices=["convert", "fill", "refuse", "tangents"])
     p.add_argument("clip", type=Path)
     p.add_argument("--zip", type=Path)
     p.add_argument("--every", type=int, default=15)
     p.add_argument("--frames", type=int, default=301)
     p.add_argument("--method", default="cubic")
     p.add_argument("--exported", type=Path)
+    p.add_argument("--backend", choices=["AUTO", "PYTHON", "EXECUTABLE"], help="the add-on's *Run keyfill*")
+    p.add_argument("--executable", action="append", help="the add-on's *keyfill Executable* (refuse: each in turn)")
+    p.add_argument("--no-import", action="store_true", help="keyfill unimportable in Blender's Python")
     p.add_argument("--out", type=Path, required=True)
     args = p.parse_args(argv)
-    result = {"convert": cmd_convert, "fill": cmd_fill, "tangents": cmd_tangents}[args.command](args)
+    result = {"convert": cmd_convert, "fill": cmd_fill, "refuse": cmd_refuse, "tangents": cmd_tangents}[args.command](args)
     args.out.write_text(json.dumps(result))
 
 

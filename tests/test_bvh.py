@@ -247,7 +247,8 @@ def test_large_file_parses_in_bulk(tmp_path: Path):
     seed=st.integers(0, 2**32 - 1),
 )
 def test_line_template_prints_every_value_as_percent_12g(columns, frames, seed):
-    """Constant columns folded into the line template print exactly as per-value %.12g would."""
+    """Constant columns folded into the line template print exactly as per-value %.12g would, with the rows
+    given in blocks of any sizes (empty ones too)."""
     rng = np.random.default_rng(seed)
     cols = []
     for c in columns:
@@ -259,7 +260,8 @@ def test_line_template_prints_every_value_as_percent_12g(columns, frames, seed):
         else:
             cols.append(np.full(frames, c) * rng.choice([1.0, -1.0]) if rng.random() < 0.2 else np.full(frames, c))
     values = np.stack(cols, axis=1)
-    line, varying = bvh._line_template(values)
+    cuts = np.sort(rng.integers(0, frames + 1, rng.integers(0, 3)))  # gathered a block of rows at a time
+    line, varying = bvh._line_template(values.shape[1], np.split(values, cuts))
     got = [line % tuple(row) for row in values[:, varying].tolist()]
     want = [" ".join(bvh.NUMBER_FORMAT % v for v in row) for row in values.tolist()]
     assert got == want

@@ -31,7 +31,7 @@ import numpy as np
 
 from keyfill import limits, progress
 from keyfill.errors import DataError, FormatError
-from keyfill.io.bvh_channels import channels_to_pose, output_layout, pose_to_channels
+from keyfill.io.bvh_channels import channel_blocks, channels_to_pose, output_layout, pose_to_channels
 from keyfill.io.bvh_follow import follow
 from keyfill.io.bvh_values import Layout, value_chunks
 from keyfill.motion import Motion, Skeleton, check_channels
@@ -380,21 +380,30 @@ def _write_joint(sk: Skeleton, root: int, out: list[str], children: list[list[in
         stack.extend((k, depth + 1, False) for k in reversed(children[j]))
 
 
-def _line_template(values: np.ndarray) -> tuple[str, np.ndarray]:
-    """The %-template of one motion line and the columns it takes, ``(C,)`` bool.
+def _line_template(count: int, blocks) -> tuple[str, np.ndarray]:
+    """The %-template of one motion line and the columns it takes, ``(C,)`` bool, of the values ``(F, C)``
+    given as ``blocks`` of rows in order (``count``: C), gathered a block at a time.
 
     A channel whose values all print the same (e.g. the translation of a joint
     that only rotates) is printed once, into the template. Rounding to
     ``NUMBER_FORMAT`` is monotonic, so the column's minimum and maximum printing
     alike (with one sign bit, for -0) means every value does.
     """
-    if not len(values):
-        return " ".join([NUMBER_FORMAT] * values.shape[1]), np.ones(values.shape[1], bool)
-    lo = [NUMBER_FORMAT % v for v in values.min(axis=0).tolist()]
-    hi = [NUMBER_FORMAT % v for v in values.max(axis=0).tolist()]
-    one_sign = np.all(np.signbit(values) == np.signbit(values[:1]), axis=0)
-    varying = np.array([a != b for a, b in zip(lo, hi)]) | ~one_sign
-    return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, values[0].tolist())), varying
+    lo = hi = first = None
+    one_sign = np.ones(count, bool)
+    for block in blocks:
+        if not len(block):
+            continue
+        if first is None:
+            first, lo, hi = block[0].copy(), block.min(axis=0), block.max(axis=0)
+        else:
+            lo, hi = np.minimum(lo, block.min(axis=0)), np.maximum(hi, block.max(axis=0))
+        one_sign &= np.all(np.signbit(block) == np.signbit(first), axis=0)
+    if first is None:
+        return " ".join([NUMBER_FORMAT] * count), np.ones(count, bool)
+    low, high = [NUMBER_FORMAT % v for v in lo.tolist()], [NUMBER_FORMAT % v for v in hi.tolist()]
+    varying = np.array([a != b for a, b in zip(low, high)], dtype=bool) | ~one_sign
+    return " ".join(NUMBER_FORMAT if v else NUMBER_FORMAT % x for v, x in zip(varying, first.tolist())), varying
 
 
 def follow_template(values: np.ndarray, motion: Motion, template: str | Path) -> np.ndarray:
@@ -418,15 +427,27 @@ def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None
             raise DataError(f"joint {j} is named {name[:60]!r}, which a BVH file cannot hold (BVH names are words "
                             "separated by single spaces)")
     try:
-        values = pose_to_channels(motion)
+        count, blocks = channel_blocks(motion)
     except DataError as e:
         if not layout_hint:
             raise
         raise DataError(f"{e}; bvh_layout full gives every joint three rotation channels, and position "
                         "channels to joints that move", params="bvh_layout") from None
-    values += 0.0  # no -0 of the arithmetic (a template's own -0 stays)
-    if template is not None:
+    if template is not None:  # following a file's numbers takes every frame's values at once
+        values = pose_to_channels(motion)
+        values += 0.0  # no -0 of the arithmetic (a template's own -0 stays)
         values = follow_template(values, motion, template)
+        line, varying = _line_template(count, [values])
+        passes = [values]
+    else:  # twice through the blocks: the columns' extremes, then the lines (no full-size array)
+
+        def written():
+            for _, block in blocks():
+                block += 0.0  # no -0 of the arithmetic
+                yield block
+
+        line, varying = _line_template(count, written())
+        passes = written()
     children: list[list[int]] = [[] for _ in range(sk.num_joints)]
     for j, p in enumerate(sk.parents):
         if p >= 0:
@@ -442,14 +463,14 @@ def _pieces(motion: Motion, rows: int = 4096, template: str | Path | None = None
     out.append(f"Frames: {motion.num_frames}")
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
     yield "\n".join(out) + "\n"
-    if values.shape[1]:
-        line, varying = _line_template(values)
+    if count:
         line += "\n"
-        with progress.task("writing BVH", len(values), " frames") as update:
-            for start in range(0, len(values), rows):
-                block = values[start : start + rows, varying].tolist()
-                yield "".join(line % tuple(row) for row in block)
-                update(len(block))
+        with progress.task("writing BVH", motion.num_frames, " frames") as update:
+            for values in passes:
+                for start in range(0, len(values), rows):
+                    block = values[start : start + rows, varying].tolist()
+                    yield "".join(line % tuple(row) for row in block)
+                    update(len(block))
     else:
         yield "\n" * motion.num_frames
 

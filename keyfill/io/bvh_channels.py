@@ -11,7 +11,7 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import DataError
-from keyfill.motion import POSITION_CHANNELS, Motion, Skeleton
+from keyfill.motion import EULER_BLOCK, POSITION_CHANNELS, Motion, Skeleton
 
 #: a BVH output's channel layout: ``source``: each joint's own channels (lossless from a BVH), ``full``: the
 #: layout every reader takes (:meth:`Skeleton.full_layout`), ``auto``: ``source`` where that is already full or
@@ -65,19 +65,58 @@ def channels_to_pose(values: np.ndarray, skeleton: Skeleton, block: int = 16384)
 
 
 def pose_to_channels(motion: Motion) -> np.ndarray:
-    """``(F, C)`` BVH channel values (degrees, file units) of ``motion`` in its skeleton's layout.
+    """``(F, C)`` BVH channel values (degrees, file units) of ``motion`` in its skeleton's layout: the blocks
+    of :func:`channel_blocks` in one array."""
+    count, blocks = channel_blocks(motion)
+    values = np.empty((motion.num_frames, count))
+    for start, block in blocks():
+        values[start : start + len(block)] = block
+    return values
 
-    Angles come from :meth:`Motion.euler_blocks` (continuous curves, a block of
-    frames at a time: the only full-size array made is the result). Raises
-    :class:`DataError` when the motion does something the channels cannot hold
-    (a rotation about an axis without a channel, a translation of a joint
-    without position channels).
+
+def channel_blocks(motion: Motion):
+    """``(C, blocks)``: the number of BVH channels of ``motion`` and a function whose every call iterates
+    ``(first frame, (b, C) values)`` (degrees, file units) over the frames, a block of
+    :meth:`Motion.euler_blocks` at a time (continuous curves across blocks), so that a writer holds no
+    full-size array (and may pass over the frames twice).
+
+    Raises :class:`DataError` (at once) when the motion does something the channels cannot hold (a rotation
+    about an axis without a channel, a translation of a joint without position channels).
     """
+    columns = _columns(motion)
+    positions = [(i, j, axis) for i, (j, is_position, axis) in enumerate(columns) if is_position]
+    angle_columns = [(i, j, axis) for i, (j, is_position, axis) in enumerate(columns) if not is_position]
+
+    def blocks():
+        if not angle_columns:
+            for start in range(0, motion.num_frames, EULER_BLOCK):
+                rows = min(EULER_BLOCK, motion.num_frames - start)
+                yield start, _with_positions(np.empty((rows, len(columns))), motion, positions, start)
+            return
+        cols, js, axes = (np.array(x) for x in zip(*angle_columns))
+        for start, angles in motion.euler_blocks():
+            block = _with_positions(np.empty((len(angles), len(columns))), motion, positions, start)
+            block[:, cols] = np.rad2deg(angles[:, js, axes])
+            yield start, block
+
+    return len(columns), blocks
+
+
+def _with_positions(block: np.ndarray, motion: Motion, positions, start: int) -> np.ndarray:
+    """``block`` (frames ``start ..``) with its position columns ``(column, joint, axis)`` filled in."""
+    for i, j, axis in positions:
+        block[:, i] = motion.positions[start : start + len(block), j, axis]
+    return block
+
+
+def _columns(motion: Motion) -> list[tuple[int, bool, int]]:
+    """Per BVH channel of ``motion``'s skeleton: ``(joint, is a position, axis)``, the axis being the position's
+    (0-2 for X-Z) or the angle's index in the joint's Euler order; a :class:`DataError` when a joint moves
+    along an axis it has no position channel for."""
     sk = motion.skeleton
     F = motion.num_frames
     orders = sk.euler_orders
     scale = max(1.0, float(np.abs(sk.offsets).max(initial=0.0)))
-    # per column: (joint, position axis) or (joint, index of the angle in the joint's Euler order)
     columns: list[tuple[int, bool, int]] = []
     for j, chans in enumerate(sk.channels):
         pos_axes = [c[0] for c in chans if c in POSITION_CHANNELS]
@@ -94,13 +133,4 @@ def pose_to_channels(motion: Motion) -> np.ndarray:
                 columns.append((j, True, "XYZ".index(c[0])))
             else:
                 columns.append((j, False, orders[j].index(c[0])))
-    values = np.empty((F, len(columns)))
-    for i, (j, is_position, axis) in enumerate(columns):
-        if is_position:
-            values[:, i] = motion.positions[:, j, axis]
-    angle_columns = [(i, j, axis) for i, (j, is_position, axis) in enumerate(columns) if not is_position]
-    if angle_columns:
-        cols, js, axes = (np.array(x) for x in zip(*angle_columns))
-        for start, angles in motion.euler_blocks():
-            values[start : start + len(angles), cols] = np.rad2deg(angles[:, js, axes])
-    return values
+    return columns

@@ -62,6 +62,9 @@ def choose(mode: str, executable: str, python_path: str = "") -> str:
                                "or choose the executable in the add-on's preferences")
         return "python"
     if not find_executable(executable):
+        if mode == "EXECUTABLE":  # the user chose the executable: say what is wrong with it alone
+            raise BackendError(f"keyfill: the executable {executable or 'keyfill'!r} chosen is not an executable file "
+                               "here; set its path in the add-on's preferences")
         raise BackendError(f"keyfill is neither importable in Blender's Python nor an executable here "
                            f"({executable or 'keyfill'!r}); set its path in the add-on's preferences")
     return "executable"

@@ -19,8 +19,8 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.errors import UsageError
-from keyfill.kinematics import fk
 from keyfill.interpolate import BLOCK, segment_coordinates
+from keyfill.kinematics import fk
 from keyfill.motion import Motion, Skeleton
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}

@@ -9,7 +9,7 @@ from conftest import DATA
 from keyfill import io
 from keyfill.characters.retarget import canonical_axes, make_rig, quat_between, retarget
 from keyfill.kinematics import fk
-from keyfill.learn.rig_bridge import mapped_joints, model_frames, resample
+from keyfill.learn.rig_bridge import mapped_joints, model_frames, model_times, resampled
 from keyfill.motion import Motion
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh_fixtures"
@@ -104,8 +104,9 @@ def test_resampling_to_the_input_grid_hits_the_keys_and_holds_outside():
     keys = np.array([4, 20, 60])
     grid = model_frames(keys, 120.0, 30.0)  # as if the clip were at 120 fps
     coarse = clip.frames(list(range(int(grid[-1]) + 1)))
-    fine = resample(coarse, grid, keys, 66, 120.0)
-    assert fine.num_frames == 66 and fine.fps == 120.0
+    blocks = list(resampled(coarse, model_times(grid, keys, 66)))
+    fine = clip.replace(rotations=np.concatenate([b[2] for b in blocks]), positions=np.concatenate([b[3] for b in blocks]))
+    assert fine.num_frames == 66
     for key, g in zip(keys, grid):
         np.testing.assert_allclose(fine.positions[key], coarse.positions[g], atol=1e-12)
     np.testing.assert_allclose(fine.positions[:4], np.broadcast_to(coarse.positions[0], (4, *coarse.positions.shape[1:])))

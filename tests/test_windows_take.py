@@ -1,15 +1,20 @@
 """A take's arrays made a block of frames at a time (:func:`keyfill.learn.windows.model_take` and
-:func:`~keyfill.learn.windows.file_take`, issue 44: long takes in bounded memory) hold the very numbers of the
-whole-take steps they replace: the keys' interpolation, the model's hierarchy, continuous signs, and back."""
+:func:`~keyfill.learn.windows.file_take`, and the rig bridge's way back, :mod:`keyfill.learn.rig_bridge`;
+issue 44: long takes in bounded memory) hold the very numbers of the whole-take steps they replace: the keys'
+interpolation, the model's hierarchy, continuous signs, and back; retargeting, resampling and the spline."""
 
 import numpy as np
 import pytest
+from conftest import DATA
 from synthetic_corpus import walker_motion, walker_skeleton
+from test_long_takes import long_motion
 
+from keyfill import interpolate, io
 from keyfill import rotations as R
+from keyfill.characters.retarget import make_rig, retarget
 from keyfill.errors import ModelError
 from keyfill.interpolate import linear, segment_coordinates
-from keyfill.learn import windows
+from keyfill.learn import rig_bridge, windows
 from keyfill.learn.corpus import model_hierarchy
 from keyfill.learn.windows import file_take, model_take
 from keyfill.motion import Keys
@@ -100,3 +105,36 @@ def test_a_take_is_checked_against_the_model_before_any_work():
     other = walker_skeleton(leg_length=60.0)
     with pytest.raises(ModelError, match="another skeleton than the model.*; train one$"):
         model_take(other, True, motion, KEYS, hint="; train one")
+
+
+@pytest.mark.parametrize("block", [1, 5, 64, 4096])
+@pytest.mark.parametrize(("fps", "back"), [(120.0, True), (30.0, True), (24.0, False)])
+def test_the_bridge_back_onto_the_rig_in_blocks_is_the_whole_take_at_once(monkeypatch, block, fps, back):
+    """A model's take (20 whole turns of the root: many sign changes) retargeted onto another rig and resampled
+    at the motion's frames: in blocks as the whole take retargeted (its signs continuous along all of it), then
+    resampled."""
+    keys = np.array([2, 40, 41, 97, 160, 171, 250, 299]) if fps != 30.0 else np.array([0, 30, 60, 299])
+    grid = rig_bridge.model_frames(keys, fps, 30.0)
+    filled = long_motion(int(grid[-1]) + 1)
+    flip = np.where(np.random.default_rng(1).random(filled.rotations.shape[:2]) < 0.3, -1.0, 1.0)
+    filled = filled.replace(rotations=filled.rotations * flip[..., None])  # signs for retargeting to make continuous
+    times = rig_bridge.model_times(grid, keys, 320)
+    rigs = (make_rig(filled.skeleton), make_rig(io.load(DATA / "bvhtoolbox_test_freebvh_mixamo.bvh").skeleton))
+    whole = retarget(filled, *rigs) if back else filled
+    want_r, want_p = interpolate.at_times(whole.rotations, whole.positions, times)
+    monkeypatch.setattr(interpolate, "BLOCK", block)
+    blocks = list(rig_bridge.resampled(filled, times, rigs if back else None))
+    assert [b[0] for b in blocks] == list(range(0, 320, block))
+    assert np.array_equal(np.concatenate([b[2] for b in blocks]), want_r)
+    assert np.array_equal(np.concatenate([b[3] for b in blocks]), want_p)
+
+
+@pytest.mark.parametrize("block", [1, 6, 64, 4096])
+def test_the_bridges_spline_in_blocks_is_the_whole_spline(block):
+    motion = long_motion(200, seed=3)
+    k = np.array([5, 9, 30, 31, 77, 120, 121, 150, 190])
+    want = interpolate.cubic(motion, Keys(k))
+    signs = R.quat_continuous_np(motion.rotations[k], axis=0)
+    parts = [rig_bridge._cubic_frames(motion, k, signs, a, min(a + block, 200)) for a in range(0, 200, block)]
+    assert np.array_equal(np.concatenate([p[0] for p in parts]), want.rotations)
+    assert np.array_equal(np.concatenate([p[1] for p in parts]), want.positions)

@@ -17,6 +17,10 @@ of any humanoid rig (:mod:`keyfill.characters.humanoid`) at any frame rate:
 
 The output keeps the motion's skeleton, channel layout, Euler orders, frame rate and frame count. Partial keys
 keep their kind; a model joint is keyed where the motion's joint of its role is.
+
+Steps 4 and 5 are made a block of the motion's frames at a time (:func:`resampled`, :func:`_cubic_frames`) into
+the result's arrays, and step 6 corrects them in place: a long take costs the motion's arrays, the model's
+completion of it (on the model's skeleton) and the result's, not copies of each step (issue 44).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from keyfill import rotations as R
 from keyfill.characters.retarget import Rig, make_rig, retarget
 from keyfill.errors import DataError, ModelError
 from keyfill.learn.corpus import model_hierarchy
+from keyfill.learn.windows import SignChain
 from keyfill.motion import Keys, Motion, Skeleton
 
 
@@ -113,14 +118,44 @@ def _held(poses_rot: np.ndarray, poses_pos: np.ndarray, frames: np.ndarray, coun
     return poses_rot[src], poses_pos[src]
 
 
-def resample(motion: Motion, model_keys: np.ndarray, keys: np.ndarray, num_frames: int, fps: float) -> Motion:
-    """``motion`` (on the model's grid, keys at ``model_keys``) at the frames ``0 .. num_frames-1`` of a motion
-    whose keys are ``keys`` at ``fps``: each gap's frames map linearly onto its model frames (slerp of
-    rotations, lerp of translations); frames before the first key and after the last hold it."""
+def model_times(model_keys: np.ndarray, keys: np.ndarray, num_frames: int) -> np.ndarray:
+    """``(F,)`` the model frame (fractional) of each frame ``0 .. num_frames-1`` of a motion whose keys ``keys (K,)``
+    are at ``model_keys (K,)`` on the model's grid: each gap's frames map linearly onto its model frames;
+    frames before the first key and after the last map onto it."""
     t = np.clip(np.arange(num_frames), keys[0], keys[-1])
     s, u = interpolate.segment_coordinates(num_frames, keys)
-    tau = model_keys[s] + np.where(t >= keys[-1], 1.0, u) * (model_keys[s + 1] - model_keys[s])
-    return Motion(motion.skeleton, fps, *interpolate.at_times(motion.rotations, motion.positions, tau))
+    return model_keys[s] + np.where(t >= keys[-1], 1.0, u) * (model_keys[s + 1] - model_keys[s])
+
+
+def resampled(filled: Motion, times: np.ndarray, back: tuple[Rig, Rig] | None = None):
+    """``filled`` (a motion on the model's grid) at the model times ``times (F,)`` (:func:`model_times`): slerp of
+    rotations, lerp of translations between the two model frames around each time
+    (:func:`keyfill.interpolate.at_times`), with ``back`` = ``(model's rig, motion's rig)`` retargeted onto the
+    motion's rig first (:func:`keyfill.characters.retarget.retarget`, whose signs are continuous along the whole of
+    ``filled``).
+
+    Yields ``(a, b, rotations (b - a, J, 4), positions (b - a, J, 3))`` for the frames ``a .. b-1`` of ``times``,
+    :data:`keyfill.interpolate.BLOCK` frames at a time: memory is a block's, of ``filled``'s frames and ours.
+    ``times`` must not decrease.
+    """
+    M = filled.num_frames
+    prev = None  # (first model frame, model frames retargeted and signed as the whole take's) of the last block
+    for a in range(0, len(times), interpolate.BLOCK):
+        b = min(len(times), a + interpolate.BLOCK)
+        t = times[a:b]
+        hi = min(int(np.floor(t[-1])) + 1, M - 1)
+        # from the last block's last model frame on (every frame counts for the signs), or from the first
+        first = 0 if prev is None else min(int(np.floor(t[0])), prev[0] + len(prev[1]) - 1)
+        part = filled.replace(rotations=filled.rotations[first: hi + 1], positions=filled.positions[first: hi + 1])
+        rot = part.rotations
+        if back is not None:
+            part = retarget(part, *back)
+            rot = part.rotations
+            if prev is not None:  # the part's first frame is one the last block signed: continue its signs
+                seen = prev[1][first - prev[0]]
+                rot *= np.where(np.sum(seen * rot[0], axis=-1) < 0, -1.0, 1.0)[:, None]
+        prev = (first, rot)
+        yield (a, b, *interpolate.at_times(rot, part.positions, t - first))
 
 
 def _model_keys(keys: Keys, frames: np.ndarray, source: Rig, target: Rig) -> Keys:
@@ -198,24 +233,47 @@ def complete_on_model_rig(motion: Motion, keys: Keys, complete, model: Served, o
     else:
         model_keys = _model_keys(keys, frames, source, target)
     done = complete(model_motion, model_keys)
-    filled = done.motion.replace(keys=None)
-    if not same:
-        filled = retarget(filled, target, source)
-    filled = resample(filled, frames, k, motion.num_frames, motion.fps)
-    if same:
-        rotations, positions = filled.rotations, filled.positions
-    else:  # joints without a role, and translations but the hips', from the motion's own keys
-        spline = interpolate.cubic(motion, keys)
-        keep = ~mapped_joints(source)
-        rotations = np.where(keep[None, :, None], spline.rotations, filled.rotations)
-        positions = spline.positions.copy()
-        positions[:, source.roles.hips] = filled.positions[:, source.roles.hips]
-    result = motion.replace(rotations=R.quat_continuous_np(rotations, axis=0), positions=positions, keys=keys)
+    del model_motion, rot, pos  # the completion read its keys
+    # back on the motion's rig and frames, a block of frames at a time into the result's arrays: joints without
+    # a role, and translations but the hips', from the cubic spline through the motion's own keys
+    rotations, positions = np.empty(motion.rotations.shape), np.empty(motion.positions.shape)
+    signs = SignChain()
+    keep = None if same else ~mapped_joints(source)
+    spline_keys = None if same else R.quat_continuous_np(motion.rotations[k], axis=0)  # as the whole spline's
+    times = model_times(frames, k, motion.num_frames)
+    for a, b, rot, pos in resampled(done.motion.replace(keys=None), times, None if same else (target, source)):
+        if not same:
+            spline_rot, spline_pos = _cubic_frames(motion, k, spline_keys, a, b)
+            rot = np.where(keep[None, :, None], spline_rot, rot)
+            spline_pos[:, source.roles.hips] = pos[:, source.roles.hips]
+            pos = spline_pos
+        signs(rot)
+        rotations[a:b], positions[a:b] = rot, pos
+    result = motion.replace(rotations=rotations, positions=positions, keys=keys)
     inner = {key: v for key, v in done.info.items() if key not in ("method", "keys", "frames")}
     info = {**inner, "model_fps": float(model_fps), "model_keys": frames.tolist(), "exact_keys": bool(options.exact_keys)}
     if not same:
         info["rig"] = source.roles.to_json()
     if options.exact_keys:
-        result, report = snap_to_keys(result, motion, keys)
+        result, report = snap_to_keys(result, motion, keys, in_place=True)  # result: ours
         info.update(report)
     return Completion(result, info)
+
+
+def _cubic_frames(motion: Motion, k: np.ndarray, key_rotations: np.ndarray, a: int, b: int):
+    """``(rotations (b - a, J, 4), positions (b - a, J, 3))``: frames ``a .. b-1`` of
+    :func:`keyfill.interpolate.cubic` of ``motion`` through its keys ``k (K,)``, made from the keys around them
+    alone (a gap's piece of the spline depends on its keys and their neighbours); ``key_rotations (K, J, 4)``
+    the keys' rotations with the signs the whole spline gives them (continuous along the keys)."""
+    frames = np.clip(np.arange(a, b), k[0], k[-1])  # frames outside the keys take the spline's end values
+    s = np.clip(np.searchsorted(k, frames, side="right") - 1, 0, len(k) - 2)
+    lo, hi = max(int(s[0]) - 1, 0), min(int(s[-1]) + 2, len(k) - 1)
+    first, window = int(k[lo]), k[lo: hi + 1] - int(k[lo])
+    wr = np.empty((window[-1] + 1,) + motion.rotations.shape[1:])
+    wp = np.empty((window[-1] + 1,) + motion.positions.shape[1:])
+    wr[window], wp[window] = key_rotations[lo: hi + 1], motion.positions[k[lo: hi + 1]]
+    spline_r, spline_p = interpolate.cubic_arrays(wr, wp, window)
+    rot, pos = spline_r[frames - first], spline_p[frames - first]
+    at = k[(k >= a) & (k < b)]  # key frames: the keys themselves
+    rot[at - a], pos[at - a] = motion.rotations[at], motion.positions[at]
+    return rot, pos

@@ -153,7 +153,7 @@ def model_take(model_skeleton: Skeleton, folded: bool, motion: Motion, key_frame
     kq = kq[:, joints]
     quats, positions = np.empty((F, J, 4)), np.empty((F, J, 3))
     top = (np.empty((F, 4)), np.empty((F, 3))) if folded else None
-    flips = prev = None  # continuous: sign changes so far (J,), and the previous block's last frame unflipped
+    signs = SignChain() if continuous else None
     for a in range(0, F, BLOCK):
         b = min(F, a + BLOCK)
         ss, uu = s[a:b], u[a:b]
@@ -167,18 +167,33 @@ def model_take(model_skeleton: Skeleton, folded: bool, motion: Motion, key_frame
         if folded:
             top[0][a:b], top[1][a:b] = r[:, 0], p[:, 0]
             r, p = fold_root(r, p, motion.skeleton.parents)
-        if continuous:
-            before = r[:-1] if prev is None else np.concatenate([prev, r[:-1]])
-            last = r[-1:].copy()
-            changes = np.cumsum(np.sum(r[1 if prev is None else 0:] * before, axis=-1) < 0, axis=0)
-            if flips is not None:
-                changes += flips
-            if len(changes):
-                flips = changes[-1]
-                r[len(r) - len(changes):][changes % 2 == 1] *= -1
-            prev = last
+        if signs is not None:
+            signs(r)
         quats[a:b], positions[a:b] = r, p
     return quats, positions, top
+
+
+class SignChain:
+    """:func:`keyfill.rotations.quat_continuous_np` along time (axis 0) of a take given a block of frames at a
+    time, in order: calling it with each block's quaternions ``(n, ..., 4)`` flips their signs in place as the
+    whole take's would be (the same sign changes counted from the take's first frame)."""
+
+    def __init__(self):
+        self.flips = None  # (...,) int: sign changes from the first frame to the last one seen
+        self.last = None  # (1, ..., 4): the last frame seen, before its flip
+
+    def __call__(self, q: np.ndarray) -> None:
+        if not len(q):
+            return
+        before = q[:-1] if self.last is None else np.concatenate([self.last, q[:-1]])
+        first = 1 if self.last is None else 0
+        self.last = q[-1:].copy()
+        changes = np.cumsum(np.sum(q[first:] * before, axis=-1) < 0, axis=0)
+        if self.flips is not None:
+            changes += self.flips
+        if len(changes):
+            self.flips = changes[-1]
+            q[first:][changes % 2 == 1] *= -1
 
 
 def file_take(quats: np.ndarray, positions: np.ndarray, top, skeleton: Skeleton) -> None:

@@ -188,6 +188,10 @@ def check_fps(fps: float) -> str | None:
     return None
 
 
+#: frames :func:`check_values` looks at at once
+CHECK_ROWS = 65_536
+
+
 def check_values(motion, what: str = "the motion") -> None:
     """Raise :class:`DataError` unless every number of ``motion`` can be written to a file.
 
@@ -200,11 +204,13 @@ def check_values(motion, what: str = "the motion") -> None:
     limit = max_abs()
     sk = motion.skeleton
     for name, arr in (("rest offset", sk.offsets), ("position", motion.positions)):
-        big = ~(np.abs(arr) <= limit)  # NaN counts as too big
-        if big.any():
-            idx = np.argwhere(big)[0]
-            where = f"joint {sk.names[idx[-2]]!r}" + (f" at frame {idx[0]}" if arr.ndim == 3 else "")
-            raise DataError(f"{what}: a {name} of {where} is beyond {limit:g} (or not finite); refusing to write it")
+        for start in range(0, len(arr), CHECK_ROWS):  # a block of frames at a time: no full-size temporary
+            big = ~(np.abs(arr[start : start + CHECK_ROWS]) <= limit)  # NaN counts as too big
+            if big.any():
+                idx = np.argwhere(big)[0] + np.array([start] + [0] * (arr.ndim - 1))  # in the whole array
+                where = f"joint {sk.names[idx[-2]]!r}" + (f" at frame {idx[0]}" if arr.ndim == 3 else "")
+                raise DataError(f"{what}: a {name} of {where} is beyond {limit:g} (or not finite); refusing to "
+                                "write it")
     for j, off in sk.end_sites:
         if not np.all(np.abs(off) <= limit):
             raise DataError(f"{what}: an End Site offset of joint {sk.names[j]!r} is beyond {limit:g}; refusing to write it")

@@ -641,7 +641,7 @@ def test_long_takes_are_read_and_written_in_bounded_memory(monkeypatch, tmp_path
         gltf.read(tmp_path / f"warm{suffix}")
     for suffix in (".glb", ".gltf"):
         path = tmp_path / f"long{suffix}"
-        # limits.check_values takes 0.48x (the magnitudes of the positions) before the writer starts
+        # limits.check_values takes 0.48x (the magnitudes of the positions, CHECK_ROWS frames at once: all of this take)
         assert _peak_beyond(gltf_write.write, motion, path)[0] < 0.7 * own
         assert _peak_beyond(gltf_write.write, motion, tmp_path / f"kept{suffix}", template=path)[0] < 0.7 * own
         peak, back = _peak_beyond(gltf.read, path)

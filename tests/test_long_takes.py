@@ -119,3 +119,20 @@ def test_a_gltf_may_describe_as_much_as_its_bin_file_holds(tmp_path, monkeypatch
     io.save(motion, tmp_path / "take.gltf")
     assert (tmp_path / "take.gltf").stat().st_size < 2000 * (31 + 8)  # the JSON alone could not describe it
     assert io.load(tmp_path / "take.gltf").num_frames == 2000
+
+
+@pytest.mark.parametrize("rows", [1, 7, 65_536])
+def test_the_writers_value_check_names_the_first_bad_number_in_any_block_size(rows, monkeypatch):
+    """limits.check_values looks at the positions a block of frames at a time (no full-size temporary before
+    every writer): whatever the block, it names the first frame and joint beyond the limit, as one look at
+    the whole array did."""
+    from keyfill import limits
+    from keyfill.errors import DataError
+
+    monkeypatch.setattr(limits, "CHECK_ROWS", rows)
+    m = long_motion(40)
+    limits.check_values(m)
+    pos = m.positions.copy()
+    pos[23, 4, 2], pos[31, 2, 0] = 1e14, -1e15
+    with pytest.raises(DataError, match=f"joint {m.skeleton.names[4]!r} at frame 23 is beyond"):
+        limits.check_values(m.replace(positions=pos))

@@ -294,8 +294,8 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
         except KeyfillError as e:
             results[j] = e
     # windows: (job, a, b, key frames inside); spans of one motion never overlap but at their boundary keys
-    windows = [(j, a, b, tuple(prep[0][(prep[0] >= a) & (prep[0] <= b)] - a))
-               for j, prep in prepared.items() for a, b in prep[4]]
+    windows = [(j, a, b, tuple(k[np.searchsorted(k, a): np.searchsorted(k, b, side="right")] - a))
+               for j, (k, *_, parts) in prepared.items() for a, b in parts]
     if batch:
         groups: dict = {}
         for w in windows:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import shutil
 import sys
 import tempfile
 from dataclasses import dataclass
@@ -86,6 +87,8 @@ FORMATS = {f.name: f for f in (
 #: suffix (lower case, with the dot) -> format name
 SUFFIXES = {s: f.name for f in FORMATS.values() for s in f.suffixes}
 STDIO = "-"
+#: bytes of a written file copied to standard output at a time
+STDOUT_CHUNK = 1 << 22
 
 
 def listing(items, last: str = "or") -> str:
@@ -307,7 +310,8 @@ def _write(write, motion: Motion, path, spec: Format, options: dict) -> None:
             out = Path(tmp) / ("stdout" + spec.suffixes[0])
             write(motion, out, **options)
             sys.stdout.flush()
-            sys.stdout.buffer.write(out.read_bytes())
+            with open(out, "rb") as f:
+                shutil.copyfileobj(f, sys.stdout.buffer, STDOUT_CHUNK)  # a long take is not held whole
             sys.stdout.buffer.flush()
         return
     if spec.sidecar:

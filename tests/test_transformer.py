@@ -329,6 +329,22 @@ def test_hidden_frames_do_not_change_the_prediction(trained, corpus):
     np.testing.assert_array_equal(a[1], b[1])
 
 
+def test_a_joint_s_quaternion_sign_does_not_change_the_prediction(trained, corpus):
+    """q and -q are one rotation: flipping the signs of some joints over a window (as another Euler channel order
+    gives them: issue 47's Blender operator against the CLI, 0.032 of the height) gives the same rotations,
+    each in the sign it was given."""
+    _, model = trained
+    q, r = corpus.clip(1)
+    q, r = q[None, :40].copy(), r[None, :40].copy()
+    keys = np.append(np.arange(10), 30)
+    a = model.complete_windows(q, r, keys)
+    flip = np.where(np.random.default_rng(4).random(q.shape[2]) < 0.5, -1.0, 1.0)[None, None, :, None]
+    flip[..., 0, :] = -1.0  # the root too
+    b = model.complete_windows(q * flip, r, keys)
+    np.testing.assert_allclose(b[0], a[0] * flip, atol=1e-12)
+    np.testing.assert_array_equal(a[1], b[1])
+
+
 def test_save_and_load_give_the_same_completion(trained, corpus):
     out, model = trained
     again = T.load(out)

@@ -128,6 +128,10 @@ class CompletionModel:
         up = self.skeleton.up_axis
         turn, shift = canonical_transform(q, r, keys, self.config.facing_axis, up)
         q, r = apply_transform(q, r, turn, shift)
+        # q and -q are one rotation, but the network reads the numbers: each joint of each window is taken in
+        # the hemisphere w >= 0 at the first key (its signs along the window kept), and given back in its own
+        sign = np.where(q[:, keys[:1], :, :1] < 0, -1.0, 1.0)  # (B, 1, J, 1)
+        q = q * sign
         q, r = self.config.fill(q, r, keys)
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
         if getattr(self.network, "numpy_io", False):
@@ -144,7 +148,7 @@ class CompletionModel:
         pq, pr = self.features.decode(y)
         outside = kinds == IGNORED
         pq[:, outside], pr[:, outside] = q[:, outside], r[:, outside]
-        pq, pr = apply_transform(pq, pr, turn, shift, inverse=True)
+        pq, pr = apply_transform(pq * sign, pr, turn, shift, inverse=True)
         return R.quat_normalize(pq), pr
 
     def benchmark_method(self):

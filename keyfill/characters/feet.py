@@ -49,16 +49,13 @@ import numpy as np
 
 from keyfill import rotations as R
 from keyfill.characters.humanoid import SIDES
-from keyfill.characters.leg_ik import solve_legs
+from keyfill.characters.legs import BLOCK, ancestors, chain_world, leg_chain, leg_world, solve_legs
 from keyfill.characters.retarget import Rig, make_rig
 from keyfill.errors import DataError, UsageError
-from keyfill.kinematics import fk
 from keyfill.motion import POSITION_CHANNELS, Keys, Motion, Skeleton
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 _LEG_ROLES = ("thigh", "shin", "foot")
-#: frames whose leg kinematics and IK are computed at once (their temporaries: a few MB, for any length)
-BLOCK = 4096
 
 
 @dataclass(frozen=True)
@@ -168,19 +165,10 @@ def foot_chains(rig: Rig | Skeleton) -> dict[str, tuple[int, int, int, int | Non
     out = {s: tuple([limbs[f"{r}_{s}"] for r in _LEG_ROLES] + [limbs.get(f"toe_{s}")]) for s in SIDES}
     for s, chain in out.items():
         for upper, lower in itertools.pairwise(j for j in chain if j is not None):
-            if upper not in _ancestors(parents, lower):
+            if upper not in ancestors(parents, lower):
                 names = rig.skeleton.names
                 raise DataError(f"the {s} leg is not a chain: {names[lower]!r} is not below {names[upper]!r}",
                                 params="rig_map")
-    return out
-
-
-def _ancestors(parents: np.ndarray, j: int) -> list[int]:
-    """``j``'s ancestors, nearest first."""
-    out = []
-    while parents[j] >= 0:
-        j = int(parents[j])
-        out.append(j)
     return out
 
 
@@ -201,36 +189,6 @@ def _motion_rig(motion: Motion, rig: Rig | Skeleton) -> Rig:
     if motion.skeleton is not rig.skeleton and motion.skeleton.names != rig.skeleton.names:
         raise DataError("the motion is not on the rig's skeleton (their joints differ)")
     return rig
-
-
-def _leg_chain(skeleton: Skeleton, joints) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(sub (S,), sub_parents (S,), column (J,))``: ``joints`` and their ``S`` ancestors, their parents among
-    them, and the column of joint ``j`` in arrays of the ``S`` (-1 for the joints left out)."""
-    parents = skeleton.parents
-    sub = np.array(sorted({int(k) for j in joints for k in [j, *_ancestors(parents, j)]}))
-    column = np.full(skeleton.num_joints, -1)
-    column[sub] = np.arange(len(sub))
-    sub_parents = np.array([column[parents[j]] if parents[j] >= 0 else -1 for j in sub])
-    return sub, sub_parents, column
-
-
-def _chain_world(rotations: np.ndarray, positions: np.ndarray, chain, rows) -> tuple[np.ndarray, np.ndarray]:
-    """World ``(rotations (n, S, 4), positions (n, S, 3))`` of :func:`_leg_chain`'s joints on the frames
-    ``rows`` (a slice or indices) of local ``rotations (F, J, 4)``, ``positions (F, J, 3)``."""
-    sub, sub_parents, _ = chain
-    return fk(rotations[rows][:, sub], positions[rows][:, sub], sub_parents)
-
-
-def _leg_world(rotations: np.ndarray, positions: np.ndarray, skeleton: Skeleton, joints) -> tuple[np.ndarray, ...]:
-    """World ``(rotations (F, S, 4), positions (F, S, 3), column (J,) int)`` of ``joints`` and their ``S``
-    ancestors by forward kinematics of those joints alone (the legs of a 55-joint rig are 10): joint ``j``'s
-    are column ``column[j]`` (-1 for the joints left out)."""
-    chain = _leg_chain(skeleton, joints)
-    F, S = len(rotations), len(chain[0])
-    W, P = np.empty((F, S, 4)), np.empty((F, S, 3))
-    for a in range(0, F, BLOCK):  # a block of frames at a time: the temporaries stay small
-        W[a : a + BLOCK], P[a : a + BLOCK] = _chain_world(rotations, positions, chain, slice(a, a + BLOCK))
-    return W, P, chain[2]
 
 
 def _frames(keys, num_frames: int, param: str = "keys") -> np.ndarray:
@@ -273,7 +231,7 @@ def ground_height(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int
         raise DataError("the motion has no frames to find the ground in")
     idx = frames if len(frames) else slice(None)
     feet = [j for _, j in contact_joints(rig)]
-    _, pos, column = _leg_world(motion.rotations[idx], motion.positions[idx], motion.skeleton, feet)
+    _, pos, column = leg_world(motion.rotations[idx], motion.positions[idx], motion.skeleton, feet)
     return float(pos[:, column[feet], _AXES[motion.skeleton.up_axis]].min())
 
 
@@ -355,7 +313,7 @@ def contacts(motion: Motion, rig: Rig | Skeleton, ground: float | None = None,
     if motion.num_frames == 0:
         return np.zeros((0, len(cols)), dtype=bool)
     joints = [j for _, j in cols]
-    _, pos, column = _leg_world(motion.rotations, motion.positions, sk, joints)
+    _, pos, column = leg_world(motion.rotations, motion.positions, sk, joints)
     feet = pos[:, column[joints]]
     floor, _ = _planted_heights(feet, [r for r, _ in cols], _frames(keys, motion.num_frames), _ground_value(ground),
                                 _AXES[sk.up_axis], rig.hip_height, settings)
@@ -540,11 +498,11 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
         raise DataError("the motion has no frames to lock the feet of")
     # the whole take holds only per-frame arrays of the feet; the legs' kinematics are made a block of frames
     # at a time, where needed (issue 44: 0.3x the motion's memory at most, not 1.3x)
-    chain = _leg_chain(sk, [j for c in chains.values() for j in c if j is not None])
+    chain = leg_chain(sk, [j for c in chains.values() for j in c if j is not None])
     col = chain[2]
     feet = np.empty((F, len(cols), 3))  # (F, n, 3) world positions of the foot joints
     for a in range(0, F, BLOCK):
-        feet[a : a + BLOCK] = _chain_world(motion.rotations, motion.positions, chain, slice(a, a + BLOCK))[1][
+        feet[a : a + BLOCK] = chain_world(motion.rotations, motion.positions, chain, slice(a, a + BLOCK))[1][
             :, col[[j for _, j in cols]]]
     floor, ground_used = _planted_heights(feet, [r for r, _ in cols], key_frames, _ground_value(ground), up, H, settings)
     if labels is None:
@@ -564,7 +522,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     cap = settings.max_hip_drop * H
     need = np.zeros(F)  # what the hips must come down (none without a cap above 0)
     for a in range(0, F, BLOCK) if cap > 0 else ():
-        _, P = _chain_world(motion.rotations, motion.positions, chain, slice(a, a + BLOCK))
+        _, P = chain_world(motion.rotations, motion.positions, chain, slice(a, a + BLOCK))
         thighs, knees, ankles = (P[:, col[legs[:, i]]] for i in range(3))
         length = np.linalg.norm(knees - thighs, axis=-1) + np.linalg.norm(ankles - knees, axis=-1)
         reach = np.maximum(settings.max_reach * length, np.linalg.norm(ankles - thighs, axis=-1))
@@ -581,7 +539,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
     unreached = 0
     for i in range(0, len(frames), BLOCK):  # the legs' kinematics of a block of frames, before its IK
         rows = frames[i : i + BLOCK]
-        W, P = _chain_world(motion.rotations, motion.positions, chain, rows)
+        W, P = chain_world(motion.rotations, motion.positions, chain, rows)
         targets = feet[rows][:, ankle_cols] + offsets[rows]
         solved = solve_legs(rotations, W, P, col, rows, legs, chains, sides, sk.parents, shift[rows], targets,
                             changed[rows])
@@ -594,7 +552,7 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
         for i in range(0, len(down), BLOCK):
             rows = down[i : i + BLOCK]
             local = shift[rows] if parent < 0 else R.quat_rotate(
-                R.quat_conjugate(_chain_world(motion.rotations, motion.positions, chain, rows)[0][:, col[parent]]),
+                R.quat_conjugate(chain_world(motion.rotations, motion.positions, chain, rows)[0][:, col[parent]]),
                 shift[rows])
             positions[rows, mover] += local
     locked = motion.replace(rotations=rotations, positions=positions)
@@ -618,5 +576,5 @@ def lock_feet(motion: Motion, rig: Rig | Skeleton, keys: Keys | Sequence[int] | 
 
 def _translated_joint(skeleton: Skeleton, hips: int) -> int:
     """The joint whose translation moves the hips: they or their nearest ancestor with position channels."""
-    return next((j for j in [hips, *_ancestors(skeleton.parents, hips)]
+    return next((j for j in [hips, *ancestors(skeleton.parents, hips)]
                  if any(c in POSITION_CHANNELS for c in skeleton.channels[j])), hips)

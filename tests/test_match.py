@@ -317,7 +317,8 @@ def test_the_tree_finds_the_same_neighbours_by_brute_force_and_by_scipy(monkeypa
 
 def test_the_fallback_is_the_whole_spline_made_gap_by_gap():
     """fall_back makes only the unfamiliar gaps' pieces of the cubic spline (from the keys around each): the
-    same bits as the spline through every key, whichever gaps (the first and last included)."""
+    same bits as the spline through every key, whichever gaps (the first and last included), in a copy or in
+    the output's own arrays."""
     from test_long_takes import long_motion
 
     from keyfill.learn.library.guard import fall_back
@@ -334,3 +335,7 @@ def test_the_fallback_is_the_whole_spline_made_gap_by_gap():
             source = spline if unfamiliar[g] else motion
             assert np.array_equal(out.rotations[a + 1: b], source.rotations[a + 1: b])
             assert np.array_equal(out.positions[a + 1: b], source.positions[a + 1: b])
+        own = motion.replace(rotations=motion.rotations.copy(), positions=motion.positions.copy())
+        kept = fall_back(own, motion, keys, unfamiliar, in_place=True)  # a long take's: no copy
+        assert kept.rotations is own.rotations and np.array_equal(kept.rotations, out.rotations)
+        assert np.array_equal(kept.positions, out.positions)

@@ -316,7 +316,8 @@ def guarded(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, res
     result.info["guard"] = block
     if mode == "fallback" and block["unfamiliar"]:
         unfamiliar = np.array([g["unfamiliar"] for g in block["gaps"]], dtype=bool)
-        return Completion(guard.fall_back(result.motion, motion, keys, unfamiliar), result.info)
+        return Completion(guard.fall_back(result.motion, motion, keys, unfamiliar,
+                                          in_place=_own_arrays(result.motion, motion)), result.info)
     return result
 
 
@@ -394,7 +395,6 @@ def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOption
     feet are locked in ``result``'s own arrays unless they may be ``source``'s (the input's) too."""
     if (options.feet or m.feet) != "lock":
         return result
-    import numpy as np
 
     from keyfill.characters.feet import lock_feet
     from keyfill.characters.humanoid import read_rig_map
@@ -405,16 +405,23 @@ def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOption
         rig = make_rig(result.motion.skeleton, rig_map=rig_map)
     except DataError as e:
         raise DataError(f"feet lock needs a skeleton with legs: {e}", params=("feet",) + e.params) from None
-    out = result.motion
-    own = not any(np.may_share_memory(a, b) for a in (out.rotations, out.positions)
-                  for b in (source.rotations, source.positions))
-    locked, report = lock_feet(out, rig, keys, ground=options.ground, in_place=own)
+    locked, report = lock_feet(result.motion, rig, keys, ground=options.ground,
+                               in_place=_own_arrays(result.motion, source))
     cm = 100.0 * result.motion.skeleton.meters_per_unit
     before, after = report["skating_before"], report["skating_after"]
     result.info.update({"feet": "lock", "foot_skating_cm_s": {
         "before": None if before is None else before * cm, "after": None if after is None else after * cm},
         "contact_intervals": report["intervals"]})
     return Completion(locked, result.info)
+
+
+def _own_arrays(out: Motion, source: Motion) -> bool:
+    """Whether a completion's ``out`` shares no array with its input ``source``: a later step (the guard's
+    fallback, the feet lock) may then change it in place instead of copying a long take."""
+    import numpy as np
+
+    return not any(np.may_share_memory(a, b) for a in (out.rotations, out.positions)
+                   for b in (source.rotations, source.positions))
 
 
 def _on_model_rig(m: Method, motion: Motion, keys: Keys, options: CompleteOptions) -> Completion | None:

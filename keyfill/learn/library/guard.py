@@ -27,6 +27,8 @@ from keyfill.motion import Keys, Motion
 
 #: every how many frames of a gap the output's poses are scored
 OUTPUT_STEP = 3
+#: poses scored at a time (memory: a chunk's features and candidates, about 14 MB, not a long take's)
+CHUNK = 4096
 MODES = ("fallback", "warn", "off")
 
 
@@ -35,13 +37,21 @@ def scores(index: PoseIndex, frames: Frames, motion: Motion, keys: Keys, output:
     frames between them, both on the index's skeleton."""
     k = keys.frames
     inner = np.concatenate([np.arange(a + 1, b, OUTPUT_STEP) for a, b in pairwise(k)] or [np.zeros(0, int)])
-    feats_k = describe(motion.frames(k).world_positions(), frames)[0]
-    score_k = index.familiarity(feats_k)
+    score_k = familiarity(index, frames, motion, k)
     out = np.maximum(score_k[:-1], score_k[1:])
     if len(inner):
-        score_i = index.familiarity(describe(output.frames(inner).world_positions(), frames)[0])
+        score_i = familiarity(index, frames, output, inner)
         gap_of = np.searchsorted(k, inner, side="right") - 1
         np.maximum.at(out, gap_of, score_i)
+    return out
+
+
+def familiarity(index: PoseIndex, frames: Frames, motion: Motion, rows: np.ndarray) -> np.ndarray:
+    """``(N,)`` :meth:`PoseIndex.familiarity` of ``motion``'s frames ``rows (N,)``, :data:`CHUNK` at a time."""
+    out = np.empty(len(rows))
+    for a in range(0, len(rows), CHUNK):
+        part = rows[a: a + CHUNK]
+        out[a: a + CHUNK] = index.familiarity(describe(motion.frames(part).world_positions(), frames)[0])
     return out
 
 
@@ -56,12 +66,14 @@ def report(index: PoseIndex, mode: str, keys: Keys, gap_scores: np.ndarray) -> d
                      for a, b, s, u in zip(k[:-1], k[1:], gap_scores, unfamiliar)]}
 
 
-def fall_back(output: Motion, motion: Motion, keys: Keys, unfamiliar: np.ndarray) -> Motion:
+def fall_back(output: Motion, motion: Motion, keys: Keys, unfamiliar: np.ndarray, in_place: bool = False) -> Motion:
     """``output`` with the frames strictly inside every unfamiliar gap (``unfamiliar (K - 1,)`` bool) taken
-    from the cubic spline through ``motion``'s keys; keys and every other frame unchanged."""
+    from the cubic spline through ``motion``'s keys; keys and every other frame unchanged. With ``in_place``
+    the spline is written into ``output``'s own arrays (for a caller that owns them: a long take needs no copy)."""
     if not unfamiliar.any():
         return output
-    rot, pos = np.array(output.rotations), np.array(output.positions)
+    rot, pos = (output.rotations, output.positions) if in_place else (np.array(output.rotations),
+                                                                       np.array(output.positions))
     k = keys.frames
     signs = R.quat_continuous_np(motion.rotations[k], axis=0)  # the keys as the whole spline sees them
     for g in np.flatnonzero(unfamiliar):

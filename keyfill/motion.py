@@ -431,6 +431,8 @@ class Keys:
 
 #: frames per block of :meth:`Motion.euler_blocks`: its temporaries are a few MB for a few dozen joints
 EULER_BLOCK = 4096
+#: frames a Motion checks for values that are not finite at once
+FINITE_BLOCK = 65_536
 
 
 def _turns_off(angles: np.ndarray) -> np.ndarray:
@@ -466,9 +468,11 @@ class Motion:
             raise DataError(f"positions must be {rot.shape[:2] + (3,)}, got {pos.shape}")
         if not (np.isfinite(self.fps) and self.fps > 0):
             raise DataError(f"fps must be positive, got {self.fps}")
-        if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(pos))):
-            f = int(np.flatnonzero(~(np.isfinite(rot).all(axis=(1, 2)) & np.isfinite(pos).all(axis=(1, 2))))[0])
-            raise DataError(f"frame {f} holds a value that is not finite")
+        for a in range(0, len(rot), FINITE_BLOCK):  # a block at a time: no whole-take temporary per Motion
+            r, p = rot[a : a + FINITE_BLOCK], pos[a : a + FINITE_BLOCK]
+            if not (np.all(np.isfinite(r)) and np.all(np.isfinite(p))):
+                f = a + int(np.flatnonzero(~(np.isfinite(r).all(axis=(1, 2)) & np.isfinite(p).all(axis=(1, 2))))[0])
+                raise DataError(f"frame {f} holds a value that is not finite")
         if self.keys is not None:
             self.keys.check(rot.shape[0], min_keys=0)
         object.__setattr__(self, "rotations", rot)

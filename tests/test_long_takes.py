@@ -136,3 +136,20 @@ def test_the_writers_value_check_names_the_first_bad_number_in_any_block_size(ro
     pos[23, 4, 2], pos[31, 2, 0] = 1e14, -1e15
     with pytest.raises(DataError, match=f"joint {m.skeleton.names[4]!r} at frame 23 is beyond"):
         limits.check_values(m.replace(positions=pos))
+
+
+@pytest.mark.parametrize("rows", [1, 7, 65_536])
+def test_a_motion_names_its_first_frame_that_is_not_finite_in_any_block_size(rows, monkeypatch):
+    """A Motion checks its values a block of frames at a time (no whole-take temporary each time one is made):
+    whatever the block, it names the first frame holding a value that is not finite."""
+    from keyfill import motion as motion_module
+    from keyfill.errors import DataError
+
+    monkeypatch.setattr(motion_module, "FINITE_BLOCK", rows)
+    m = long_motion(40)
+    rot, pos = m.rotations.copy(), m.positions.copy()
+    rot[29, 3, 2], pos[17, 5, 0] = np.nan, np.inf
+    with pytest.raises(DataError, match="frame 17 holds a value that is not finite"):
+        m.replace(rotations=rot, positions=pos)
+    with pytest.raises(DataError, match="frame 29 holds a value that is not finite"):
+        m.replace(rotations=rot)

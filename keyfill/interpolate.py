@@ -230,6 +230,26 @@ def cubic(motion: Motion, keys: Keys) -> Motion:
     return _keep_keys(rot, pos, motion, keys)
 
 
+def cubic_span(motion: Motion, k: np.ndarray, key_rotations: np.ndarray, a: int, b: int):
+    """``(rotations (b - a, J, 4), positions (b - a, J, 3))``: frames ``a .. b-1`` (``a < b``) of :func:`cubic`
+    of ``motion`` through its keys ``k (K,)``, made from the keys around them alone (a gap's piece of the spline
+    depends on its keys and their neighbours), so a long take's spline can be made a span at a time;
+    ``key_rotations (K, J, 4)``: the keys' rotations with the signs the whole spline gives them (continuous
+    along the keys). Frames outside the keys take the spline's end values; key frames are the keys."""
+    frames = np.clip(np.arange(a, b), k[0], k[-1])
+    s = np.clip(np.searchsorted(k, frames, side="right") - 1, 0, len(k) - 2)
+    lo, hi = max(int(s[0]) - 1, 0), min(int(s[-1]) + 2, len(k) - 1)
+    first, window = int(k[lo]), k[lo: hi + 1] - int(k[lo])
+    wr = np.empty((window[-1] + 1,) + motion.rotations.shape[1:])
+    wp = np.empty((window[-1] + 1,) + motion.positions.shape[1:])
+    wr[window], wp[window] = key_rotations[lo: hi + 1], motion.positions[k[lo: hi + 1]]
+    spline_r, spline_p = cubic_arrays(wr, wp, window)
+    rot, pos = spline_r[frames - first], spline_p[frames - first]
+    at = k[(k >= a) & (k < b)]
+    rot[at - a], pos[at - a] = motion.rotations[at], motion.positions[at]
+    return rot, pos
+
+
 def velocity(motion: Motion, keys: Keys, frames: float | None = None) -> Motion:
     """The interpolation plus the velocity of given frames next to each gap, fading over ``frames`` frames
     (:data:`VELOCITY_FRAMES` by default; :func:`velocity_arrays`)."""

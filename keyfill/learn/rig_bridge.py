@@ -18,7 +18,7 @@ of any humanoid rig (:mod:`keyfill.characters.humanoid`) at any frame rate:
 The output keeps the motion's skeleton, channel layout, Euler orders, frame rate and frame count. Partial keys
 keep their kind; a model joint is keyed where the motion's joint of its role is.
 
-Steps 4 and 5 are made a block of the motion's frames at a time (:func:`resampled`, :func:`_cubic_frames`) into
+Steps 4 and 5 are made a block of the motion's frames at a time (:func:`resampled`, :func:`keyfill.interpolate.cubic_span`) into
 the result's arrays, and step 6 corrects them in place: a long take costs the motion's arrays, the model's
 completion of it (on the model's skeleton) and the result's, not copies of each step (issue 44).
 """
@@ -243,7 +243,7 @@ def complete_on_model_rig(motion: Motion, keys: Keys, complete, model: Served, o
     times = model_times(frames, k, motion.num_frames)
     for a, b, rot, pos in resampled(done.motion.replace(keys=None), times, None if same else (target, source)):
         if not same:
-            spline_rot, spline_pos = _cubic_frames(motion, k, spline_keys, a, b)
+            spline_rot, spline_pos = interpolate.cubic_span(motion, k, spline_keys, a, b)
             rot = np.where(keep[None, :, None], spline_rot, rot)
             spline_pos[:, source.roles.hips] = pos[:, source.roles.hips]
             pos = spline_pos
@@ -260,20 +260,3 @@ def complete_on_model_rig(motion: Motion, keys: Keys, complete, model: Served, o
     return Completion(result, info)
 
 
-def _cubic_frames(motion: Motion, k: np.ndarray, key_rotations: np.ndarray, a: int, b: int):
-    """``(rotations (b - a, J, 4), positions (b - a, J, 3))``: frames ``a .. b-1`` of
-    :func:`keyfill.interpolate.cubic` of ``motion`` through its keys ``k (K,)``, made from the keys around them
-    alone (a gap's piece of the spline depends on its keys and their neighbours); ``key_rotations (K, J, 4)``
-    the keys' rotations with the signs the whole spline gives them (continuous along the keys)."""
-    frames = np.clip(np.arange(a, b), k[0], k[-1])  # frames outside the keys take the spline's end values
-    s = np.clip(np.searchsorted(k, frames, side="right") - 1, 0, len(k) - 2)
-    lo, hi = max(int(s[0]) - 1, 0), min(int(s[-1]) + 2, len(k) - 1)
-    first, window = int(k[lo]), k[lo: hi + 1] - int(k[lo])
-    wr = np.empty((window[-1] + 1,) + motion.rotations.shape[1:])
-    wp = np.empty((window[-1] + 1,) + motion.positions.shape[1:])
-    wr[window], wp[window] = key_rotations[lo: hi + 1], motion.positions[k[lo: hi + 1]]
-    spline_r, spline_p = interpolate.cubic_arrays(wr, wp, window)
-    rot, pos = spline_r[frames - first], spline_p[frames - first]
-    at = k[(k >= a) & (k < b)]  # key frames: the keys themselves
-    rot[at - a], pos[at - a] = motion.rotations[at], motion.positions[at]
-    return rot, pos

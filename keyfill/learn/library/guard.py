@@ -77,15 +77,9 @@ def fall_back(output: Motion, motion: Motion, keys: Keys, unfamiliar: np.ndarray
     k = keys.frames
     signs = R.quat_continuous_np(motion.rotations[k], axis=0)  # the keys as the whole spline sees them
     for g in np.flatnonzero(unfamiliar):
-        # gap g's piece of the spline depends on keys g-1 .. g+2 alone: made from them, over its frames only
-        lo, hi = max(g - 1, 0), min(g + 2, len(k) - 1)
-        first, window = int(k[lo]), k[lo: hi + 1] - int(k[lo])
-        wr = np.empty((window[-1] + 1,) + motion.rotations.shape[1:])
-        wp = np.empty((window[-1] + 1,) + motion.positions.shape[1:])
-        wr[window], wp[window] = signs[lo: hi + 1], motion.positions[k[lo: hi + 1]]
         a, b = int(k[g]) + 1, int(k[g + 1])
-        spline_r, spline_p = interpolate.cubic_arrays(wr, wp, window)
-        rot[a:b], pos[a:b] = spline_r[a - first: b - first], spline_p[a - first: b - first]
+        if a < b:  # the gap's piece of the spline, from the keys around it alone
+            rot[a:b], pos[a:b] = interpolate.cubic_span(motion, k, signs, a, b)
     return output.replace(rotations=rot, positions=pos)
 
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import bpy  # isort: skip (bpy first: it makes bmesh and mathutils importable)
 import bmesh  # isort: skip
 import numpy as np
+from clip_setup import import_clip, keep_every  # this folder: the clip as the Blender tests set it up
 from mathutils import Matrix, Vector
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,8 +40,8 @@ FILL_COLOR = (0.25, 0.45, 0.8, 1.0)
 BLENDER_COLOR = (0.45, 0.45, 0.45, 1.0)
 GHOST = (0.72, 0.72, 0.72, 1.0)
 TARGET = (0.85, 0.1, 0.1, 1.0)
-SKIP = ("joint_Root",)
-SPREAD = 0.045  # m a frame: the poses of the Fill picture are spread along the walk  # the Bandai rig's ground-level root: a bone from the floor to the hips would mislead
+SKIP = ("joint_Root",)  # the Bandai rig's ground-level root: a bone from the floor to the hips would mislead
+SPREAD = 0.045  # m a frame: the poses of the Fill picture are spread along the walk
 
 
 def load_extension() -> None:
@@ -52,34 +53,6 @@ def load_extension() -> None:
     if hasattr(bpy.types, "KEYFILL_OT_fill_inbetweens"):
         keyfill_blender.unregister()
     keyfill_blender.register()
-
-
-def import_clip(path: Path, own_axes: bool, rotate_mode: str):
-    """The clip as the tests import it (tests/interop/blender_addon_check.py)."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    kw = {"axis_forward": "Y", "axis_up": "Z", "global_scale": 1.0} if own_axes else {"global_scale": 0.01}
-    bpy.ops.import_anim.bvh(filepath=str(path), target="ARMATURE", frame_start=1, use_fps_scale=False,
-                            update_scene_fps=True, update_scene_duration=True, rotate_mode=rotate_mode, **kw)
-    obj = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    if own_axes:
-        obj.rotation_euler = (math.pi / 2, 0.0, 0.0)
-        obj.scale = (0.01, 0.01, 0.01)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    bpy.context.view_layer.update()
-    return obj
-
-
-def keep_every(obj, every: int, first: int) -> None:
-    from bpy_extras import anim_utils
-
-    ad = obj.animation_data
-    for fc in anim_utils.action_get_channelbag_for_slot(ad.action, ad.action_slot).fcurves:
-        kps = fc.keyframe_points
-        for i in reversed(range(len(kps))):
-            if (round(kps[i].co[0]) - first) % every:
-                kps.remove(kps[i], fast=True)
-        fc.update()
 
 
 def pose_at(obj, frame: int) -> dict:

@@ -42,25 +42,11 @@ import bpy
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _import(path: Path, own_axes: bool, rotate_mode: str = "QUATERNION"):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    kw = {"axis_forward": "Y", "axis_up": "Z", "global_scale": 1.0} if own_axes else {"global_scale": 0.01}
-    bpy.ops.import_anim.bvh(filepath=str(path), target="ARMATURE", frame_start=1, use_fps_scale=False,
-                            update_scene_fps=True, update_scene_duration=True, rotate_mode=rotate_mode, **kw)
-    obj = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    if own_axes:
-        obj.rotation_euler = (np.pi / 2, 0.0, 0.0)
-        obj.scale = (0.01, 0.01, 0.01)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
-    bpy.context.view_layer.update()
-    return obj
+sys.path.insert(0, str(ROOT / "blender"))
+from clip_setup import import_clip, keep_every  # blender/: the clip as the pictures set it up too
 
 
 def _convert_module():
-    sys.path.insert(0, str(ROOT / "blender"))
     from keyfill_blender import action, convert
 
     return action, convert
@@ -70,7 +56,7 @@ def cmd_convert(args) -> dict:
     action, convert = _convert_module()
     out = {}
     for label, own in (("default", False), ("object", True)):
-        obj = _import(args.clip, own)
+        obj = import_clip(args.clip, own)
         rig = convert.rig_from_armature(obj)
         first, last = (round(x) for x in obj.animation_data.action.frame_range)
         frames = np.arange(first, last + 1)
@@ -137,19 +123,6 @@ def _fill_op(**kw) -> dict:
             "seconds": time.perf_counter() - t0}
 
 
-def _keep_every(obj, every: int, first: int) -> None:
-    from bpy_extras import anim_utils
-
-    ad = obj.animation_data
-    cb = anim_utils.action_get_channelbag_for_slot(ad.action, ad.action_slot)
-    for fc in cb.fcurves:
-        kps = fc.keyframe_points
-        for i in reversed(range(len(kps))):
-            if (round(kps[i].co[0]) - first) % every:
-                kps.remove(kps[i], fast=True)
-        fc.update()
-
-
 def _undo() -> None:
     """Undo the operator. Blender without a window pushes no undo step after an operator a script calls (the
     UI does, as the operator's UNDO flag asks), so the step is pushed here as the UI would, then undone."""
@@ -180,7 +153,7 @@ def _heads(obj, frames) -> list:
 
 
 def cmd_fill(args) -> dict:
-    obj = _import(args.clip, own_axes=True)
+    obj = import_clip(args.clip, own_axes=True)
     mod = _install(args.zip)
     if args.backend:
         _use_backend(mod, args.backend, args.executable[0] if args.executable else None)
@@ -189,7 +162,7 @@ def cmd_fill(args) -> dict:
     first, last = (round(x) for x in obj.animation_data.action.frame_range)
     last = min(last, first + args.frames - 1)
     scene.frame_start, scene.frame_end = first, last
-    _keep_every(obj, args.every, first)
+    keep_every(obj, args.every, first)
     bpy.ops.export_anim.bvh(filepath=str(args.exported), global_scale=1.0, frame_start=first, frame_end=last,
                             rotate_mode="NATIVE", root_transform_only=False)
     before = _keys_snapshot(obj)
@@ -219,10 +192,10 @@ def cmd_fill(args) -> dict:
 
 
 def cmd_refuse(args) -> dict:
-    obj = _import(args.clip, own_axes=True)
+    obj = import_clip(args.clip, own_axes=True)
     mod = _install(args.zip)
     name = obj.name
-    _keep_every(obj, args.every, round(obj.animation_data.action.frame_range[0]))
+    keep_every(obj, args.every, round(obj.animation_data.action.frame_range[0]))
     before, actions = _keys_snapshot(obj), len(bpy.data.actions)
     cases = [("EXECUTABLE", exe, False) for exe in args.executable] + [("AUTO", args.executable[0], True)]
     out = []
@@ -237,10 +210,10 @@ def cmd_refuse(args) -> dict:
 
 
 def cmd_tangents(args) -> dict:
-    obj = _import(args.clip, own_axes=False, rotate_mode="NATIVE")
+    obj = import_clip(args.clip, own_axes=False, rotate_mode="NATIVE")
     mod = _install(args.zip)
     first = round(obj.animation_data.action.frame_range[0])
-    _keep_every(obj, 15, first)
+    keep_every(obj, 15, first)
     scene = bpy.context.scene
     frame = first + 8
     scene.frame_set(frame)

@@ -393,3 +393,65 @@ def test_blender_imports_the_kept_stage_with_its_mesh_material_and_animation(cap
     world = io.load(out).world_positions()
     for frame, heads in got["heads"].items():
         assert np.abs(np.array(heads) - world[int(frame) - 1]).max() < 1e-6
+
+
+# --- long takes: the template opened before the motion is read (issue 44) ----------------------------------
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
+@pytest.mark.parametrize("source_suffix", [".usda", ".usdc"])
+def test_a_template_opened_before_reading_writes_the_bytes_of_the_source_path(shot, tmp_path, suffix, source_suffix):
+    source = shot if source_suffix == ".usda" else shot.with_suffix(".usdc")
+    if source != shot:
+        Sdf.Layer.FindOrOpen(str(shot)).Export(str(source))
+    template = usd_stage.template_for(source, suffix.lstrip("."), None)
+    assert isinstance(template, usd_stage.Template) and not template.used
+    motion = completed(source)
+    by_path, by_template = tmp_path / ("by_path" + suffix), tmp_path / ("by_template" + suffix)
+    io.save(motion, by_path, source=source)
+    io.save(motion, by_template, source=source, template=template)
+    assert template.used
+    assert by_template.read_bytes() == by_path.read_bytes()
+    again = tmp_path / ("again" + suffix)  # a used template is not written into twice: the file is opened again
+    io.save(motion, again, source=source, template=template)
+    assert again.read_bytes() == by_path.read_bytes()
+
+
+def test_the_template_holds_none_of_the_sources_joint_samples(shot):
+    template = usd_stage.open_template(shot)
+    anim = template.layer.GetPrimAtPath(ANIM)
+    for name in ("translations", "rotations"):
+        assert anim.attributes[name].GetInfo("timeSamples") == {}  # dropped at once: a long take's are large
+    assert Usd.Stage.Open(str(shot)).GetPrimAtPath(ANIM).GetAttribute("rotations").GetNumTimeSamples() == len(KEYS)
+    assert template.start == KEYS[0] and template.names == [j.rsplit("/", 1)[-1] for j in JOINTS]
+
+
+@pytest.mark.parametrize("case", ["bvh source", "bvh output", "over", "new", "standard input", "not USD"])
+def test_template_for_opens_only_a_stage_the_output_keeps(shot, tmp_path, case):
+    source, output, layer = shot, "usdc", None
+    if case == "bvh source":
+        source = tmp_path / "clip.bvh"
+        bvh.write(completed(shot), source)
+    elif case == "bvh output":
+        output = "bvh"
+    elif case in ("over", "new"):
+        layer = case
+    elif case == "standard input":
+        source = "-"
+    else:  # a .usda that is not USD: the reader's own error is the one the user gets
+        source = tmp_path / "broken.usda"
+        source.write_text("#usda 1.0\n(\n")
+    assert usd_stage.template_for(source, output, layer) is None
+
+
+def test_a_template_checks_the_layers_it_composes_as_the_reader_does(shot):
+    import os
+
+    fifo = shot.parent / "fifo.usda"
+    os.mkfifo(fifo)
+    layer = Sdf.Layer.FindOrOpen(str(shot))
+    layer.subLayerPaths.append("./fifo.usda")
+    layer.Save()
+    with pytest.raises(FormatError, match="not a regular file"):  # refused, never opened (a pipe would hang)
+        usd_stage.open_template(shot)
+    assert usd_stage.template_for(shot, "usda", None) is None

@@ -190,13 +190,14 @@ def complete(inputs, dst, keys_text, key_every, key_joints, key_positions, key_p
     usd_stage.check_option(usd_layer, io.format_of(dst, fmt), src)
     refuse_overwriting_input(dst, [src, *dna_files], force)
     refuse_read_only(dst, force)
+    template = usd_stage.template_for(src, io.format_of(dst, fmt), usd_layer)  # before the motion is read
     motion = io.load(src, input_format(src, in_fmt), up_axis=up_axis)
     keys = apply_partial_keys(motion, resolve_keys(motion, keys_text, key_every), key_joints, key_positions,
                               key_plane)
     result = run(motion, keys, method, options)
     frames = motion.num_frames
     del motion  # the input's arrays are not needed to write the result (a long take: half the memory)
-    io.save(result.motion, dst, fmt, source=src, bvh_layout=bvh_layout,
+    io.save(result.motion, dst, fmt, source=src, bvh_layout=bvh_layout, template=template,
             **({} if usd_layer is None else {"usd_layer": usd_layer}))
     say_guard(src, result.info)
     if as_json:

@@ -117,6 +117,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, us
     refuse_overwriting_input(dst, [src], force)
     refuse_read_only(dst, force)
 
+    template = None if curves else usd_stage.template_for(src, io.format_of(dst, fmt), usd_layer)
     motion = io.load(src, input_format(src, in_fmt), meters_per_unit, up_axis)
     if curves:
         from keyfill.edit.fit import fit
@@ -130,7 +131,7 @@ def convert(paths, outdir, fmt, in_fmt, meters_per_unit, up_axis, bvh_layout, us
         raise UsageError("--keys and --key-every choose the keys of --curves; add --curves")
     else:
         layer = {} if usd_layer is None else {"usd_layer": usd_layer}
-        io.save(motion, dst, fmt, source=src, bvh_layout=bvh_layout, **layer)
+        io.save(motion, dst, fmt, source=src, bvh_layout=bvh_layout, template=template, **layer)
     if as_json and dst != "-":
         emit_json({"input": src, "output": dst, "frames": motion.num_frames, "joints": motion.num_joints})
     elif dst != "-":

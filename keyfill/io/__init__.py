@@ -269,7 +269,10 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
     is of another family, a :func:`keyfill.progress.note` says what it held
     that the output does not carry (:attr:`Format.contents`).
     ``options`` go to the format's writer (e.g. ``sparse=True`` for USD key
-    files). A :attr:`Format.named` format's animation is named after the output
+    files); ``template=`` a :class:`keyfill.io.usd_stage.Template` opened from
+    ``source`` before the motion was read (:func:`keyfill.io.usd_stage.open_template`:
+    a long take's USD samples are then never held beside its arrays) is used
+    in place of ``source`` where the stage is kept. A :attr:`Format.named` format's animation is named after the output
     file's stem (on standard output the source's, if any). A format with a :attr:`Format.sidecar`
     writes that file beside the output, atomically too: its writer gets
     ``sidecar=(temporary path, final file name)``, or ``sidecar=None`` on
@@ -285,8 +288,9 @@ def save(motion: Motion, path: str | os.PathLike, format: str | None = None, sou
     write = _function(spec.writer)
     source_suffix = Path(source).suffix.lower() if source is not None and str(source) != STDIO else None
     came_from = FORMATS[SUFFIXES[source_suffix]] if source_suffix in SUFFIXES else None
+    opened = options.pop("template", None)
     if spec.template and came_from is not None and came_from.family == spec.family:
-        options["template"] = Path(source)
+        options["template"] = opened if opened is not None else Path(source)
     elif came_from is not None and came_from.family != spec.family and came_from.contents:
         _note_left_behind(Path(source), _function(came_from.contents)(Path(source)), spec)
     if spec.asset_paths and str(path) == STDIO:

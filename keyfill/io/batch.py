@@ -464,6 +464,7 @@ def convert_chunk(chunk: list[Item], spec: str | None = None) -> list[dict]:
     """Job function of ``keyfill convert IN... -o OUTDIR/``: read each input, write its output; ``spec``: the
     layout of BVH outputs (``--bvh-layout``; None: auto)."""
     from keyfill import io
+    from keyfill.io import usd_stage
 
     out = []
     for it in chunk:
@@ -471,8 +472,9 @@ def convert_chunk(chunk: list[Item], spec: str | None = None) -> list[dict]:
             out.append(None)
             continue
         try:
+            template = usd_stage.template_for(it.src, io.format_of(it.dst), None)  # before the motion is read
             motion = io.load(it.src)
-            io.save(motion, it.dst, source=it.src, bvh_layout=bvh_layout(it.dst, spec))
+            io.save(motion, it.dst, source=it.src, bvh_layout=bvh_layout(it.dst, spec), template=template)
             out.append({"input": it.src, "output": it.dst, "status": "done", "frames": motion.num_frames,
                         "joints": motion.num_joints})
         except (KeyfillError, OSError) as e:

@@ -26,9 +26,12 @@ The motion must have the source Skeleton's joints (names and parents, as the rea
 the meshes bound to that Skeleton cannot be kept, and writing is refused (a :class:`UsageError`; write with
 ``usd_layer="new"`` for a new file of the skeleton and animation alone).
 
-Long takes: the source's root layer is opened once, as a private copy (memory-mapped for ``.usdc``); its
-animation's old samples are dropped as a whole and the new ones go in a block of frames at a time
-(:func:`keyfill.io.usd.write_samples`), as in a new file.
+Long takes: the source's root layer is parsed once into a private copy (memory-mapped for ``.usdc``) and
+its animation's old translation and rotation samples are dropped as a whole at once; the new ones go in a
+block of frames at a time (:func:`keyfill.io.usd.write_samples`), as in a new file. A caller that reads the
+motion from the source itself opens that copy *before* reading (:func:`open_template`, handed to
+:func:`keyfill.io.save` as ``template=``), so that a text ``.usda`` source is never held parsed beside the
+motion's arrays (1,000,000 frames of 22 joints: about 0.6 GB of samples beside 1.2 GB of arrays).
 
 ``.usdz``: :func:`read_usdz` reads a package's default layer (its first file) through the USD reader, after
 checking that there is one; :func:`write_usdz` writes the USD file (new, kept or over) as
@@ -43,6 +46,7 @@ import os
 import posixpath
 import re
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -61,8 +65,9 @@ def write(motion: Motion, path: str | Path, template: str | Path | None = None, 
     """Write ``motion`` to a USD file: :func:`keyfill.io.save`'s writer of the USD formats.
 
     Args:
-        template: the USD file the motion came from (``io.save`` passes its ``source``); with ``usd_layer``
-            ``"stage"`` or ``"over"`` its stage is kept (:func:`write_kept`, see the module docstring).
+        template: the USD file the motion came from (``io.save`` passes its ``source``), or a
+            :class:`Template` opened from it; with ``usd_layer`` ``"stage"`` or ``"over"`` its stage is kept
+            (:func:`write_kept`, see the module docstring).
         usd_layer: ``"stage"``: the template's whole stage with the motion's joint samples; ``"over"``: a
             layer over the template holding them alone; ``"new"``: a new file of the skeleton and animation
             (as without a template).
@@ -196,15 +201,22 @@ def _identifier(p: str, anchor: Path) -> str:
 
 def _private_copy(source: Path, label):
     """An anonymous copy of the source's root layer (a package's default layer), editable without touching
-    the file or a layer another caller holds."""
+    the file or a layer another caller holds. The layers the source composes are checked first, as the reader
+    checks them (each a regular file: :func:`keyfill.io.usd_layers.composed_layers`); a text layer is parsed
+    once, for that check, and copied from it (its values shared until the copy drops them)."""
     from pxr import Sdf, Tf
 
+    from keyfill.io.usd_layers import composed_layers
+
     try:
-        layer = Sdf.Layer.OpenAsAnonymous(str(source))
-        if layer is not None and is_package(source):  # a package's layer refuses edits of its asset paths
-            copy = Sdf.Layer.CreateAnonymous(Path(default_layer(source)).suffix)
-            copy.TransferContent(layer)
-            layer = copy
+        held = composed_layers(source, label)
+        root = held[0][1] if held else None
+        if root is not None and (is_package(source) or root.GetFileFormat().formatId == "usda"):
+            # a package's layer refuses edits of its asset paths; a text layer would be parsed again
+            layer = Sdf.Layer.CreateAnonymous(Path(default_layer(source) if is_package(source) else source).suffix)
+            layer.TransferContent(root)
+        else:
+            layer = Sdf.Layer.OpenAsAnonymous(str(source))  # .usdc: memory-mapped, values read when asked
     except Tf.ErrorException:
         layer = None
     if layer is None:
@@ -266,15 +278,44 @@ def _custom(motion: Motion, composed: dict | None, frames: int) -> dict:
     return custom
 
 
-def write_kept(motion: Motion, path: str | Path, template: str | Path, over: bool = False, sparse: bool = False,
-               relative: bool = True) -> None:
-    """Write ``motion`` into the stage of the USD file ``template`` (see the module docstring)."""
-    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
+@dataclass(eq=False)
+class Template:
+    """A USD file's stage ready for a motion to be written into it (:func:`write_kept`): the root layer as a
+    private copy (or, ``over``, a new layer over the file), with its animation's old translation and rotation
+    samples dropped, and what the writer needs of the source.
+
+    Open one with :func:`open_template` before reading the motion from the same file, so that the source's
+    samples are never held beside the motion's arrays; :func:`write_kept` uses it once (a second write opens
+    the file again).
+    """
+
+    source: Path  #: the file
+    label: object  #: how errors name it
+    over: bool  #: a layer over the file (``usd_layer="over"``) rather than its copy
+    layer: object  #: the ``Sdf.Layer`` written (anonymous)
+    source_layer: object  #: the file's root layer as USD gives it (the copy itself unless ``over``)
+    paths: _Paths  #: the asset paths anchored where the source is
+    skel_path: object  #: the ``Sdf.Path`` of the Skeleton the reader picks
+    anim_path: object  #: the ``Sdf.Path`` of its SkelAnimation
+    joints: list  #: the Skeleton's joint paths
+    names: list  #: its joint names, as the reader gives them
+    parents: np.ndarray  #: ``(J,)`` parent indices, -1 for a root
+    start: float  #: the time code of frame 0
+    composed_custom: object  #: the Skeleton's composed ``customData["keyfill"]`` (None where it has none)
+    anim_joints: list  #: the SkelAnimation's joint paths
+    new_scales: bool  #: whether its scales are written again (one default ``(1, 1, 1)`` per joint)
+    used: bool = False
+
+
+def open_template(template: str | Path, over: bool = False, label=None) -> Template:
+    """Open the USD file ``template`` for :func:`write_kept` (see :class:`Template`); a :class:`FormatError`
+    naming ``label`` (default: the path) where it is not a USD file with a skeleton and its animation."""
+    from pxr import Sdf, Tf, Usd, UsdSkel, UsdUtils
 
     from keyfill.io import usd
 
-    limits.check_values(motion)
-    source, label = Path(template), Path(template)
+    source = Path(template)
+    label = source if label is None else label
     paths = _Paths(source)
     if over:
         layer = Sdf.Layer.CreateAnonymous(".usda")
@@ -292,22 +333,65 @@ def write_kept(motion: Motion, path: str | Path, template: str | Path, over: boo
         anim = usd._find_animation(stage, skel, UsdSkel, label)
         joints = usd._tokens(skel.GetJointsAttr(), label)
         names, parents = _source_names(skel, joints, label)
-        sk = motion.skeleton
-        if tuple(names) != tuple(sk.names) or not np.array_equal(parents, sk.parents):
-            raise UsageError(f"{label}: its Skeleton's joints are not those of the motion, so its stage (meshes "
-                             "bound to that Skeleton) cannot be kept; write a new file (usd_layer new), or read "
-                             "the motion from this file", params="usd_layer")
-        start = _first_time(source_layer, anim)
-        frames = usd.written_frames(motion, sparse)
-        composed_custom = skel.GetPrim().GetCustomDataByKey(usd.CUSTOM_KEY)
         anim_joints = usd._tokens(anim.GetJointsAttr(), label)
         scales = anim.GetScalesAttr()
         scale_default = scales.Get() if scales.HasAuthoredValue() else None
         new_scales = scales.GetNumTimeSamples() > 0 or (scale_default is not None and len(scale_default) != len(joints))
-        new_scales = new_scales or (scale_default is not None and anim_joints != joints)
+        kept = Template(source, label, over, layer, source_layer, paths, skel.GetPath(), anim.GetPath(), joints,
+                        names, parents, _first_time(source_layer, anim),
+                        skel.GetPrim().GetCustomDataByKey(usd.CUSTOM_KEY), anim_joints,
+                        new_scales or (scale_default is not None and anim_joints != joints))
         del stage  # edits go to the layer: no change notices to a stage
     except Tf.ErrorException as e:
         raise FormatError(f"USD cannot compose this file: {' '.join(str(e).split())[-300:]}", label) from None
+    with Sdf.ChangeBlock():  # the old samples go as a whole, now: they are never held beside the new ones
+        for name in ("translations", "rotations"):
+            spec = layer.GetAttributeAtPath(kept.anim_path.AppendProperty(name))
+            if spec is not None:
+                spec.ClearInfo("timeSamples")
+    return kept
+
+
+def template_for(source: str | Path | None, output_format: str, usd_layer: str | None) -> Template | None:
+    """The :class:`Template` :func:`keyfill.io.save` will write an ``output_format`` file into, opened now,
+    before the motion is read from ``source`` (see the module docstring, "Long takes"); None where the output
+    keeps no stage of it (not USD from USD, ``usd_layer`` "over" or "new") or the file cannot be opened so
+    (the reader then says why, in its own words)."""
+    from keyfill import io
+
+    fmt = io.SUFFIXES.get(Path(source).suffix.lower()) if source is not None and str(source) != io.STDIO else None
+    if fmt is None or io.FORMATS[fmt].family != "usd" or io.FORMATS[output_format].family != "usd":
+        return None
+    if usd_layer not in (None, "stage"):
+        return None
+    try:
+        return open_template(source)
+    except Exception:  # noqa: BLE001 - a file USD cannot open so: the reader's error is the one to give
+        return None
+
+
+def write_kept(motion: Motion, path: str | Path, template: str | Path | Template, over: bool = False,
+               sparse: bool = False, relative: bool = True) -> None:
+    """Write ``motion`` into the stage of the USD file ``template`` (see the module docstring): its path, or a
+    :class:`Template` opened from it (and not yet used, with the same ``over``)."""
+    from pxr import Gf, Sdf, UsdGeom, UsdUtils, Vt
+
+    from keyfill.io import usd
+
+    limits.check_values(motion)
+    kept = template if isinstance(template, Template) else None
+    if kept is None or kept.used or kept.over != over:
+        kept = open_template(kept.source if kept is not None else template, over,
+                             kept.label if kept is not None else None)
+    kept.used = True
+    layer, source_layer, joints = kept.layer, kept.source_layer, kept.joints
+    sk = motion.skeleton
+    if tuple(kept.names) != tuple(sk.names) or not np.array_equal(kept.parents, sk.parents):
+        raise UsageError(f"{kept.label}: its Skeleton's joints are not those of the motion, so its stage (meshes "
+                         "bound to that Skeleton) cannot be kept; write a new file (usd_layer new), or read "
+                         "the motion from this file", params="usd_layer")
+    frames = usd.written_frames(motion, sparse)
+    start = kept.start
 
     with Sdf.ChangeBlock():
         if over:
@@ -320,14 +404,14 @@ def write_kept(motion: Motion, path: str | Path, template: str | Path, over: boo
             layer.timeCodesPerSecond = layer.framesPerSecond = motion.fps
         layer.startTimeCode = start
         layer.endTimeCode = start + max(motion.num_frames - 1, 0)
-        skel_spec = Sdf.CreatePrimInLayer(layer, skel.GetPath())
+        skel_spec = Sdf.CreatePrimInLayer(layer, kept.skel_path)
         custom = dict(skel_spec.customData)
-        custom[usd.CUSTOM_KEY] = _custom(motion, composed_custom, motion.num_frames)
+        custom[usd.CUSTOM_KEY] = _custom(motion, kept.composed_custom, motion.num_frames)
         skel_spec.customData = custom
-        anim_spec = Sdf.CreatePrimInLayer(layer, anim.GetPath())
-        if anim_joints != joints:
+        anim_spec = Sdf.CreatePrimInLayer(layer, kept.anim_path)
+        if kept.anim_joints != joints:
             _spec(anim_spec, "joints", Sdf.ValueTypeNames.TokenArray, uniform=True).default = Vt.TokenArray(joints)
-        if new_scales:
+        if kept.new_scales:
             s_spec = _spec(anim_spec, "scales", Sdf.ValueTypeNames.Half3Array)
             s_spec.ClearInfo("timeSamples")
             s_spec.default = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * len(joints))
@@ -335,11 +419,10 @@ def write_kept(motion: Motion, path: str | Path, template: str | Path, over: boo
         for attr, type_name in (("translations", Sdf.ValueTypeNames.Float3Array),
                                 ("rotations", Sdf.ValueTypeNames.QuatfArray)):
             spec = _spec(anim_spec, attr, type_name)
-            spec.ClearInfo("timeSamples")  # the source's samples go as a whole, not one by one
-            spec.ClearInfo("default")
+            spec.ClearInfo("default")  # (its samples went when the template was opened)
             specs.append(spec.path)
     usd.write_samples(layer, specs[0], specs[1], motion, frames, start)
-    UsdUtils.ModifyAssetPaths(layer, paths.relocate(Path(path).resolve().parent if relative else None))
+    UsdUtils.ModifyAssetPaths(layer, kept.paths.relocate(Path(path).resolve().parent if relative else None))
     layer.Export(str(path))
 
 

@@ -26,8 +26,9 @@ The motion must have the source Skeleton's joints (names and parents, as the rea
 the meshes bound to that Skeleton cannot be kept, and writing is refused (a :class:`UsageError`; write with
 ``usd_layer="new"`` for a new file of the skeleton and animation alone).
 
-Long takes: the source's root layer is parsed once into a private copy (memory-mapped for ``.usdc``) and
-its animation's old translation and rotation samples are dropped as a whole at once; the new ones go in a
+Long takes: the source's root layer is read into a private copy (memory-mapped for ``.usdc``; a ``.usda``
+copied from the parse its layer check makes) and its animation's old translation and rotation samples are
+dropped as a whole at once; the new ones go in a
 block of frames at a time (:func:`keyfill.io.usd.write_samples`), as in a new file. A caller that reads the
 motion from the source itself opens that copy *before* reading (:func:`open_template`, handed to
 :func:`keyfill.io.save` as ``template=``), so that a text ``.usda`` source is never held parsed beside the

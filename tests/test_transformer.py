@@ -571,3 +571,55 @@ def test_a_missing_gpu_is_a_usage_error(trained):
         T.load(out, device="cuda")
     with pytest.raises(UsageError, match="unknown torch device"):
         T.load(out, device="gpu0")
+
+
+# --- a matched start (issue 46) ------------------------------------------------------
+
+
+def _same_rotations(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
+    return bool(np.all(np.abs(np.abs((a * b).sum(-1)) - 1.0) <= atol))
+
+
+def test_a_zero_residual_gives_the_matched_start_and_without_one_the_prefill(corpus, corpus_dir):
+    """A new residual model's correction is zero: started from a matched in-between it gives that in-between,
+    and without one its pre-fill (here the cubic spline, not the take's linear interpolation it starts from),
+    as when it completes that job alone: both kinds of job in one batch stay apart."""
+    import dataclasses
+
+    from keyfill import interpolate
+    from keyfill.motion import Keys
+
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, prefill="cubic")
+    model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    motion = io.load(sorted(corpus_dir.rglob("*.bvh"))[0]).frames(slice(0, 81)).replace(keys=None)
+    keys = Keys([0, 20, 50, 80])
+    rng = np.random.default_rng(0)  # a start that is neither the truth nor the interpolation
+    between = np.setdiff1d(np.arange(81), keys.frames)
+    rot, pos = motion.rotations.copy(), motion.positions.copy()
+    rot[between] = R.quat_normalize(rot[between] + 0.05 * rng.standard_normal((len(between),) + rot.shape[1:]))
+    pos[between, 0] += 0.02 * rng.standard_normal((len(between), 3))
+    start = motion.replace(rotations=rot, positions=pos)
+    (matched, _), (plain, _) = T.complete_motions(model, [(motion, keys), (motion, keys)], starts=[start, None])
+    assert _same_rotations(matched.rotations, start.rotations, 1e-5)
+    np.testing.assert_allclose(matched.positions[:, 0], start.positions[:, 0], atol=1e-4)
+    (alone, _), = T.complete_motions(model, [(motion, keys)], batch=False)
+    np.testing.assert_array_equal(plain.rotations, alone.rotations)
+    np.testing.assert_array_equal(plain.positions, alone.positions)
+    linear = interpolate.linear(motion, keys)
+    assert not _same_rotations(plain.rotations, linear.rotations, 1e-3)
+    assert not _same_rotations(plain.rotations, matched.rotations, 1e-3)
+
+
+def test_a_start_of_other_frames_or_other_keys_is_refused(corpus, corpus_dir):
+    from keyfill.errors import DataError
+    from keyfill.motion import Keys
+
+    model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    motion = io.load(sorted(corpus_dir.rglob("*.bvh"))[0]).frames(slice(0, 81)).replace(keys=None)
+    keys = Keys([0, 40, 80])
+    short = motion.frames(slice(0, 80))
+    moved = motion.replace(positions=motion.positions + 1.0)
+    for start, words in ((short, "80 frames"), (moved, "positions at the keys")):
+        (result,) = T.complete_motions(model, [(motion, keys)], starts=[start])
+        assert isinstance(result, DataError) and words in str(result)

@@ -108,13 +108,17 @@ class CompletionModel:
     def device(self):
         return next(self.network.parameters()).device
 
-    def complete_windows(self, quats: np.ndarray, root: np.ndarray, keys) -> tuple[np.ndarray, np.ndarray]:
+    def complete_windows(self, quats: np.ndarray, root: np.ndarray, keys,
+                         prefilled: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Fill windows whose key frames are ``keys`` (numpy in, numpy out).
 
         Args:
-            quats: ``(B, T, J, 4)`` local quaternions (only key frames are read).
+            quats: ``(B, T, J, 4)`` local quaternions (only key frames are read, unless ``prefilled``).
             root: ``(B, T, 3)`` root positions.
             keys: ``(K,)`` increasing frame indices shared by the windows.
+            prefilled: the frames between the keys already hold where the network starts (a matched
+                in-between: :func:`complete_motions`' ``starts``), in place of the model's pre-fill; with
+                ``residual`` the output is that start plus the network's correction.
 
         Returns:
             ``(quats, root)`` of all ``T`` frames; frames outside the keys hold
@@ -132,7 +136,8 @@ class CompletionModel:
         # the hemisphere w >= 0 at the first key (its signs along the window kept), and given back in its own
         sign = np.where(q[:, keys[:1], :, :1] < 0, -1.0, 1.0)  # (B, 1, J, 1)
         q = q * sign
-        q, r = self.config.fill(q, r, keys)
+        if not prefilled:
+            q, r = self.config.fill(q, r, keys)
         x = self.features.encode(q, r)  # numpy: many small quaternion products are cheaper than in torch
         if getattr(self.network, "numpy_io", False):
             y = self.network(x, np.broadcast_to(kinds, (len(q), T)))
@@ -272,7 +277,7 @@ def complete_motion(model: CompletionModel, motion, keys) -> tuple[object, dict]
 MAX_WINDOWS = 64
 
 
-def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
+def complete_motions(model: CompletionModel, jobs, batch: bool = True, starts=None) -> list:
     """:func:`complete_motion` for many ``(motion, keys)``: ``(motion, info)`` or the error, per job.
 
     With ``batch``, windows of the same length and key layout (from any of the
@@ -280,6 +285,10 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
     together, up to :data:`MAX_WINDOWS` at a time; a window's result then
     depends on its batch in float32 rounding only. Without, every window is
     completed alone, in order (what one ``keyfill complete`` does).
+
+    ``starts``: per job, None or a motion of the job's skeleton and frames (an in-between matched from a
+    motion library, issue 46) whose frames between the keys the network starts from instead of the model's
+    pre-fill (:meth:`CompletionModel.complete_windows`' ``prefilled``); its key frames are the job's own.
     """
     from keyfill.learn.windows import file_take, model_take
     from keyfill.motion import Keys
@@ -292,34 +301,56 @@ def complete_motions(model: CompletionModel, jobs, batch: bool = True) -> list:
             # the keys' interpolation (held outside them) in the model's hierarchy, signs continuous; the
             # windows' interiors are written into q and p in place (windows share no frame but keys), and
             # they become the result's arrays
-            q, p, top = model_take(model.skeleton, model.folded, motion, k, continuous=True, hint=TRAIN_HINT)
+            start = None if starts is None else starts[j]
+            if start is None:
+                q, p, top = model_take(model.skeleton, model.folded, motion, k, continuous=True, hint=TRAIN_HINT)
+            else:  # every frame the start's own (no joint slerped), signs continuous along the take
+                check_start(start, motion, k)
+                q, p, top = model_take(model.skeleton, model.folded, start, np.arange(start.num_frames),
+                                       slerped=np.arange(0), continuous=True, hint=TRAIN_HINT)
             parts = spans(k, model.config.max_frames)
-            prepared[j] = (k, top, q, p, parts)
+            prepared[j] = (k, top, q, p, parts, start is not None)
         except KeyfillError as e:
             results[j] = e
     # windows: (job, a, b, key frames inside); spans of one motion never overlap but at their boundary keys
     windows = [(j, a, b, tuple(k[np.searchsorted(k, a): np.searchsorted(k, b, side="right")] - a))
-               for j, (k, *_, parts) in prepared.items() for a, b in parts]
-    if batch:
+               for j, (k, _, _, _, parts, _) in prepared.items() for a, b in parts]
+    if batch:  # windows started from a match and from the pre-fill go through the network apart
         groups: dict = {}
         for w in windows:
-            groups.setdefault((w[2] - w[1], w[3]), []).append(w)
+            groups.setdefault((w[2] - w[1], w[3], prepared[w[0]][5]), []).append(w)
         runs = [g[i: i + MAX_WINDOWS] for g in groups.values() for i in range(0, len(g), MAX_WINDOWS)]
     else:
         runs = [[w] for w in windows]
     for run in runs:
         wq, wr = model.complete_windows(np.stack([prepared[j][2][a: b + 1] for j, a, b, _ in run]),
                                         np.stack([prepared[j][3][a: b + 1, 0] for j, a, b, _ in run]),
-                                        np.asarray(run[0][3]))
+                                        np.asarray(run[0][3]), prefilled=prepared[run[0][0]][5])
         for i, (j, a, b, _) in enumerate(run):
             out_q, pos = prepared[j][2], prepared[j][3]
             out_q[a + 1: b], pos[a + 1: b, 0] = wq[i, 1:-1], wr[i, 1:-1]
-    for j, (k, top, out_q, pos, parts) in prepared.items():
+    for j, (k, top, out_q, pos, parts, _) in prepared.items():
         motion = jobs[j][0]
         file_take(out_q, pos, top, motion.skeleton)
         result = motion.replace(rotations=out_q, positions=pos, keys=Keys(k))
         results[j] = (result, {"spans": len(parts), "max_frames": model.config.max_frames})
     return results
+
+
+def check_start(start, motion, keys: np.ndarray) -> None:
+    """A :class:`DataError` unless ``start`` can stand for ``motion`` between ``keys (K,)``: the same skeleton
+    (joint names and parents) and frames, and the same poses at the keys."""
+    from keyfill.errors import DataError
+
+    sk, own = start.skeleton, motion.skeleton
+    if tuple(sk.names) != tuple(own.names) or not np.array_equal(sk.parents, own.parents):
+        raise DataError("the start motion is not on the motion's skeleton")
+    if start.num_frames != motion.num_frames:
+        raise DataError(f"the start motion has {start.num_frames} frames, the motion {motion.num_frames}")
+    if not np.allclose(np.abs((start.rotations[keys] * motion.rotations[keys]).sum(-1)), 1.0, atol=1e-6):
+        raise DataError("the start motion's poses at the keys are not the motion's")
+    if not np.allclose(start.positions[keys], motion.positions[keys], atol=1e-6):
+        raise DataError("the start motion's positions at the keys are not the motion's")
 
 
 def complete(motion, keys, options):

@@ -464,9 +464,9 @@ def feet(f: dict) -> list[str]:
         ["held-out style", "keys every", "real"] + list(methods), rows)
 
 
-def match(f: dict) -> list[str]:
-    """``--method match`` against the spline and the shipped models; variety; the guard; speed."""
-    methods = ("cubic", "transformer", "gan", "match raw", "match")
+def realism_table(f: dict, methods: tuple[str, ...], note: str) -> list[str]:
+    """Held-out realism per method (``f["quality"]``: set -> keys every -> method -> skating, jitter, gap
+    error, and the real clips'), one row per set and key spacing."""
     rows = []
     for name, by_gap in f["quality"].items():
         real = by_gap["real"]
@@ -477,9 +477,21 @@ def match(f: dict) -> list[str]:
                 cells.append(f"{num(r['foot_skating_cm_s'], 1)}, {num(r['jitter_m_s3'], 0)}, {num(r['gap_error_cm'])}")
             rows.append([name, gap] + cells)
     out = [(f"Each cell: foot skating (cm/s), jitter (m/s^3), gap error (cm); real clips: skating, jitter. "
-            f"{', '.join(f'{k}: {v}' for k, v in f['clips'].items())} clips. `match raw`: `--feet free`; "
-            "`match`: its default (feet locked)."), ""]
-    out += table(["held-out clips", "keys every", "real"] + list(methods), rows) + [""]
+            f"{', '.join(f'{k}: {v}' for k, v in f['clips'].items())} clips. {note}"), ""]
+    return out + table(["held-out clips", "keys every", "real"] + list(methods), rows) + [""]
+
+
+def transformer_start(f: dict) -> list[str]:
+    """The shipped transformer started from match's in-between against match and its pre-fill."""
+    return realism_table(f, ("cubic", "transformer", "match raw", "match", "transformer from match"),
+                         "`match raw`: `--feet free`; `match`: its default (feet locked); `transformer from "
+                         "match`: the shipped weights' correction added to `match raw`, feet free.")
+
+
+def match(f: dict) -> list[str]:
+    """``--method match`` against the spline and the shipped models; variety; the guard; speed."""
+    out = realism_table(f, ("cubic", "transformer", "gan", "match raw", "match"),
+                        "`match raw`: `--feet free`; `match`: its default (feet locked).")
     var = [[name, num(v["pairwise_cm"], 1), num(v["best_of_5_gap_error_cm"]),
             "; ".join(f"{num(s['foot_skating_cm_s'], 1)}, {num(s['jitter_m_s3'], 0)}, {num(s['gap_error_cm'])}"
                       for s in v["seeds"].values())] for name, v in f["variety"].items()]

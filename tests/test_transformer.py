@@ -623,3 +623,59 @@ def test_a_start_of_other_frames_or_other_keys_is_refused(corpus, corpus_dir):
     for start, words in ((short, "80 frames"), (moved, "positions at the keys")):
         (result,) = T.complete_motions(model, [(motion, keys)], starts=[start])
         assert isinstance(result, DataError) and words in str(result)
+
+
+def _start_set(corpus, path, spacing=30):
+    """A start set of the corpus's windows whose starts are the truth disturbed between the keys."""
+    from keyfill.learn.transformer import starts
+
+    keys = starts.layout(spacing, 65)
+    T = int(keys[-1]) + 1
+    q, r, _, _ = corpus.windows(T, 10)
+    rng = np.random.default_rng(1)
+    sq, sr = q.copy(), r.copy()
+    between = np.setdiff1d(np.arange(T), keys)
+    sq[:, between] = R.quat_normalize(sq[:, between] + 0.1 * rng.standard_normal(sq[:, between].shape))
+    sr[:, between] += 0.05 * rng.standard_normal(sr[:, between].shape)
+    starts.save({f"truth_q_{spacing}": q.astype(np.float32), f"truth_r_{spacing}": r.astype(np.float32),
+                 f"start_q_{spacing}": sq.astype(np.float32), f"start_r_{spacing}": sr.astype(np.float32)}, path)
+    return q, r, sq, sr, keys
+
+
+def test_a_start_batch_reads_the_start_and_aims_at_the_truth(corpus, tmp_path):
+    from keyfill.learn.transformer.task import make_start_batch
+
+    q, r, sq, sr, keys = _start_set(corpus, tmp_path / "starts.npz")
+    model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    x, y, gq, gr, kinds = make_start_batch(model, q[:4], r[:4], sq[:4], sr[:4], keys)
+    dq, _ = model.features.decode(x.double())
+    tq, _ = model.features.decode(y.double())
+    sign = np.where(q[:4, :1, :, :1] < 0, -1.0, 1.0)  # (the canonical turn is one rotation of the root)
+    dots = lambda a, b: np.abs((np.asarray(a)[..., 1:, :] * np.asarray(b)[..., 1:, :]).sum(-1))  # noqa: E731
+    assert np.all(np.abs(dots(dq, sq[:4] * sign) - 1) < 1e-4)  # the input: the start (joints below the root)
+    assert np.all(np.abs(dots(tq, q[:4] * sign) - 1) < 1e-4)  # the target: the truth
+    assert not np.all(np.abs(dots(dq, q[:4]) - 1) < 1e-4)
+    assert (kinds[:, keys] == TF.KEY).all() and (kinds[:, 1:30] == TF.UNKNOWN).all()
+
+
+def test_training_draws_matched_start_batches_only_when_asked(corpus, tmp_path):
+    import dataclasses
+
+    from keyfill.learn.transformer import starts
+
+    _start_set(corpus, tmp_path / "starts.npz")
+    cfg = dataclasses.replace(TINY_TRAINING, epochs=1, matched_starts=str(tmp_path / "starts.npz"),
+                              matched_share=0.5)
+    task = TransformerTask(corpus, TINY, cfg, seed=0)
+    task.build(None)
+    lengths = [b[0].shape[1] for e in range(5) for b in task.batches(e)]
+    assert 61 in lengths and len(set(lengths)) > 1  # start batches (61 frames, keys every 30) among the others
+    every = TransformerTask(corpus, TINY, dataclasses.replace(cfg, matched_share=1.0), seed=0)
+    every.build(None)
+    assert {b[0].shape[1] for b in every.batches(0)} == {61}
+    off = TransformerTask(corpus, TINY, TINY_TRAINING, seed=0)
+    assert off.starts is None and "matched_share" not in TINY_TRAINING.recorded()
+    with pytest.raises(UsageError, match="spacing 30 is not 5 joints"):
+        starts.load(tmp_path / "starts.npz", 5)
+    with pytest.raises(UsageError, match="name a start set"):
+        TrainConfig(matched_share=0.5)

@@ -65,7 +65,8 @@ GAP_SAMPLING = ("uniform", "log-uniform")
 #: that value they are left out of what --resume compares and of the settings a model records, so an older
 #: checkpoint still resumes and an older run retrains to the same files (as
 #: :data:`keyfill.learn.transformer.model.LATER_ARCHITECTURE` for the model's settings)
-LATER_TRAINING = {"gap_sampling": "uniform", "relative_loss": False, "posture_angle": 0.0, "slowest_tempo": 1.0}
+LATER_TRAINING = {"gap_sampling": "uniform", "relative_loss": False, "posture_angle": 0.0, "slowest_tempo": 1.0,
+                  "matched_starts": None, "matched_share": 0.0}
 
 
 @dataclass(frozen=True)
@@ -94,6 +95,10 @@ class TrainConfig:
             rotation of up to this many radians (:func:`keyfill.learn.augment.perturb_posture`; 0: off).
         slowest_tempo: style augmentation: play half of the windows slower, at a speed from this to 1
             (:func:`keyfill.learn.augment.retime`; 1: off).
+        matched_starts: a start set (:mod:`keyfill.learn.transformer.starts`): windows keyed every 20-60
+            frames whose frames between the keys are matched from a motion library; a batch drawn from it
+            starts the network from the match instead of the pre-fill (issue 46). None: off.
+        matched_share: the share of batches drawn from ``matched_starts`` (0: none).
     """
 
     epochs: int = 40
@@ -114,6 +119,8 @@ class TrainConfig:
     mirror: bool = True
     posture_angle: float = 0.0
     slowest_tempo: float = 1.0
+    matched_starts: str | None = None
+    matched_share: float = 0.0
 
     def recorded(self) -> dict:
         """The settings a model file and a checkpoint record: all but later ones at their old value."""
@@ -141,6 +148,10 @@ class TrainConfig:
         for name in ("relative_loss", "mirror"):
             if not isinstance(getattr(self, name), bool):
                 raise UsageError(f"{name} must be true or false, not {getattr(self, name)!r}")
+        if self.matched_starts is not None and not isinstance(self.matched_starts, str):
+            raise UsageError(f"matched_starts must be a file name, not {self.matched_starts!r}")
+        if self.matched_share > 0 and self.matched_starts is None:
+            raise UsageError("matched_share draws batches from matched_starts: name a start set")
 
 
 #: each number of the training section: (whole number?, lowest, highest, lowest allowed?); validation
@@ -151,7 +162,7 @@ _TRAIN_NUMBERS = {
     "lr": (False, 0, 10, True), "warmup_epochs": (False, 0, 1e6, True), "decay_every": (False, 0, 1e6, False),
     "decay": (False, 0, 1, False), "weight_decay": (False, 0, 1e3, True), "val_fraction": (False, 0, 0.9, True),
     "grad_clip": (False, 0, 1e6, True), "posture_angle": (False, 0, math.pi, True),
-    "slowest_tempo": (False, 0, 1, False),
+    "slowest_tempo": (False, 0, 1, False), "matched_share": (False, 0, 1, True),
 }
 
 
@@ -251,6 +262,32 @@ def make_batch(model: CompletionModel, quats: np.ndarray, root: np.ndarray, keys
     return x, y, gq, gr, kinds
 
 
+def make_start_batch(model: CompletionModel, truth_q: np.ndarray, truth_r: np.ndarray, start_q: np.ndarray,
+                     start_r: np.ndarray, keys: np.ndarray):
+    """:func:`make_batch`'s tensors for windows started from a match (:mod:`keyfill.learn.transformer.starts`):
+    ``truth_* (B, T, ...)`` and ``start_*`` in the canonical frame of the keys, each joint in the hemisphere
+    w >= 0 at the first key (as :meth:`CompletionModel.complete_windows` reads them); the input is the start's
+    features, the target the truth's."""
+    import torch
+
+    q, r = truth_q.astype(np.float64), truth_r.astype(np.float64)
+    sq, sr = start_q.astype(np.float64), start_r.astype(np.float64)
+    turn, shift = canonical_transform(q, r, keys, model.config.facing_axis, model.skeleton.up_axis)
+    q, r = apply_transform(q, r, turn, shift)
+    sq, sr = apply_transform(sq, sr, turn, shift)
+    sign = np.where(q[:, keys[:1], :, :1] < 0, -1.0, 1.0)
+    q, sq = q * sign, sq * sign
+    dev = model.device
+
+    def t(a):
+        return torch.as_tensor(a, dtype=torch.float32, device=dev)
+
+    gq, gr = t(q), t(r)
+    T = q.shape[1]
+    kinds = torch.as_tensor(frame_kinds(T, keys), device=dev).expand(len(q), T)
+    return model.features.encode(t(sq), t(sr)), model.features.encode(gq, gr), gq, gr, kinds
+
+
 def learning_rate(cfg: TrainConfig, epoch_float: float) -> float:
     """The scheduled learning rate at a fractional epoch."""
     if cfg.warmup_epochs > 0 and epoch_float < cfg.warmup_epochs:
@@ -335,6 +372,11 @@ class TransformerTask(TrainingTask):
                                                                   replace=False)
             self.mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
         self.posture = posture_joints(corpus.skeleton) if cfg.posture_angle > 0 else None
+        self.starts = None  # {key spacing: (truth_q, truth_r, start_q, start_r)}
+        if cfg.matched_starts is not None and cfg.matched_share > 0:
+            from keyfill.learn.transformer import starts
+
+            self.starts = starts.load(cfg.matched_starts, corpus.skeleton.num_joints)
         self.contact_swap = None  # the columns of a mirrored window's contact labels
         if self.mirror is not None and self.data.contacts is not None:
             self.contact_swap = column_swap(self.mirror, self.data.contact_joints)
@@ -403,6 +445,9 @@ class TransformerTask(TrainingTask):
         torch.manual_seed(int(rng.integers(2**62)))
         order = rng.permutation(len(self.data.quats))
         for step in range(self.steps(epoch)):
+            if self.starts is not None and rng.random() < cfg.matched_share:
+                yield self._start_batch(rng)
+                continue
             _, T, keys = sample_layout(rng, cfg.layouts, cfg.window, cfg.gap_sampling)
             idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
             n = cfg.window if cfg.slowest_tempo < 1 else T  # retiming draws on the whole window
@@ -420,6 +465,21 @@ class TransformerTask(TrainingTask):
                 wq = perturb_posture(rng, wq, self.posture, cfg.posture_angle)
             batch = make_batch(self.model, wq, wr, keys, T)
             yield batch if wc is None else batch + (torch.as_tensor(wc[:, :T], device=self.model.device),)
+
+    def _start_batch(self, rng: np.random.Generator):
+        """One batch of matched-start windows: a key spacing drawn uniformly, its windows drawn without
+        replacement, half of them (truth and start alike) mirrored where the skeleton allows."""
+        from keyfill.learn.transformer.starts import layout
+
+        spacing = sorted(self.starts)[int(rng.integers(len(self.starts)))]
+        tq, tr, sq, sr = self.starts[spacing]
+        idx = np.sort(rng.choice(len(tq), min(self.cfg.batch_size, len(tq)), replace=False))
+        tq, tr, sq, sr = (a[idx].astype(np.float64) for a in (tq, tr, sq, sr))
+        if self.mirror is not None:
+            flip = rng.random(len(idx)) < 0.5
+            tq[flip], tr[flip] = self.mirror(tq[flip], tr[flip])
+            sq[flip], sr[flip] = self.mirror(sq[flip], sr[flip])
+        return make_start_batch(self.model, tq, tr, sq, sr, layout(spacing, tq.shape[1]))
 
     def shard(self, batch, rank, world):
         return tuple(t[rank::world] for t in batch)

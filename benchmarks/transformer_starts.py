@@ -1,0 +1,74 @@
+"""Build the matched-start training set of issue 46 (:mod:`keyfill.learn.transformer.starts`).
+
+Bandai-Namco dataset-2 without its held-out ``normal`` style (the shipped transformer's corpus), in two folds
+by style: the active, elderly and exhausted clips are matched against a library of the feminine and masculine
+clips, and those against a library of the first three, so that no window is matched from its own clip.
+Windows of 65 frames at most, every ``--offset`` frames, keyed every 20, 30, 40 and 60 frames. The two folds
+run in parallel (``--workers``, one per fold).
+
+    .venv/bin/python benchmarks/transformer_starts.py -o data/starts/bandai2.npz
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+FOLDS = (("active", "elderly", "exhausted"), ("feminine", "masculine"))
+WINDOW = 65
+
+
+def fold_files(data: Path, styles) -> list[Path]:
+    from keyfill.learn.library.store import clip_files
+
+    return clip_files([data], include=[f"*_{s}_*" for s in styles])
+
+
+def one_fold(data: str, matched: int, library: str, offset: int) -> dict:
+    from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.transformer import model as T
+    from keyfill.learn.transformer import starts
+
+    model = T.load(T.model_path(CompleteOptions()))
+    files = fold_files(Path(data), FOLDS[matched])
+    done = starts.build([files], [library], model.skeleton, model.folded, WINDOW, offset)
+    return done
+
+
+def main(argv=None) -> int:
+    import numpy as np
+
+    from keyfill.learn.corpus import locate
+    from keyfill.learn.library.store import build
+    from keyfill.learn.transformer import starts
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("-o", "--output", required=True, help="the .npz start set to write")
+    ap.add_argument("--offset", type=int, default=30, help="frames between window starts (default 30)")
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args(argv)
+    data = locate("bandai2")
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    libraries = []
+    for n, styles in enumerate(FOLDS):  # library n holds the clips of fold n: it matches the other fold
+        lib = out.parent / f"{out.stem}-library-{n}"
+        build([data], lib, include=[f"*_{s}_*" for s in styles], precision="half", workers=args.workers)
+        libraries.append(str(lib))
+    print(f"libraries built in {time.perf_counter() - t0:.0f} s", flush=True)
+    with ProcessPoolExecutor(args.workers) as pool:
+        jobs = [pool.submit(one_fold, str(data), n, libraries[1 - n], args.offset) for n in range(len(FOLDS))]
+        parts = [j.result() for j in jobs]
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    starts.save(arrays, out)
+    counts = {s: len(arrays[f"truth_q_{s}"]) for s in starts.SPACINGS}
+    print(f"wrote {out}: windows per key spacing {counts} in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,124 @@
+"""Matched starts for training the transformer (issue 46): windows of real clips with the frames between their
+keys matched from a motion library, as ``--method match`` fills them.
+
+With keys every 20-60 frames the transformer can start from match's in-between instead of its pre-fill
+(:func:`keyfill.learn.transformer.model.complete_motions`' ``starts``). To learn that correction it trains on
+windows whose frames between the keys are such a match (``matched_starts`` in the training settings,
+:mod:`keyfill.learn.transformer.task`). A window's own clip must not be in the library it is matched from (the
+search would find the clip itself): :func:`build` matches the clips of each fold against a library of the
+other folds' clips.
+
+A start set is one ``.npz`` file, read without pickles. For each key spacing ``s`` (frames between keys, of
+:data:`SPACINGS`), windows of ``T = s * ((window - 1) // s) + 1`` frames keyed at ``0, s, 2s, ...``:
+
+* ``truth_q_<s> (W, T, J, 4)`` float32: the clip's local rotations in the model's hierarchy
+  (:func:`keyfill.learn.windows.model_take`, signs continuous), ``truth_r_<s> (W, T, 3)``: its root positions
+  (skeleton units);
+* ``start_q_<s>``, ``start_r_<s>``: the same of match's in-between (seed 0, feet free), equal to the truth at
+  the keys.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from keyfill.errors import DataError, UsageError
+from keyfill.motion import Keys, Skeleton
+
+#: the key spacings (frames) a start set holds windows of
+SPACINGS = (20, 30, 40, 60)
+
+
+def layout(spacing: int, window: int) -> np.ndarray:
+    """``(K,)`` the key frames of a window of at most ``window`` frames keyed every ``spacing`` frames."""
+    if not 2 <= spacing <= window - 1:
+        raise UsageError(f"a key spacing of {spacing} frames does not fit a {window}-frame window")
+    return np.arange(0, (window - 1) // spacing * spacing + 1, spacing)
+
+
+def match_windows(matcher, files: list[Path], model_skeleton: Skeleton, folded: bool, window: int, offset: int,
+                  spacings=SPACINGS, progress: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:
+    """The arrays of a start set (see the module) for windows cut every ``offset`` frames from the clips
+    ``files`` (on the library's skeleton and frame rate) and matched from ``matcher``'s library."""
+    from keyfill import io
+    from keyfill.learn.windows import model_take
+
+    out: dict[str, list] = {f"{p}_{s}": [] for s in spacings for p in ("truth_q", "truth_r", "start_q", "start_r")}
+    for n, f in enumerate(files):
+        motion = io.load(f).replace(keys=None)
+        if abs(motion.fps - matcher.library.fps) > 1e-6:
+            raise DataError(f"{f}: {motion.fps:g} fps, the library {matcher.library.fps:g}")
+        for s in spacings:
+            keys = layout(s, window)
+            T = int(keys[-1]) + 1
+            for a in range(0, motion.num_frames - T + 1, offset):
+                truth = motion.frames(slice(a, a + T))
+                filled, _ = matcher.fill(truth, Keys(keys), seed=0)
+                for name, m in (("truth", truth), ("start", filled)):
+                    q, p, _ = model_take(model_skeleton, folded, m, np.arange(T), slerped=np.arange(0),
+                                         continuous=True)
+                    out[f"{name}_q_{s}"].append(q.astype(np.float32))
+                    out[f"{name}_r_{s}"].append(p[:, 0].astype(np.float32))
+        if progress is not None:
+            progress(n + 1, len(files))
+    J = model_skeleton.num_joints
+    arrays = {}
+    for s in spacings:
+        T = int(layout(s, window)[-1]) + 1
+        for name, shape in (("q", (T, J, 4)), ("r", (T, 3))):
+            for kind in ("truth", "start"):
+                rows = out[f"{kind}_{name}_{s}"]
+                arrays[f"{kind}_{name}_{s}"] = np.stack(rows) if rows else np.zeros((0,) + shape, np.float32)
+    return arrays
+
+
+def build(folds: list[list[Path]], libraries: list[str | os.PathLike], model_skeleton: Skeleton, folded: bool,
+          window: int, offset: int, spacings=SPACINGS, progress=None) -> dict[str, np.ndarray]:
+    """:func:`match_windows` of each fold's clips against ``libraries[i]``, a library of none of fold ``i``'s
+    clips; the folds' windows concatenated."""
+    from keyfill.learn.library.matcher import Matcher
+    from keyfill.learn.library.store import load as load_library
+
+    parts = []
+    for files, lib in zip(folds, libraries, strict=True):
+        parts.append(match_windows(Matcher(load_library(lib)), files, model_skeleton, folded, window, offset,
+                                   spacings, progress))
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def save(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> None:
+    """Write a start set (uncompressed ``.npz``)."""
+    np.savez(path, **arrays)
+
+
+def load(path: str | os.PathLike, joints: int) -> dict[int, tuple[np.ndarray, ...]]:
+    """A start set as ``{spacing: (truth_q, truth_r, start_q, start_r)}`` (float32, see the module); a
+    :class:`UsageError` naming ``matched_starts`` when the file is not one for ``joints`` joints."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            files = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError) as e:
+        raise UsageError(f"matched_starts {path}: not a start set ({' '.join(str(e).split())[:200]})",
+                         params="matched_starts") from None
+    sets = {}
+    for key in files:
+        if not key.startswith("truth_q_"):
+            continue
+        s = int(key.rsplit("_", 1)[1])
+        parts = tuple(files.get(f"{p}_{s}") for p in ("truth_q", "truth_r", "start_q", "start_r"))
+        W = len(parts[0])
+        ok = all(a is not None and a.dtype == np.float32 and len(a) == W for a in parts)
+        ok = ok and parts[0].shape[2:] == (joints, 4) and parts[2].shape == parts[0].shape
+        ok = ok and parts[1].shape == parts[0].shape[:2] + (3,) and parts[3].shape == parts[1].shape
+        if not ok:
+            raise UsageError(f"matched_starts {path}: spacing {s} is not {joints} joints' windows",
+                             params="matched_starts")
+        if W:
+            sets[s] = parts
+    if not sets:
+        raise UsageError(f"matched_starts {path}: no window", params="matched_starts")
+    return sets

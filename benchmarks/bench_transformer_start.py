@@ -2,18 +2,20 @@
 matched start"), against match alone and the transformer as shipped, before any training on such starts.
 
 The shipped transformer (``bandai2-transformer``) learned to correct its pre-fill (the interpolation plus the
-fading velocity beside a gap). Here the same weights are handed, as the frames between the keys, the raw
-output of ``--method match`` with the shipped library (its feet free, seed 0), and add their correction to it
+fading velocity beside a gap). Here its weights (or ``--model``'s, e.g. a model trained on matched starts,
+``matched_starts`` in docs/transformer.md) are handed, as the frames between the keys, the raw output of
+``--method match`` with the shipped library (its feet free, seed 0), and add their correction to it
 (:func:`keyfill.learn.transformer.model.complete_motions`' ``starts``); keys are then made exact as in every
-completion. Held-out clips and figures as ``bench_match.py`` (6 s clips of dataset-2 ``normal`` and of
+completion. ``transformer`` is the same model from its pre-fill. Held-out clips and figures as ``bench_match.py`` (6 s clips of dataset-2 ``normal`` and of
 dataset-1 ``sad`` / ``feminine``, keys every 30 and 60 frames; foot skating cm/s against the true clip's floor,
 jitter m/s^3, gap error cm), the guard off for every method so that each is scored as it fills.
 
     .venv/bin/python benchmarks/bench_transformer_start.py            # --clips 24 per set
     .venv/bin/python benchmarks/bench_transformer_start.py --clips 4 --no-record
+    .venv/bin/python benchmarks/bench_transformer_start.py --model data/models/bandai2-transformer-starts
 
 Without the corpora it says ``skipped`` and exits 0. The run is recorded in
-``benchmarks/results/transformer_start.json``.
+``benchmarks/results/transformer_start-<model folder>.json``.
 """
 
 from __future__ import annotations
@@ -31,16 +33,23 @@ from keyfill.learn.protocols.metrics import foot_joints, foot_skating, jitter
 from keyfill.learn.transformer import model as T
 
 SETS = ("normal (dataset-2)", "sad, feminine (dataset-1)")
-METHODS = ("cubic", "transformer", "match raw", "match", "transformer from match")
+METHODS = ("cubic", "transformer", "match raw", "match", "transformer from match")  # the transformer: --model
 
 
-def from_match(model: T.CompletionModel, m, keys):
-    """The shipped transformer's correction added to match's raw in-between of ``m`` between ``keys``."""
-    start = run_method("match raw", m, keys).motion
-    (done,) = T.complete_motions(model, [(m, keys)], batch=False, starts=[start])
+def transformer(model: T.CompletionModel, m, keys, start=None):
+    """``model``'s completion of ``m`` between ``keys`` (keys made exact), from its pre-fill or from ``start``."""
+    (done,) = T.complete_motions(model, [(m, keys)], batch=False, starts=None if start is None else [start])
     if isinstance(done, Exception):
         raise done
     return T._finish(done, m, keys, CompleteOptions()).motion
+
+
+def fill(method: str, model: T.CompletionModel, m, keys):
+    if method == "transformer":
+        return transformer(model, m, keys)
+    if method == "transformer from match":
+        return transformer(model, m, keys, run_method("match raw", m, keys).motion)
+    return run_method(method, m, keys).motion
 
 
 def quality(sets: dict, model: T.CompletionModel) -> dict:
@@ -59,9 +68,7 @@ def quality(sets: dict, model: T.CompletionModel) -> dict:
                 rows = []
                 for m in clips:
                     keys = keys_every(m, gap)
-                    filled = from_match(model, m, keys) if method == "transformer from match" else \
-                        run_method(method, m, keys).motion
-                    rows.append(figures_of(m, keys, filled))
+                    rows.append(figures_of(m, keys, fill(method, model, m, keys)))
                 row[method] = summary(rows)
             out[name][str(gap)] = row
             print(f"{name}, keys every {gap}: " + "; ".join(
@@ -94,6 +101,7 @@ def goals(figures: dict) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--clips", type=int, default=24, help="clips per style set (default 24)")
+    ap.add_argument("--model", help="a transformer model folder (default: the shipped bandai2-transformer)")
     results.add_option(ap)
     args = ap.parse_args(argv)
     bench = results.Run()
@@ -102,10 +110,10 @@ def main(argv: list[str] | None = None) -> int:
     except DataError as e:
         print(f"skipped: {e}")
         return 0
-    model = T.load(T.model_path(CompleteOptions()))
-    figures = {"clips": {k: len(sets[k]) for k in SETS}, "model": model.info.get("name", "bandai2-transformer"),
-               "quality": quality(sets, model)}
-    record = bench.record("transformer_start", figures, goals(figures), write=not args.no_record)
+    path = T.model_path(CompleteOptions(model=args.model))
+    model = T.load(path)
+    figures = {"clips": {k: len(sets[k]) for k in SETS}, "model": path.name, "quality": quality(sets, model)}
+    record = bench.record(f"transformer_start-{path.name}", figures, goals(figures), write=not args.no_record)
     results.print_goals(record)
     print(results.summary(record))
     return 0

@@ -104,9 +104,10 @@ SECTIONS = {
         "In-betweens matched from real motion", "`--method match` against cubic and the shipped models on held-out "
         "clips, its variety over seeds, the guard, and the library's speed (docs/match.md).", S.match),
     "transformer_start": Section(
-        "The transformer started from a matched in-between", "The shipped transformer's weights, as trained, handed "
-        "`--method match`'s raw in-between in place of their pre-fill, against match and the transformer as shipped "
-        "on held-out clips, keys every 30 and 60 (issue 46, before any training on such starts).",
+        "The transformer started from a matched in-between: `{variant}`", "A transformer's weights handed "
+        "`--method match`'s raw in-between in place of their pre-fill, against match and the same model from its "
+        "pre-fill on held-out clips, keys every 30 and 60 (issue 46; the shipped model never trained on such "
+        "starts).",
         S.transformer_start),
     "feet": Section(
         "Feet on the ground: raw and locked", "Every method with its feet free and locked (`keyfill complete --feet "

@@ -484,8 +484,9 @@ def realism_table(f: dict, methods: tuple[str, ...], note: str) -> list[str]:
 def transformer_start(f: dict) -> list[str]:
     """The shipped transformer started from match's in-between against match and its pre-fill."""
     return realism_table(f, ("cubic", "transformer", "match raw", "match", "transformer from match"),
-                         "`match raw`: `--feet free`; `match`: its default (feet locked); `transformer from "
-                         "match`: the shipped weights' correction added to `match raw`, feet free.")
+                         f"`match raw`: `--feet free`; `match`: its default (feet locked); `transformer`: "
+                         f"`{f['model']}` from its pre-fill; `transformer from match`: its correction added to "
+                         "`match raw`, feet free.")
 
 
 def match(f: dict) -> list[str]:

@@ -15,7 +15,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 transformer-model-5 transformer-model-5q library pose-indexes gltf-validator clean
+.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 transformer-model-5 transformer-model-5q transformer-model-6 library pose-indexes gltf-validator clean
 
 $(DEMO_STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -256,6 +256,22 @@ $(MODELS)/bandai2-transformer-starts25/weights.safetensors: $(STARTS)
 
 transformer-model-5: $(MODELS)/bandai2-transformer-starts/weights.safetensors
 transformer-model-5q: $(MODELS)/bandai2-transformer-starts25/weights.safetensors
+
+# The same with dataset-1 (without its held-out normal, sad and feminine) in the corpus and in the start set's
+# folds (transformer_starts.py --dataset-1), 8 epochs of benchmarks/transformer_recipe6_starts12.json.
+STARTS12 := data/starts/bandai12.npz
+
+$(STARTS12): | $(BANDAI2) $(BANDAI1)
+	$(BIN)/python benchmarks/transformer_starts.py --dataset-1 -o $@
+
+$(MODELS)/bandai12-transformer-starts/weights.safetensors: $(STARTS12)
+	@mkdir -p $(dir $(@D))
+	$(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
+	    --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 1 -o $(MODELS)/bandai12-transformer-starts \
+	    --init $(SHIPPED)/bandai2-transformer --config benchmarks/transformer_recipe6_starts12.json \
+	    $(call resume_if,$(MODELS)/bandai12-transformer-starts)
+
+transformer-model-6: $(MODELS)/bandai12-transformer-starts/weights.safetensors
 
 $(BLENDER_STAMP): Makefile
 	$(PYTHON) -m venv $(BLENDER_VENV)

@@ -3,10 +3,12 @@
 Bandai-Namco dataset-2 without its held-out ``normal`` style (the shipped transformer's corpus), in two folds
 by style: the active, elderly and exhausted clips are matched against a library of the feminine and masculine
 clips, and those against a library of the first three, so that no window is matched from its own clip.
-Windows of 65 frames at most, every ``--offset`` frames, keyed every 20, 30, 40 and 60 frames. The two folds
-run in parallel (``--workers``, one per fold).
+``--dataset-1`` adds dataset-1 without its held-out ``normal``, ``sad`` and ``feminine`` styles, six styles to
+each fold. Windows of 65 frames at most, every ``--offset`` frames, keyed every 20, 30, 40 and 60 frames. The
+two folds run in parallel (``--workers``, one per fold).
 
     .venv/bin/python benchmarks/transformer_starts.py -o data/starts/bandai2.npz
+    .venv/bin/python benchmarks/transformer_starts.py --dataset-1 -o data/starts/bandai12.npz
 """
 
 from __future__ import annotations
@@ -17,25 +19,23 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-FOLDS = (("active", "elderly", "exhausted"), ("feminine", "masculine"))
+#: each fold's file patterns: the styles of dataset-2 and (with --dataset-1) of dataset-1
+FOLDS = ([f"dataset-2_*_{s}_*" for s in ("active", "elderly", "exhausted")],
+         [f"dataset-2_*_{s}_*" for s in ("feminine", "masculine")])
+FOLDS_1 = ([f"dataset-1_*_{s}_*" for s in ("active", "angry", "childish", "chimpira", "giant", "happy")],
+           [f"dataset-1_*_{s}_*" for s in ("masculinity", "musical", "not-confident", "old", "proud", "tired")])
 WINDOW = 65
 
 
-def fold_files(data: Path, styles) -> list[Path]:
-    from keyfill.learn.library.store import clip_files
-
-    return clip_files([data], include=[f"*_{s}_*" for s in styles])
-
-
-def one_fold(data: str, matched: int, library: str, offset: int) -> dict:
+def one_fold(folders: list[str], patterns: list[str], library: str, offset: int) -> dict:
     from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.library.store import clip_files
     from keyfill.learn.transformer import model as T
     from keyfill.learn.transformer import starts
 
     model = T.load(T.model_path(CompleteOptions()))
-    files = fold_files(Path(data), FOLDS[matched])
-    done = starts.build([files], [library], model.skeleton, model.folded, WINDOW, offset)
-    return done
+    files = clip_files(folders, include=patterns)
+    return starts.build([files], [library], model.skeleton, model.folded, WINDOW, offset)
 
 
 def main(argv=None) -> int:
@@ -49,19 +49,21 @@ def main(argv=None) -> int:
     ap.add_argument("-o", "--output", required=True, help="the .npz start set to write")
     ap.add_argument("--offset", type=int, default=30, help="frames between window starts (default 30)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--dataset-1", action="store_true", help="add dataset-1's styles to the folds")
     args = ap.parse_args(argv)
-    data = locate("bandai2")
+    folders = [str(locate("bandai2"))] + ([str(locate("bandai1"))] if args.dataset_1 else [])
+    folds = [a + b for a, b in zip(FOLDS, FOLDS_1)] if args.dataset_1 else list(FOLDS)
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     libraries = []
-    for n, styles in enumerate(FOLDS):  # library n holds the clips of fold n: it matches the other fold
+    for n, patterns in enumerate(folds):  # library n holds the clips of fold n: it matches the other fold
         lib = out.parent / f"{out.stem}-library-{n}"
-        build([data], lib, include=[f"*_{s}_*" for s in styles], precision="half", workers=args.workers)
+        build(folders, lib, include=patterns, precision="half", workers=args.workers)
         libraries.append(str(lib))
     print(f"libraries built in {time.perf_counter() - t0:.0f} s", flush=True)
     with ProcessPoolExecutor(args.workers) as pool:
-        jobs = [pool.submit(one_fold, str(data), n, libraries[1 - n], args.offset) for n in range(len(FOLDS))]
+        jobs = [pool.submit(one_fold, folders, folds[n], libraries[1 - n], args.offset) for n in range(len(folds))]
         parts = [j.result() for j in jobs]
     arrays = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     starts.save(arrays, out)

@@ -592,7 +592,7 @@ def test_a_zero_residual_gives_the_matched_start_and_without_one_the_prefill(cor
     torch.manual_seed(0)
     cfg = dataclasses.replace(TINY, prefill="cubic")
     model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
-    motion = io.load(sorted(corpus_dir.rglob("*.bvh"))[0]).frames(slice(0, 81)).replace(keys=None)
+    motion = io.load(min(corpus_dir.rglob("*.bvh"))).frames(slice(0, 81)).replace(keys=None)
     keys = Keys([0, 20, 50, 80])
     rng = np.random.default_rng(0)  # a start that is neither the truth nor the interpolation
     between = np.setdiff1d(np.arange(81), keys.frames)
@@ -616,7 +616,7 @@ def test_a_start_of_other_frames_or_other_keys_is_refused(corpus, corpus_dir):
     from keyfill.motion import Keys
 
     model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
-    motion = io.load(sorted(corpus_dir.rglob("*.bvh"))[0]).frames(slice(0, 81)).replace(keys=None)
+    motion = io.load(min(corpus_dir.rglob("*.bvh"))).frames(slice(0, 81)).replace(keys=None)
     keys = Keys([0, 40, 80])
     short = motion.frames(slice(0, 80))
     moved = motion.replace(positions=motion.positions + 1.0)
@@ -647,11 +647,14 @@ def test_a_start_batch_reads_the_start_and_aims_at_the_truth(corpus, tmp_path):
 
     q, r, sq, sr, keys = _start_set(corpus, tmp_path / "starts.npz")
     model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
-    x, y, gq, gr, kinds = make_start_batch(model, q[:4], r[:4], sq[:4], sr[:4], keys)
+    x, y, _, _, kinds = make_start_batch(model, q[:4], r[:4], sq[:4], sr[:4], keys)
     dq, _ = model.features.decode(x.double())
     tq, _ = model.features.decode(y.double())
     sign = np.where(q[:4, :1, :, :1] < 0, -1.0, 1.0)  # (the canonical turn is one rotation of the root)
-    dots = lambda a, b: np.abs((np.asarray(a)[..., 1:, :] * np.asarray(b)[..., 1:, :]).sum(-1))  # noqa: E731
+
+    def dots(a, b):  # per joint below the root: |<a, b>| is 1 for one rotation
+        return np.abs((np.asarray(a)[..., 1:, :] * np.asarray(b)[..., 1:, :]).sum(-1))
+
     assert np.all(np.abs(dots(dq, sq[:4] * sign) - 1) < 1e-4)  # the input: the start (joints below the root)
     assert np.all(np.abs(dots(tq, q[:4] * sign) - 1) < 1e-4)  # the target: the truth
     assert not np.all(np.abs(dots(dq, q[:4]) - 1) < 1e-4)

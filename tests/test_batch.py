@@ -235,7 +235,7 @@ def test_transformer_batch_sends_windows_of_one_layout_together(tmp_path, capsys
     calls = []
     real = T.CompletionModel.complete_windows
     monkeypatch.setattr(T.CompletionModel, "complete_windows",
-                        lambda self, q, r, k: calls.append(len(q)) or real(self, q, r, k))
+                        lambda self, q, r, k, **kw: calls.append(len(q)) or real(self, q, r, k, **kw))
     args = ("--method", "transformer", "--model", tmp_path / "model", "--key-every", "10", "--runtime", "torch")
     code, _out, err = run(capsys, "complete", tmp_path / "in", "-o", tmp_path / "out", "--workers", "1", *args)
     assert code == 0, err

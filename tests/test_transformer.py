@@ -682,3 +682,19 @@ def test_training_draws_matched_start_batches_only_when_asked(corpus, tmp_path):
         starts.load(tmp_path / "starts.npz", 5)
     with pytest.raises(UsageError, match="name a start set"):
         TrainConfig(matched_share=0.5)
+
+
+def test_a_zero_residual_gives_the_interpolation_it_corrects(corpus, corpus_dir):
+    """The output is a correction of the pre-fill: a new residual model (its output layer zero) gives the linear
+    interpolation of the keys back, to the float32 precision of the features."""
+    from keyfill import interpolate
+    from keyfill.motion import Keys
+
+    model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    motion = io.load(min(corpus_dir.rglob("*.bvh"))).frames(slice(0, 81)).replace(keys=None)
+    keys = Keys([0, 20, 50, 80])
+    ((done, _),) = T.complete_motions(model, [(motion, keys)], batch=False)
+    linear = interpolate.linear(motion, keys)
+    assert _same_rotations(done.rotations, linear.rotations, 1e-5)
+    np.testing.assert_allclose(done.positions[:, 0], linear.positions[:, 0], atol=1e-4)
+    assert not _same_rotations(done.rotations, motion.rotations, 1e-3)

@@ -643,7 +643,7 @@ def _start_set(corpus, path, spacing=30):
 
 
 def test_a_start_batch_reads_the_start_and_aims_at_the_truth(corpus, tmp_path):
-    from keyfill.learn.transformer.task import make_start_batch
+    from keyfill.learn.transformer.starts import make_batch as make_start_batch
 
     q, r, sq, sr, keys = _start_set(corpus, tmp_path / "starts.npz")
     model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)

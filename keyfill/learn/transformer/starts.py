@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from keyfill.errors import DataError, UsageError
+from keyfill.learn.transformer.features import apply_transform, canonical_transform, frame_kinds
 from keyfill.motion import Keys, Skeleton
 
 #: the key spacings (frames) a start set holds windows of
@@ -88,6 +89,48 @@ def build(folds: list[list[Path]], libraries: list[str | os.PathLike], model_ske
         parts.append(match_windows(Matcher(load_library(lib)), files, model_skeleton, folded, window, offset,
                                    spacings, progress))
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def make_batch(model, truth_q: np.ndarray, truth_r: np.ndarray, start_q: np.ndarray,
+                     start_r: np.ndarray, keys: np.ndarray):
+    """:func:`keyfill.learn.transformer.task.make_batch`'s tensors for windows started from a match:
+    ``truth_* (B, T, ...)`` and ``start_*`` in the canonical frame of the keys, each joint in the hemisphere
+    w >= 0 at the first key (as :meth:`CompletionModel.complete_windows` reads them); the input is the start's
+    features, the target the truth's."""
+    import torch
+
+    q, r = truth_q.astype(np.float64), truth_r.astype(np.float64)
+    sq, sr = start_q.astype(np.float64), start_r.astype(np.float64)
+    turn, shift = canonical_transform(q, r, keys, model.config.facing_axis, model.skeleton.up_axis)
+    q, r = apply_transform(q, r, turn, shift)
+    sq, sr = apply_transform(sq, sr, turn, shift)
+    sign = np.where(q[:, keys[:1], :, :1] < 0, -1.0, 1.0)
+    q, sq = q * sign, sq * sign
+    dev = model.device
+
+    def t(a):
+        return torch.as_tensor(a, dtype=torch.float32, device=dev)
+
+    gq, gr = t(q), t(r)
+    T = q.shape[1]
+    kinds = torch.as_tensor(frame_kinds(T, keys), device=dev).expand(len(q), T)
+    return model.features.encode(t(sq), t(sr)), model.features.encode(gq, gr), gq, gr, kinds
+
+
+def draw_batch(rng: np.random.Generator, sets: dict, batch_size: int, mirror, model):
+    """One training batch of matched-start windows from ``sets`` (:func:`load`'s): a key spacing drawn
+    uniformly, ``batch_size`` of its windows drawn without replacement, half of them (truth and start alike)
+    mirrored left-right with ``mirror`` (:func:`keyfill.learn.corpus.find_mirror`'s; None: none); the tensors of
+    :func:`make_batch`."""
+    spacing = sorted(sets)[int(rng.integers(len(sets)))]
+    tq, tr, sq, sr = sets[spacing]
+    idx = np.sort(rng.choice(len(tq), min(batch_size, len(tq)), replace=False))
+    tq, tr, sq, sr = (a[idx].astype(np.float64) for a in (tq, tr, sq, sr))
+    if mirror is not None:
+        flip = rng.random(len(idx)) < 0.5
+        tq[flip], tr[flip] = mirror(tq[flip], tr[flip])
+        sq[flip], sr[flip] = mirror(sq[flip], sr[flip])
+    return make_batch(model, tq, tr, sq, sr, layout(spacing, tq.shape[1]))
 
 
 def save(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> None:

@@ -56,6 +56,8 @@ from keyfill.learn.transformer.features import apply_transform, canonical_transf
 from keyfill.learn.transformer.model import KIND, CompletionModel, load, new_model
 from keyfill.learn.transformer.network import losses
 from keyfill.learn.transformer.realism import column_swap, contact_windows, realism_losses
+from keyfill.learn.transformer.starts import draw_batch
+from keyfill.learn.transformer.starts import load as load_starts
 from keyfill.learn.windows import align_windows, global_pose
 from keyfill.limits import check_number
 
@@ -95,10 +97,8 @@ class TrainConfig:
             rotation of up to this many radians (:func:`keyfill.learn.augment.perturb_posture`; 0: off).
         slowest_tempo: style augmentation: play half of the windows slower, at a speed from this to 1
             (:func:`keyfill.learn.augment.retime`; 1: off).
-        matched_starts: a start set (:mod:`keyfill.learn.transformer.starts`): windows keyed every 20-60
-            frames whose frames between the keys are matched from a motion library; a batch drawn from it
-            starts the network from the match instead of the pre-fill (issue 46). None: off.
-        matched_share: the share of batches drawn from ``matched_starts`` (0: none).
+        matched_starts, matched_share: a start set (:mod:`keyfill.learn.transformer.starts`; None: off) and the
+            share of batches drawn from it, which start the network from a match instead of the pre-fill.
     """
 
     epochs: int = 40
@@ -196,15 +196,6 @@ def initial_model(path: str | os.PathLike, corpus: Corpus) -> CompletionModel:
     return model
 
 
-def weights_sha256(path: str | os.PathLike) -> str:
-    """The SHA-256 of a model folder's weights file (what ``--init`` started from)."""
-    import hashlib
-
-    from keyfill.learn.modelfile import WEIGHTS, model_folder
-
-    return hashlib.sha256((model_folder(path) / WEIGHTS).read_bytes()).hexdigest()
-
-
 # --- layouts and batches ---------------------------------------------------------------
 
 
@@ -260,32 +251,6 @@ def make_batch(model: CompletionModel, quats: np.ndarray, root: np.ndarray, keys
     y = model.features.encode(gq, gr)
     kinds = torch.as_tensor(frame_kinds(T, keys), device=dev).expand(len(q), T)
     return x, y, gq, gr, kinds
-
-
-def make_start_batch(model: CompletionModel, truth_q: np.ndarray, truth_r: np.ndarray, start_q: np.ndarray,
-                     start_r: np.ndarray, keys: np.ndarray):
-    """:func:`make_batch`'s tensors for windows started from a match (:mod:`keyfill.learn.transformer.starts`):
-    ``truth_* (B, T, ...)`` and ``start_*`` in the canonical frame of the keys, each joint in the hemisphere
-    w >= 0 at the first key (as :meth:`CompletionModel.complete_windows` reads them); the input is the start's
-    features, the target the truth's."""
-    import torch
-
-    q, r = truth_q.astype(np.float64), truth_r.astype(np.float64)
-    sq, sr = start_q.astype(np.float64), start_r.astype(np.float64)
-    turn, shift = canonical_transform(q, r, keys, model.config.facing_axis, model.skeleton.up_axis)
-    q, r = apply_transform(q, r, turn, shift)
-    sq, sr = apply_transform(sq, sr, turn, shift)
-    sign = np.where(q[:, keys[:1], :, :1] < 0, -1.0, 1.0)
-    q, sq = q * sign, sq * sign
-    dev = model.device
-
-    def t(a):
-        return torch.as_tensor(a, dtype=torch.float32, device=dev)
-
-    gq, gr = t(q), t(r)
-    T = q.shape[1]
-    kinds = torch.as_tensor(frame_kinds(T, keys), device=dev).expand(len(q), T)
-    return model.features.encode(t(sq), t(sr)), model.features.encode(gq, gr), gq, gr, kinds
 
 
 def learning_rate(cfg: TrainConfig, epoch_float: float) -> float:
@@ -372,18 +337,18 @@ class TransformerTask(TrainingTask):
                                                                   replace=False)
             self.mirror = find_mirror(corpus.skeleton, corpus.quats[np.sort(sample)])
         self.posture = posture_joints(corpus.skeleton) if cfg.posture_angle > 0 else None
-        self.starts = None  # {key spacing: (truth_q, truth_r, start_q, start_r)}
-        if cfg.matched_starts is not None and cfg.matched_share > 0:
-            from keyfill.learn.transformer import starts
-
-            self.starts = starts.load(cfg.matched_starts, corpus.skeleton.num_joints)
+        self.starts = (load_starts(cfg.matched_starts, corpus.skeleton.num_joints)  # {spacing: windows}
+                       if cfg.matched_starts is not None and cfg.matched_share > 0 else None)
         self.contact_swap = None  # the columns of a mirrored window's contact labels
         if self.mirror is not None and self.data.contacts is not None:
             self.contact_swap = column_swap(self.mirror, self.data.contact_joints)
         self.info = {"seed": seed, "corpus_clips": len(corpus), **self.data.info, "mirrored": self.mirror is not None}
         self.init = None if init is None else initial_model(init, corpus)
         if self.init is not None:
-            self.info["init"] = {"model": Path(init).name, "weights_sha256": weights_sha256(init)}
+            from keyfill.learn.modelfile import model_folder
+            from keyfill.learn.onnx import weights_digest
+
+            self.info["init"] = {"model": Path(init).name, "weights_sha256": weights_digest(model_folder(init))}
         if self.data.validation is not None:
             self.info["validation_windows"] = self.data.validation.info["test_windows"]
         self.device = "cpu"
@@ -446,7 +411,7 @@ class TransformerTask(TrainingTask):
         order = rng.permutation(len(self.data.quats))
         for step in range(self.steps(epoch)):
             if self.starts is not None and rng.random() < cfg.matched_share:
-                yield self._start_batch(rng)
+                yield draw_batch(rng, self.starts, cfg.batch_size, self.mirror, self.model)
                 continue
             _, T, keys = sample_layout(rng, cfg.layouts, cfg.window, cfg.gap_sampling)
             idx = order[step * cfg.batch_size: (step + 1) * cfg.batch_size]
@@ -465,21 +430,6 @@ class TransformerTask(TrainingTask):
                 wq = perturb_posture(rng, wq, self.posture, cfg.posture_angle)
             batch = make_batch(self.model, wq, wr, keys, T)
             yield batch if wc is None else batch + (torch.as_tensor(wc[:, :T], device=self.model.device),)
-
-    def _start_batch(self, rng: np.random.Generator):
-        """One batch of matched-start windows: a key spacing drawn uniformly, its windows drawn without
-        replacement, half of them (truth and start alike) mirrored where the skeleton allows."""
-        from keyfill.learn.transformer.starts import layout
-
-        spacing = sorted(self.starts)[int(rng.integers(len(self.starts)))]
-        tq, tr, sq, sr = self.starts[spacing]
-        idx = np.sort(rng.choice(len(tq), min(self.cfg.batch_size, len(tq)), replace=False))
-        tq, tr, sq, sr = (a[idx].astype(np.float64) for a in (tq, tr, sq, sr))
-        if self.mirror is not None:
-            flip = rng.random(len(idx)) < 0.5
-            tq[flip], tr[flip] = self.mirror(tq[flip], tr[flip])
-            sq[flip], sr[flip] = self.mirror(sq[flip], sr[flip])
-        return make_start_batch(self.model, tq, tr, sq, sr, layout(spacing, tq.shape[1]))
 
     def shard(self, batch, rank, world):
         return tuple(t[rank::world] for t in batch)

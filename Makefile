@@ -15,7 +15,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 transformer-model-5 transformer-model-5q transformer-model-6 transformer-model-7 library pose-indexes gltf-validator clean
+.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 transformer-model-5 transformer-model-5q transformer-model-6 transformer-model-7 transformer-model-8 library pose-indexes gltf-validator clean
 
 $(DEMO_STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -282,6 +282,17 @@ $(MODELS)/bandai12-transformer-gentle/weights.safetensors: $(STARTS12)
 	    $(call resume_if,$(MODELS)/bandai12-transformer-gentle)
 
 transformer-model-7: $(MODELS)/bandai12-transformer-gentle/weights.safetensors
+
+# ... and gently with the excess-jerk term in training (smooth_weight 0.00025, issue 30's trial weight), two
+# threads (benchmarks/transformer_recipe8_starts12_smooth.json; 13 minutes).
+$(MODELS)/bandai12-transformer-smooth/weights.safetensors: $(STARTS12)
+	@mkdir -p $(dir $(@D))
+	$(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
+	    --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 2 -o $(MODELS)/bandai12-transformer-smooth \
+	    --init $(SHIPPED)/bandai2-transformer --config benchmarks/transformer_recipe8_starts12_smooth.json \
+	    $(call resume_if,$(MODELS)/bandai12-transformer-smooth)
+
+transformer-model-8: $(MODELS)/bandai12-transformer-smooth/weights.safetensors
 
 $(BLENDER_STAMP): Makefile
 	$(PYTHON) -m venv $(BLENDER_VENV)

@@ -240,58 +240,52 @@ transformer-model-4: $(MODELS)/bandai-transformer-4/weights.safetensors
 # (transformer-model-5, benchmarks/transformer_recipe5_starts.json) or a quarter (transformer-model-5q,
 # transformer_recipe5_starts25.json) drawn from the start set. Interrupted, each continues from its checkpoint.
 STARTS := data/starts/bandai2.npz
+# $(call tune_shipped,TRAIN COMMAND,MODEL,CONFIG): fine-tune the shipped transformer into $(MODELS)/MODEL
+tune_shipped = $(1) -o $(MODELS)/$(2) --init $(SHIPPED)/bandai2-transformer --config benchmarks/$(3) \
+    $(call resume_if,$(MODELS)/$(2))
 
 $(STARTS): | $(BANDAI2)
 	$(BIN)/python benchmarks/transformer_starts.py -o $@
 
 $(MODELS)/bandai2-transformer-starts/weights.safetensors: $(STARTS)
 	@mkdir -p $(dir $(@D))
-	$(TRANSFORMER_TRAIN) -o $(MODELS)/bandai2-transformer-starts --init $(SHIPPED)/bandai2-transformer \
-	    --config benchmarks/transformer_recipe5_starts.json $(call resume_if,$(MODELS)/bandai2-transformer-starts)
+	$(call tune_shipped,$(TRANSFORMER_TRAIN),bandai2-transformer-starts,transformer_recipe5_starts.json)
 
 $(MODELS)/bandai2-transformer-starts25/weights.safetensors: $(STARTS)
 	@mkdir -p $(dir $(@D))
-	$(TRANSFORMER_TRAIN) -o $(MODELS)/bandai2-transformer-starts25 --init $(SHIPPED)/bandai2-transformer \
-	    --config benchmarks/transformer_recipe5_starts25.json $(call resume_if,$(MODELS)/bandai2-transformer-starts25)
+	$(call tune_shipped,$(TRANSFORMER_TRAIN),bandai2-transformer-starts25,transformer_recipe5_starts25.json)
 
 transformer-model-5: $(MODELS)/bandai2-transformer-starts/weights.safetensors
 transformer-model-5q: $(MODELS)/bandai2-transformer-starts25/weights.safetensors
 
 # The same with dataset-1 (without its held-out normal, sad and feminine) in the corpus and in the start set's
-# folds (transformer_starts.py --dataset-1), 8 epochs of benchmarks/transformer_recipe6_starts12.json.
+# folds (transformer_starts.py --dataset-1): 8 epochs of benchmarks/transformer_recipe6_starts12.json
+# (transformer-model-6); gently, a quarter of the batches at half the rate (transformer-model-7,
+# transformer_recipe7_starts12_gentle.json); gently with the excess-jerk term in training (smooth_weight
+# 0.00025, issue 30's trial weight), two threads, 13 minutes (transformer-model-8,
+# transformer_recipe8_starts12_smooth.json).
 STARTS12 := data/starts/bandai12.npz
+TRANSFORMER12_TRAIN = $(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' \
+    --exclude 'dataset-1_*_sad_*' --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 1
+TRANSFORMER12_TRAIN_2 = $(subst --threads 1,--threads 2,$(TRANSFORMER12_TRAIN))
 
 $(STARTS12): | $(BANDAI2) $(BANDAI1)
 	$(BIN)/python benchmarks/transformer_starts.py --dataset-1 -o $@
 
 $(MODELS)/bandai12-transformer-starts/weights.safetensors: $(STARTS12)
 	@mkdir -p $(dir $(@D))
-	$(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
-	    --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 1 -o $(MODELS)/bandai12-transformer-starts \
-	    --init $(SHIPPED)/bandai2-transformer --config benchmarks/transformer_recipe6_starts12.json \
-	    $(call resume_if,$(MODELS)/bandai12-transformer-starts)
+	$(call tune_shipped,$(TRANSFORMER12_TRAIN),bandai12-transformer-starts,transformer_recipe6_starts12.json)
 
-transformer-model-6: $(MODELS)/bandai12-transformer-starts/weights.safetensors
-
-# ... and gently: a quarter of the batches at half the rate (benchmarks/transformer_recipe7_starts12_gentle.json).
 $(MODELS)/bandai12-transformer-gentle/weights.safetensors: $(STARTS12)
 	@mkdir -p $(dir $(@D))
-	$(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
-	    --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 1 -o $(MODELS)/bandai12-transformer-gentle \
-	    --init $(SHIPPED)/bandai2-transformer --config benchmarks/transformer_recipe7_starts12_gentle.json \
-	    $(call resume_if,$(MODELS)/bandai12-transformer-gentle)
+	$(call tune_shipped,$(TRANSFORMER12_TRAIN),bandai12-transformer-gentle,transformer_recipe7_starts12_gentle.json)
 
-transformer-model-7: $(MODELS)/bandai12-transformer-gentle/weights.safetensors
-
-# ... and gently with the excess-jerk term in training (smooth_weight 0.00025, issue 30's trial weight), two
-# threads (benchmarks/transformer_recipe8_starts12_smooth.json; 13 minutes).
 $(MODELS)/bandai12-transformer-smooth/weights.safetensors: $(STARTS12)
 	@mkdir -p $(dir $(@D))
-	$(BIN)/keyfill train transformer $(BANDAI2) $(BANDAI1) --exclude '*_normal_*' --exclude 'dataset-1_*_sad_*' \
-	    --exclude 'dataset-1_*_feminine_*' --seed 0 --threads 2 -o $(MODELS)/bandai12-transformer-smooth \
-	    --init $(SHIPPED)/bandai2-transformer --config benchmarks/transformer_recipe8_starts12_smooth.json \
-	    $(call resume_if,$(MODELS)/bandai12-transformer-smooth)
+	$(call tune_shipped,$(TRANSFORMER12_TRAIN_2),bandai12-transformer-smooth,transformer_recipe8_starts12_smooth.json)
 
+transformer-model-6: $(MODELS)/bandai12-transformer-starts/weights.safetensors
+transformer-model-7: $(MODELS)/bandai12-transformer-gentle/weights.safetensors
 transformer-model-8: $(MODELS)/bandai12-transformer-smooth/weights.safetensors
 
 $(BLENDER_STAMP): Makefile

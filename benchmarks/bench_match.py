@@ -122,7 +122,10 @@ def summary(rows: list[dict]) -> dict:
             "keys_exact": all(r["exact"] for r in rows)}
 
 
-def quality(sets: dict[str, list[Motion]]) -> dict:
+def quality(sets: dict[str, list[Motion]], methods=METHODS, fill=None) -> dict:
+    """Per set: the real clips' skating and jitter, and per key spacing and method the summary of its fills;
+    ``fill(method, motion, keys) -> Motion`` (default: :func:`run_method`'s motion)."""
+    fill = fill or (lambda method, m, keys: run_method(method, m, keys).motion)
     out = {}
     for name, clips in sets.items():
         sk = clips[0].skeleton
@@ -133,9 +136,9 @@ def quality(sets: dict[str, list[Motion]]) -> dict:
             "jitter_m_s3": float(np.mean([jitter(w[None], m.fps, sk.meters_per_unit) for w, m in zip(real, clips)]))}}
         for gap in GAPS:
             row = {}
-            for method in METHODS:
-                row[method] = summary([figures_of(m, keys_every(m, gap), run_method(method, m, keys_every(m, gap))
-                                                  .motion) for m in clips])
+            for method in methods:
+                row[method] = summary([figures_of(m, keys_every(m, gap), fill(method, m, keys_every(m, gap)))
+                                       for m in clips])
             out[name][str(gap)] = row
             print(f"{name}, keys every {gap}: " + "; ".join(
                 f"{k} {v['foot_skating_cm_s']:.1f}/{v['jitter_m_s3']:.0f}/{v['gap_error_cm']:.2f}"

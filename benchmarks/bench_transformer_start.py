@@ -12,7 +12,7 @@ jitter m/s^3, gap error cm), the guard off for every method so that each is scor
 
     .venv/bin/python benchmarks/bench_transformer_start.py            # --clips 24 per set
     .venv/bin/python benchmarks/bench_transformer_start.py --clips 4 --no-record
-    .venv/bin/python benchmarks/bench_transformer_start.py --model data/models/bandai2-transformer-starts
+    .venv/bin/python benchmarks/bench_transformer_start.py --model data/models/bandai12-transformer-starts --smoothing 4
 
 Without the corpora it says ``skipped`` and exits 0. The run is recorded in
 ``benchmarks/results/transformer_start-<model folder>.json``.
@@ -21,15 +21,14 @@ Without the corpora it says ``skipped`` and exits 0. The run is recorded in
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
-import numpy as np
 import results
-from bench_match import GAPS, figures_of, keys_every, run_method, style_sets, summary, world
+from bench_match import quality, run_method, style_sets
 
 from keyfill.errors import DataError
 from keyfill.learn.completion import CompleteOptions
-from keyfill.learn.protocols.metrics import foot_joints, foot_skating, jitter
 from keyfill.learn.transformer import model as T
 
 SETS = ("normal (dataset-2)", "sad, feminine (dataset-1)")
@@ -50,32 +49,6 @@ def fill(method: str, model: T.CompletionModel, m, keys):
     if method == "transformer from match":
         return transformer(model, m, keys, run_method("match raw", m, keys).motion)
     return run_method(method, m, keys).motion
-
-
-def quality(sets: dict, model: T.CompletionModel) -> dict:
-    out = {}
-    for name in SETS:
-        clips = sets[name]
-        sk = clips[0].skeleton
-        real = [world(m) for m in clips]
-        out[name] = {"real": {
-            "foot_skating_cm_s": float(np.nanmean([foot_skating(w[None], foot_joints(sk), sk.up_axis, m.fps,
-                                                                sk.meters_per_unit) for w, m in zip(real, clips)])),
-            "jitter_m_s3": float(np.mean([jitter(w[None], m.fps, sk.meters_per_unit) for w, m in zip(real, clips)]))}}
-        for gap in GAPS:
-            row = {}
-            for method in METHODS:
-                rows = []
-                for m in clips:
-                    keys = keys_every(m, gap)
-                    rows.append(figures_of(m, keys, fill(method, model, m, keys)))
-                row[method] = summary(rows)
-            out[name][str(gap)] = row
-            print(f"{name}, keys every {gap}: " + "; ".join(
-                f"{k} {v['foot_skating_cm_s']:.1f}/{v['jitter_m_s3']:.0f}/{v['gap_error_cm']:.2f}"
-                for k, v in row.items()) + f" (real {out[name]['real']['foot_skating_cm_s']:.1f}/"
-                f"{out[name]['real']['jitter_m_s3']:.0f})", flush=True)
-    return out
 
 
 def goals(figures: dict) -> list[dict]:
@@ -102,6 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--clips", type=int, default=24, help="clips per style set (default 24)")
     ap.add_argument("--model", help="a transformer model folder (default: the shipped bandai2-transformer)")
+    ap.add_argument("--smoothing", type=int, default=None,
+                    help="score with this output_smoothing (inference only); the record is named MODEL-sN")
     results.add_option(ap)
     args = ap.parse_args(argv)
     bench = results.Run()
@@ -111,9 +86,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"skipped: {e}")
         return 0
     path = T.model_path(CompleteOptions(model=args.model))
-    model = T.load(path)
-    figures = {"clips": {k: len(sets[k]) for k in SETS}, "model": path.name, "quality": quality(sets, model)}
-    record = bench.record(f"transformer_start-{path.name}", figures, goals(figures), write=not args.no_record)
+    model, name = T.load(path), path.name
+    if args.smoothing is not None:
+        model = dataclasses.replace(model, config=dataclasses.replace(model.config, output_smoothing=args.smoothing))
+        name += f"-s{args.smoothing}"
+    held_out = {k: sets[k] for k in SETS}
+    figures = {"clips": {k: len(v) for k, v in held_out.items()}, "model": name,
+               "quality": quality(held_out, METHODS, lambda method, m, keys: fill(method, model, m, keys))}
+    record = bench.record(f"transformer_start-{name}", figures, goals(figures), write=not args.no_record)
     results.print_goals(record)
     print(results.summary(record))
     return 0

@@ -29,13 +29,15 @@ WINDOW = 65
 
 def one_fold(folders: list[str], patterns: list[str], library: str, offset: int) -> dict:
     from keyfill.learn.completion import CompleteOptions
+    from keyfill.learn.library.matcher import Matcher
     from keyfill.learn.library.store import clip_files
+    from keyfill.learn.library.store import load as load_library
     from keyfill.learn.transformer import model as T
     from keyfill.learn.transformer import starts
 
     model = T.load(T.model_path(CompleteOptions()))
-    files = clip_files(folders, include=patterns)
-    return starts.build([files], [library], model.skeleton, model.folded, WINDOW, offset)
+    return starts.match_windows(Matcher(load_library(library)), clip_files(folders, include=patterns),
+                                model.skeleton, model.folded, WINDOW, offset)
 
 
 def main(argv=None) -> int:

@@ -5,8 +5,8 @@ With keys every 20-60 frames the transformer can start from match's in-between i
 (:func:`keyfill.learn.transformer.model.complete_motions`' ``starts``). To learn that correction it trains on
 windows whose frames between the keys are such a match (``matched_starts`` in the training settings,
 :mod:`keyfill.learn.transformer.task`). A window's own clip must not be in the library it is matched from (the
-search would find the clip itself): :func:`build` matches the clips of each fold against a library of the
-other folds' clips.
+search would find the clip itself): ``benchmarks/transformer_starts.py`` matches the clips of each fold
+(:func:`match_windows`) against a library of the other fold's clips.
 
 A start set is one ``.npz`` file, read without pickles. For each key spacing ``s`` (frames between keys, of
 :data:`SPACINGS`), windows of ``T = s * ((window - 1) // s) + 1`` frames keyed at ``0, s, 2s, ...``:
@@ -44,7 +44,8 @@ def layout(spacing: int, window: int) -> np.ndarray:
 def match_windows(matcher, files: list[Path], model_skeleton: Skeleton, folded: bool, window: int, offset: int,
                   spacings=SPACINGS, progress: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:
     """The arrays of a start set (see the module) for windows cut every ``offset`` frames from the clips
-    ``files`` (on the library's skeleton and frame rate) and matched from ``matcher``'s library."""
+    ``files`` (on the library's skeleton and frame rate) and matched by ``matcher`` (a
+    :class:`keyfill.learn.library.matcher.Matcher` of a library that holds none of them)."""
     from keyfill import io
     from keyfill.learn.windows import model_take
 
@@ -75,20 +76,6 @@ def match_windows(matcher, files: list[Path], model_skeleton: Skeleton, folded: 
                 rows = out[f"{kind}_{name}_{s}"]
                 arrays[f"{kind}_{name}_{s}"] = np.stack(rows) if rows else np.zeros((0,) + shape, np.float32)
     return arrays
-
-
-def build(folds: list[list[Path]], libraries: list[str | os.PathLike], model_skeleton: Skeleton, folded: bool,
-          window: int, offset: int, spacings=SPACINGS, progress=None) -> dict[str, np.ndarray]:
-    """:func:`match_windows` of each fold's clips against ``libraries[i]``, a library of none of fold ``i``'s
-    clips; the folds' windows concatenated."""
-    from keyfill.learn.library.matcher import Matcher
-    from keyfill.learn.library.store import load as load_library
-
-    parts = []
-    for files, lib in zip(folds, libraries, strict=True):
-        parts.append(match_windows(Matcher(load_library(lib)), files, model_skeleton, folded, window, offset,
-                                   spacings, progress))
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 def make_batch(model, truth_q: np.ndarray, truth_r: np.ndarray, start_q: np.ndarray,

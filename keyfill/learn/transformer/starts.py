@@ -127,13 +127,15 @@ def save(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> None:
 
 def load(path: str | os.PathLike, joints: int) -> dict[int, tuple[np.ndarray, ...]]:
     """A start set as ``{spacing: (truth_q, truth_r, start_q, start_r)}`` (float32, see the module); a
-    :class:`UsageError` naming ``matched_starts`` when the file is not one for ``joints`` joints."""
+    :class:`UsageError` naming the setting ``matched_starts`` when the file is not one for ``joints`` joints."""
+    what = f"training setting 'matched_starts' {path}"
     try:
         with np.load(path, allow_pickle=False) as z:
             files = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError) as e:
-        raise UsageError(f"matched_starts {path}: not a start set ({' '.join(str(e).split())[:200]})",
-                         params="matched_starts") from None
+    except OSError as e:
+        raise UsageError(f"{what}: {e.strerror or 'cannot be read'}") from None
+    except (ValueError, EOFError):  # numpy takes bytes that are no zip for a pickle
+        raise UsageError(f"{what}: not a start set (an .npz of arrays)") from None
     sets = {}
     for key in files:
         if not key.startswith("truth_q_"):
@@ -145,10 +147,9 @@ def load(path: str | os.PathLike, joints: int) -> dict[int, tuple[np.ndarray, ..
         ok = ok and parts[0].shape[2:] == (joints, 4) and parts[2].shape == parts[0].shape
         ok = ok and parts[1].shape == parts[0].shape[:2] + (3,) and parts[3].shape == parts[1].shape
         if not ok:
-            raise UsageError(f"matched_starts {path}: spacing {s} is not {joints} joints' windows",
-                             params="matched_starts")
+            raise UsageError(f"{what}: spacing {s} is not {joints} joints' windows")
         if W:
             sets[s] = parts
     if not sets:
-        raise UsageError(f"matched_starts {path}: no window", params="matched_starts")
+        raise UsageError(f"{what}: no window")
     return sets

@@ -40,11 +40,22 @@ def one_fold(folders: list[str], patterns: list[str], library: str, offset: int)
                                 model.skeleton, model.folded, WINDOW, offset)
 
 
+def fold_libraries(folders: list[str], folds, stem: Path, workers: int) -> list[str]:
+    """Library ``n`` of each fold's clips (``STEM-library-N``, half precision), which matches the *other* fold."""
+    from keyfill.learn.library.store import build
+
+    out = []
+    for n, patterns in enumerate(folds):
+        lib = stem.parent / f"{stem.name}-library-{n}"
+        build(folders, lib, include=patterns, precision="half", workers=workers)
+        out.append(str(lib))
+    return out
+
+
 def main(argv=None) -> int:
     import numpy as np
 
     from keyfill.learn.corpus import locate
-    from keyfill.learn.library.store import build
     from keyfill.learn.transformer import starts
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -58,11 +69,7 @@ def main(argv=None) -> int:
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    libraries = []
-    for n, patterns in enumerate(folds):  # library n holds the clips of fold n: it matches the other fold
-        lib = out.parent / f"{out.stem}-library-{n}"
-        build(folders, lib, include=patterns, precision="half", workers=args.workers)
-        libraries.append(str(lib))
+    libraries = fold_libraries(folders, folds, out.parent / out.stem, args.workers)
     print(f"libraries built in {time.perf_counter() - t0:.0f} s", flush=True)
     with ProcessPoolExecutor(args.workers) as pool:
         jobs = [pool.submit(one_fold, folders, folds[n], libraries[1 - n], args.offset) for n in range(len(folds))]

@@ -59,6 +59,8 @@ class Method:
             its ``served(options, keys)``, where it has one, what the model serves). Its gaps are scored by
             the guard (:mod:`keyfill.learn.library.guard`) against the model's pose index.
         library: it takes a motion library (``CompleteOptions.library``) as its model.
+        matches: its models may match from a motion library (``CompleteOptions.library``, else the one the model
+            names) beside the model: a gan on a matched base (:mod:`keyfill.learn.gan.matched_base`).
         feet: its ``feet`` when the options give none (``"free"`` or ``"lock"``).
     """
 
@@ -75,6 +77,7 @@ class Method:
     aliases: tuple[str, ...] = ()
     humanoid: bool = False
     library: bool = False
+    matches: bool = False
     feet: str = "free"
 
     @property
@@ -134,7 +137,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("gan", "generative tweening: long-term in-betweening with a convolutional GAN (Zhou et al. 2020)",
            "keyfill.learn.gan.model:complete", module="keyfill.learn.gan.model", protocol="lafan1",
            training="keyfill.learn.gan.train_command", export="keyfill.learn.gan.onnx:export_onnx",
-           onnx="keyfill.learn.gan.onnx", partial_keys=True, dna=True, humanoid=True),
+           onnx="keyfill.learn.gan.onnx", partial_keys=True, dna=True, humanoid=True, matches=True),
     Method("match", "in-betweens matched from a library of real motion (motion matching through the keys)",
            "keyfill.learn.match.model:complete", module="keyfill.learn.match.model", protocol="lafan1",
            partial_keys=True, humanoid=True, library=True, feet="lock"),
@@ -238,10 +241,10 @@ def checked_options(m: Method, options: CompleteOptions) -> CompleteOptions:
                          params=("dna", "dna_count"))
     if not m.learned and options.model is not None:
         raise UsageError(f"model applies to learned methods, not to {m.name!r}", params="model")
-    if options.library is not None and not m.library:
+    if options.library is not None and not (m.library or m.matches):
         raise UsageError(f"library applies to methods that match from a motion library "
-                         f"({', '.join(n.name for n in METHODS.values() if n.library)}), not to {m.name!r}",
-                         params="library")
+                         f"({', '.join(n.name for n in METHODS.values() if n.library or n.matches)}), not to "
+                         f"{m.name!r}", params="library")
     if options.model is not None and m.library:
         raise UsageError(f"{m.name} takes a motion library (library), not a model", params=("model", "library"))
     if options.guard is not None and not m.humanoid:

@@ -74,12 +74,12 @@ CHOICES = {
     "optimizer": ("rmsprop", "adam"),
     "lr_schedule": ("constant", "cosine"),
     "root_weight_schedule": ("steps", "run"),
-    "base": ("none", "spline", "linear"),
+    "base": ("none", "spline", "linear", "match"),
     "dna_source": ("any", "own"),
 }
 #: settings added after models were shipped, with their defaults: :meth:`GanConfig.to_json` leaves them out at
 #: the default, so the config.json of older folders and what ``--resume`` compares keep their bytes
-LATER_DEFAULTS = {"dna_norm": False, "dna_source": "any", "sketch_stretch": 0.0}
+LATER_DEFAULTS = {"dna_norm": False, "dna_source": "any", "sketch_stretch": 0.0, "library": "", "matched_set": ""}
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
@@ -191,7 +191,14 @@ class GanConfig:
             interpolation): the RC-FK values of that interpolation of the keys' rotations, and the root's
             path is its interpolation of the key roots instead of the path predictor's
             (:mod:`keyfill.learn.gan.spline_base`, the third recipe). Needs whole keys (not
-            ``partial_keys``): partial keys have no rotations to interpolate.
+            ``partial_keys``): partial keys have no rotations to interpolate. ``"match"``: the in-between
+            ``--method match`` gives through the keys, its rotations and its root path
+            (:mod:`keyfill.learn.gan.matched_base`, issue 45).
+        library: with base ``"match"``, the shipped motion library (a name of
+            :func:`keyfill.learn.installed_models.shipped`) the base is matched from when ``complete`` is given
+            no ``--library``.
+        matched_set: with base ``"match"``, the matched set of the training clips (a ``.npz`` of
+            :mod:`keyfill.learn.gan.matched_base`; training only, every in-clip window is one of its rows).
         seed: the seed of the clip split and of every batch (epoch ``e`` draws from
             ``numpy.random.default_rng([seed, stage, e])``).
     """
@@ -251,6 +258,8 @@ class GanConfig:
     recon_weight: float = 0.0
     foot_weight: float = 0.0
     base: str = "none"
+    library: str = ""
+    matched_set: str = ""
     seed: int = 0
 
     def __post_init__(self):
@@ -293,6 +302,9 @@ class GanConfig:
         if self.base != "none" and self.partial_keys:
             raise UsageError(f"base {self.base!r} interpolates the keys' rotations, which partial keys do not give; "
                              "train a partial-key model with base \"none\"")
+        if self.base == "match" and self.in_clip_fraction < 1:
+            raise UsageError("base \"match\" trains on in-clip windows of its matched set only: set "
+                             "in_clip_fraction to 1")
         if self.min_key_every > self.max_key_every or self.max_key_every > self.max_gap:
             raise UsageError(f"in-clip key spacing needs min_key_every <= max_key_every <= max_gap, got "
                              f"{self.min_key_every}, {self.max_key_every}, {self.max_gap}")

@@ -61,7 +61,7 @@ from keyfill.learn.gan.dna import DnaBank, dna_poses
 from keyfill.learn.gan.features import centre_keys, dense_input, sparse_input
 from keyfill.learn.gan.long_takes import FRAME_MULTIPLE, check_anchors, fill_take, latent_steps, take_noise, windows
 from keyfill.learn.gan.ranges import JointRanges, snap_in_range
-from keyfill.learn.gan.spline_base import spline_root, spline_values
+from keyfill.learn.gan.spline_base import spline_root, spline_values, track_values
 from keyfill.limits import check_count, check_fps
 from keyfill.motion import Skeleton
 
@@ -235,7 +235,7 @@ def check_keys(model: GanModel, frames: np.ndarray) -> None:
 
 
 def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, seed: int = 0, style=None,
-             dna=None, coords=None, key_quats=None, noise=None):
+             dna=None, coords=None, key_quats=None, noise=None, track=None):
     """Run the networks over the key range (the generator, and the path predictor of a model without a base).
 
     Args:
@@ -255,6 +255,9 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
         noise: ``(B, noise_dim, T' / 64)`` float32, the noise of a model with noise instead of the draw from
             ``seed`` (``T'`` the key range padded to a multiple of 64 frames; a window's share of a long
             take's noise, :func:`complete_motion`).
+        track: for a model on a matched base (``GanConfig.base`` ``"match"``), the matched in-between
+            ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` (metres, re-centred as the key poses are) it corrects;
+            the root path is then the track's.
 
     Returns:
         ``(quats ([B,] T, J, 4), root ([B,] T, 3))`` for ``T = key_frames[-1] + 1`` frames, each
@@ -265,14 +268,24 @@ def generate(model: GanModel, key_frames: np.ndarray, key_poses: np.ndarray, see
     poses = key_poses[None] if single else key_poses
     T = int(key_frames[-1]) + 1
     x = network_input(model, key_frames, poses, coords)
-    base = spline_input(model, key_frames, key_quats, len(poses), x.shape[-1])
+    if model.config.base == "match":
+        if track is None:
+            raise ValueError("a gan model on a matched base needs the matched in-between (track)")
+        tq, troot = (np.asarray(a, dtype=np.float64) for a in track)
+        tq, troot = (tq[None], troot[None]) if tq.ndim == 3 else (tq, troot)
+        base = np.stack([track_values(model.ranges, np.concatenate([q, np.repeat(q[-1:], x.shape[-1] - T, 0)]))
+                         for q in tq])
+    else:
+        base = spline_input(model, key_frames, key_quats, len(poses), x.shape[-1])
     run = getattr(model.generator, "run_numpy", None)  # an exported graph (keyfill.learn.gan.onnx)
     if run is not None:  # a graph: no noise (only noise-free models export)
         quats, root = run(model, x, seed, style, dna, base)
     else:
         quats, root = _run_torch(model, x, seed, style, dna, base, noise)
     kr = poses[:, :, 0]
-    if base is not None:
+    if model.config.base == "match":
+        root = troot[:, :T]
+    elif base is not None:
         root = np.stack([spline_root(T, key_frames, r, model.config.base) for r in kr])
     q, root = quats[:, :T].astype(np.float64), root[:, :T].astype(np.float64)
     if coords is None:
@@ -362,12 +375,14 @@ def _key_hemispheres(quats: np.ndarray, key_frames: np.ndarray, key_quats: np.nd
     return R.quat_continuous_between(q, key_frames)
 
 
-def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> tuple[object, dict]:
+def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None, start=None) -> tuple[object, dict]:
     """Fill every frame of ``motion`` between its ``keys`` (reads only the key frames; see the module docstring).
 
     ``keys`` is a :class:`~keyfill.motion.Keys` (partial keys need a ``partial_keys`` model) or
     key frames; ``dna`` the ``(P, J - 1, 3)`` poses of :func:`dna_poses` (a DNA model without
-    them draws from its bank by ``seed``). Returns ``(motion, info)``; keys are not yet exact.
+    them draws from its bank by ``seed``). A model on a matched base corrects ``start``, the motion's in-between
+    from a library (:func:`keyfill.learn.gan.matched_base.matched_start`; every frame, keys exact). Returns
+    ``(motion, info)``; keys are not yet exact.
 
     A key range longer than ``GanConfig.max_frames`` is filled by overlapping windows that share one Motion
     DNA (a model of its keys' own DNA, ``dna_source`` ``"own"``: each window's) and one draw of noise, cross-faded
@@ -390,8 +405,16 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
     skel = motion.skeleton
     # the take's arrays: translations and undriven joints interpolated, in the model's hierarchy; the
     # windows write the root and the driven joints into them, and they become the result's arrays
-    q, p, top = model_take(model.skeleton, model.folded, motion, k, _undriven(model, motion.num_joints),
-                           hint=TRAIN_HINT)
+    track = None
+    if model.config.base != "match":
+        q, p, top = model_take(model.skeleton, model.folded, motion, k, _undriven(model, motion.num_joints),
+                               hint=TRAIN_HINT)
+    elif start is None:
+        raise ValueError("a gan model on a matched base completes from a matched start")
+    else:  # the matched in-between (its keys the motion's), every joint its own: the base and the undriven joints
+        q, p, top = model_take(model.skeleton, model.folded, start, np.arange(start.num_frames), slerped=np.arange(0),
+                               continuous=True, hint=TRAIN_HINT)  # every frame a key: the match's own root
+        track = (q.copy(), p[:, 0].copy())
     if model.folded and coords is not None:  # the folded top joint is the hips: keyed where either of them is
         c = skel.children(0)[0]
         coords = coords.copy()
@@ -408,9 +431,11 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
 
     def fill(i: int, j: int):
         first = (int(k[i]) - k0) // FRAME_MULTIPLE  # the window's first latent step in the take's noise
+        span = slice(int(k[i]), int(k[j]) + 1)
         return _fill_window(model, k[i : j + 1] - k[i], key_q[i : j + 1], key_root[i : j + 1],
                             None if coords is None else coords[i : j + 1], seed, dna,
-                            None if noise is None else noise[:, :, first : first + latent_steps(k[j] - k[i] + 1)])
+                            None if noise is None else noise[:, :, first : first + latent_steps(k[j] - k[i] + 1)],
+                            None if track is None else (track[0][span], track[1][span]))
 
     fill_take(q, p[:, 0], k, plan, model.ranges, fill)
     out_q, pos = q, p
@@ -432,7 +457,7 @@ def complete_motion(model: GanModel, motion, keys, seed: int = 0, dna=None) -> t
 
 
 def _fill_window(model: GanModel, key_frames: np.ndarray, key_quats: np.ndarray, key_roots: np.ndarray, coords,
-                 seed: int, dna, noise) -> tuple[np.ndarray, np.ndarray]:
+                 seed: int, dna, noise, track=None) -> tuple[np.ndarray, np.ndarray]:
     """One window of :func:`complete_motion`: ``(quats (T, J, 4), root (T, 3))`` of its ``T`` frames in the
     model's hierarchy (root in file units; driven joints and the root set, whole keys' driven joints exact
     in the ranges).
@@ -441,7 +466,8 @@ def _fill_window(model: GanModel, key_frames: np.ndarray, key_quats: np.ndarray,
         key_frames: ``(K,)`` from 0; key_quats: ``(K, J, 4)`` their local rotations (the model's hierarchy);
         key_roots: ``(K, 3)`` their root positions (file units); coords: ``(K, J, 3)`` bool of partial keys
         or None; dna: the take's Motion DNA or None (a DNA model then takes the keys' own poses); noise: the
-        window's ``(1, noise_dim, T' / 64)`` or None (:func:`generate`).
+        window's ``(1, noise_dim, T' / 64)`` or None (:func:`generate`); track: a matched base's
+        ``(quats (T, J, 4), root (T, 3))`` of the window (the model's hierarchy, file units), else None.
     """
     from keyfill.learn.gan.poses import relative_positions
 
@@ -451,7 +477,10 @@ def _fill_window(model: GanModel, key_frames: np.ndarray, key_quats: np.ndarray,
     poses, shift = centre_keys(poses, model.skeleton.up_axis, coords)
     if model.config.dna and dna is None:
         dna = dna_poses(model, key_frames=key_frames, seed=seed, key_quats=key_quats)
-    gq, groot = generate(model, key_frames, poses, seed, dna=dna, coords=coords, key_quats=key_quats, noise=noise)
+    if track is not None:  # in the key poses' frame: metres, re-centred
+        track = (track[0], track[1] * m - shift)
+    gq, groot = generate(model, key_frames, poses, seed, dna=dna, coords=coords, key_quats=key_quats, noise=noise,
+                         track=track)
     if coords is None:  # whole keys: exact in the ranges' angles, so the ranges hold between keys
         gq = snap_in_range(model.ranges, gq, key_frames, key_quats)
     return gq, (groot + shift) / m
@@ -503,8 +532,20 @@ def complete_with(model: GanModel, motion, keys, options, path):
         if options.dna_count is not None and model.config.dna:  # named as the option, not dna_poses' count
             check_count("dna_count", options.dna_count, model.config.max_frames)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)
-    filled, info = complete_motion(model, motion, keys, options.seed, dna)
-    info = {"model": str(options.model or path.name), **info, "exact_keys": bool(options.exact_keys)}
+    start, matched = None, {}
+    if options.library is not None and model.config.base != "match":
+        raise UsageError(f"library applies to a gan model on a matched base; this one corrects "
+                         f"{'nothing' if model.config.base == 'none' else 'an interpolation'} "
+                         f"(base {model.config.base!r})", params="library")
+    if model.config.base == "match":
+        from keyfill.learn.gan.matched_base import library_path, matched_start
+
+        library = library_path(model, options)
+        start, gaps = matched_start(model, motion, keys, options.seed, library)
+        matched = {"library": library.name, "matched_gaps": sum(g["filled_by"] == "match" for g in gaps),
+                   "gaps": gaps}
+    filled, info = complete_motion(model, motion, keys, options.seed, dna, start)
+    info = {"model": str(options.model or path.name), **info, **matched, "exact_keys": bool(options.exact_keys)}
     if options.dna is not None:
         info["dna"] = options.dna
     if options.exact_keys:

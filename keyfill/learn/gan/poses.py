@@ -61,6 +61,8 @@ class ClipPool:
             :mod:`keyfill.learn.gan.spline_base`), or empty when not needed.
         parents: ``(J,)`` the skeleton's parent indices (-1 at the root; for stretched sketch keys,
             ``GanConfig.sketch_stretch``), or None.
+        matched: per clip its rows of a matched set (a base ``"match"``,
+            :func:`keyfill.learn.gan.matched_base.load_rows`), or empty when not needed.
     """
 
     relative: tuple[np.ndarray, ...]
@@ -72,6 +74,7 @@ class ClipPool:
     groups: np.ndarray | None = None
     quats: tuple[np.ndarray, ...] = ()
     parents: np.ndarray | None = None
+    matched: tuple = ()
 
     def __len__(self) -> int:
         return len(self.root)
@@ -94,10 +97,10 @@ class ClipPool:
         return int(rng.choice(usable[g == content]))
 
 
-def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False) -> ClipPool:
+def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False, matched_set=None) -> ClipPool:
     """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`;
     ``labels``: with foot contacts and content groups (:mod:`keyfill.learn.gan.labels`); ``rotations``: with
-    the local rotations."""
+    the local rotations; ``matched_set``: with the rows of that matched set (a path)."""
     s = corpus.skeleton
     m = s.meters_per_unit
     clips = list(range(len(corpus))) if clips is None else [int(i) for i in clips]
@@ -111,10 +114,15 @@ def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False)
     root = tuple(np.asarray(corpus.root[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float64) * m for i in clips)
     quats = tuple(np.asarray(corpus.quats[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float32)
                   for i in clips) if rotations else ()
+    matched = ()
+    if matched_set:
+        from keyfill.learn.gan.matched_base import load_rows
+
+        matched = load_rows(matched_set, corpus, clips, m)
     if not labels:
-        return ClipPool(rel, root, float(corpus.fps), s.up_axis, quats=quats, parents=s.parents)
+        return ClipPool(rel, root, float(corpus.fps), s.up_axis, quats=quats, parents=s.parents, matched=matched)
     from keyfill.learn.gan.labels import clip_contacts, content_groups
 
     contacts, joints = clip_contacts(corpus, clips)
     return ClipPool(rel, root, float(corpus.fps), s.up_axis, contacts, joints, content_groups(corpus, clips), quats,
-                    s.parents)
+                    s.parents, matched)

@@ -34,7 +34,10 @@ the layout hold its last key, as the padding at inference does.
 **A base** (``GanConfig.base``, the third recipe): the pool holds the clips' rotations too, each key's
 rotations are turned with its pose (:func:`~keyfill.learn.gan.spline_base.turned_rotations`), and a
 sequence or window also carries ``base``, the RC-FK values of the interpolation through its keys, and
-``spline_root``, the interpolation of its key roots (:mod:`keyfill.learn.gan.spline_base`).
+``spline_root``, the interpolation of its key roots (:mod:`keyfill.learn.gan.spline_base`). With base
+``"match"`` every in-clip window is a row of the pool's matched set (:attr:`ClipPool.matched`): its crop and
+keys, and as ``base`` and ``spline_root`` the RC-FK values and root of match's in-between
+(:mod:`keyfill.learn.gan.matched_base`).
 
 **Real sequences for the discriminator** (:func:`real_crops`) are random crops
 of ``real_frames`` frames of single clips (clips shorter than that are not
@@ -70,6 +73,7 @@ import numpy as np
 from keyfill.errors import DataError
 from keyfill.learn.gan.dna import dna_count, draw_dna
 from keyfill.learn.gan.features import centre_keys, dense_input, nearest_key, sparse_input
+from keyfill.learn.gan.matched_base import matched_arrays
 from keyfill.learn.gan.poses import ClipPool, turn
 from keyfill.learn.gan.spline_base import spline_root, spline_values, turned_rotations
 
@@ -315,6 +319,24 @@ def _window_keys(rng: np.random.Generator, length: int, min_every: int, max_ever
     return np.array(frames, dtype=np.int64)
 
 
+def window_layout(rng: np.random.Generator, n: int, cfg) -> tuple[int, int, np.ndarray]:
+    """``(start, length, key frames from 0)`` of an in-clip window in a clip of ``n`` frames (the module
+    docstring: the LaFAN1 layout a quarter of the time, else the whole clip when it fits ``cfg.window_frames``,
+    else a crop of that many frames)."""
+    W = cfg.window_frames
+    if n >= LAFAN_CONTEXT + LAFAN_GAPS[0] + 1 and rng.random() < LAFAN_SHARE:
+        gap = int(rng.integers(LAFAN_GAPS[0], min(LAFAN_GAPS[1], n - LAFAN_CONTEXT - 1) + 1))
+        L = LAFAN_CONTEXT + gap + 1
+        frames = np.append(np.arange(LAFAN_CONTEXT), L - 1)
+    elif n <= W:
+        L = n
+        frames = _window_keys(rng, L, max(cfg.min_key_every, 30), max(min(cfg.max_key_every, 60), 30))
+    else:
+        L = W
+        frames = _window_keys(rng, L, cfg.min_key_every, cfg.max_key_every)
+    return int(rng.integers(n - L + 1)), L, frames
+
+
 def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=None, ranges=None) -> dict:
     """One in-clip training window of ``cfg.window_frames`` (``W``) frames as arrays (the module docstring).
 
@@ -326,20 +348,13 @@ def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=N
     spline arrays of :func:`training_sequence` too.
     """
     W = cfg.window_frames
-    c = pool.draw(rng, np.flatnonzero(pool.lengths >= 2))
-    n = int(pool.lengths[c])
-    lafan = n >= LAFAN_CONTEXT + LAFAN_GAPS[0] + 1 and rng.random() < LAFAN_SHARE
-    if lafan:
-        gap = int(rng.integers(LAFAN_GAPS[0], min(LAFAN_GAPS[1], n - LAFAN_CONTEXT - 1) + 1))
-        L = LAFAN_CONTEXT + gap + 1
-        frames = np.append(np.arange(LAFAN_CONTEXT), L - 1)
-    elif n <= W:
-        L = n
-        frames = _window_keys(rng, L, max(cfg.min_key_every, 30), max(min(cfg.max_key_every, 60), 30))
+    if cfg.base == "match":  # a row of the matched set: its clip, crop and keys, and match's in-between
+        c = pool.draw(rng, np.flatnonzero([len(rows) > 0 for rows in pool.matched]))
+        s, frames, matched_q, matched_root = pool.matched[c][int(rng.integers(len(pool.matched[c])))]
+        L = len(matched_q)
     else:
-        L = W
-        frames = _window_keys(rng, L, cfg.min_key_every, cfg.max_key_every)
-    s = int(rng.integers(n - L + 1))
+        c = pool.draw(rng, np.flatnonzero(pool.lengths >= 2))
+        s, L, frames = window_layout(rng, int(pool.lengths[c]), cfg)
     heading = float(rng.uniform(-np.pi, np.pi))
     rel = turn(pool.relative[c][s : s + L].astype(np.float64), heading, pool.up_axis)
     truth = rel.copy()
@@ -360,7 +375,9 @@ def clip_window(pool: ClipPool, rng: np.random.Generator, cfg, halves=(), bank=N
         {"dense": dense_input(W, frames, truth[frames], cfg.mask_scale, cfg.root_input, pool.up_axis)}
     out.update({"key_mask": key_mask, "key_root": key_roots(W, frames, truth[frames]), "valid": np.arange(W) < L,
                 "truth": truth, "contact": contact})
-    if ranges is not None:
+    if cfg.base == "match":
+        out.update(matched_arrays(ranges, W, matched_q, matched_root, heading, shift, pool.up_axis))
+    elif ranges is not None:
         key_quats = turned_rotations(pool.quats[c][s + frames], heading, pool.up_axis)
         out.update(_spline_arrays(ranges, cfg.base, W, frames, key_quats, truth[frames, 0]))
     if bank is not None:

@@ -84,9 +84,18 @@ def spline_values(ranges: JointRanges, num_frames: int, key_frames, key_quats: n
     through ``key_quats (K, J, 4)`` (local rotations, root first) at ``key_frames (K,)`` (increasing, within
     ``[0, T)``); frames after the last key hold it."""
     q, _ = _curves(base, num_frames, key_frames, key_rotations=np.asarray(key_quats, dtype=np.float64))
+    return track_values(ranges, q)
+
+
+def track_values(ranges: JointRanges, quats: np.ndarray) -> np.ndarray:
+    """``(6 + 3 D, T)`` float32: the RC-FK values of the local rotations ``quats (T, J, 4)`` (root first): the
+    root's 6D vector and each driven joint's range angles clipped into its range, through :func:`range_unmap`
+    (a track the generator corrects: an interpolation, :func:`spline_values`, or a matched motion,
+    :mod:`keyfill.learn.gan.matched_base`)."""
+    q = np.asarray(quats, dtype=np.float64)
     six = matrix_to_rotation_6d(R.quat_to_matrix(q[:, 0]))  # (T, 6)
     ang = np.clip(range_angles(ranges, q), ranges.lo, ranges.hi)  # (T, D, 3)
-    v = range_unmap(ang, ranges.lo, ranges.hi, LIMIT).reshape(num_frames, -1)
+    v = range_unmap(ang, ranges.lo, ranges.hi, LIMIT).reshape(len(q), -1)
     return np.concatenate([six, v], axis=1).T.astype(np.float32)
 
 

@@ -122,8 +122,12 @@ class GanTask(TrainingTask):
         self.train_clips = np.sort(order[n_val:])
         labels = self.cfg.in_clip_fraction > 0 and stage == "generator"  # contacts and content groups
         spline = self.cfg.base != "none" and stage == "generator"
-        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline)
-        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline) if n_val else None
+        matched = self.cfg.matched_set if self.cfg.base == "match" and stage == "generator" else None
+        if self.cfg.base == "match" and stage == "generator" and not matched:
+            raise UsageError("a gan model on base \"match\" trains on a matched set of its clips: give the GAN "
+                             "setting matched_set (benchmarks/gan_matched_set.py builds one)")
+        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline, matched)
+        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline, matched) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
         self.spline_ranges = self.ranges if spline else None  # the sampling's spline base

@@ -38,7 +38,8 @@ def validate_path(task) -> dict:
 
 def validate_generator(task) -> dict:
     """Mean key errors over the given coordinates (joints, and the root after Eq. 10's re-centring) and,
-    with Motion DNA, the errors of Eqs. 11-12 as mean joint distances; file units."""
+    with Motion DNA, the errors of Eqs. 11-12 as mean joint distances; file units. A model on a matched base
+    (trained on in-clip windows only: sequences across clips have no match) has only the window figures."""
     import torch
 
     from keyfill.learn.gan.losses import dna_losses, root_free
@@ -51,7 +52,7 @@ def validate_generator(task) -> dict:
     errors = {"key_joint_error": [], "key_root_error": [], "dna_error_1": [], "dna_error_2": []}
     dev = next(G.parameters()).device
     with torch.no_grad():
-        for _ in range(cfg.val_sequences):
+        for _ in range(cfg.val_sequences if cfg.base != "match" else 0):
             seq = task.sequences(rng, task.val_pool, 1)
             t = task.inputs(seq, dev)
             key_mask, dna, dna_valid = t["key_mask"], t["dna"], t["dna_valid"]

@@ -1,0 +1,153 @@
+"""The gan on a matched base (``GanConfig.base = "match"``, issue 45; docs/gan.md): a generator whose residual is
+zero gives ``--method match``'s in-between, the seed picks the match (two seeds differ, one seed twice is the
+same), training windows carry the match of their own keys, and a matched set of other clips is refused.
+
+The library and the corpus are the Mixamo test clip and variants of it (``test_match``'s), so no shared data is
+needed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from gan_helpers import built, fit, tiny_config, world
+from test_gan_recipe2 import RECIPE2
+from test_match import clip, variant
+
+from keyfill import io
+from keyfill.errors import UsageError
+from keyfill.learn.completion import CompleteOptions
+from keyfill.learn.corpus import load_corpus
+from keyfill.learn.gan import matched_base
+from keyfill.learn.gan.poses import clip_pool, turn
+from keyfill.learn.gan.ranges import estimate_ranges
+from keyfill.learn.gan.sampling import clip_window
+from keyfill.learn.gan.spline_base import track_values, turned_rotations
+from keyfill.learn.gan.task import GanTask
+from keyfill.learn.library import store
+from keyfill.learn.library.matcher import Matcher
+from keyfill.learn.registry import complete
+from keyfill.motion import Keys
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+MATCH = {**RECIPE2, "base": "match", "output_init": "zero", "in_clip_fraction": 1.0, "window_frames": 128,
+         "real_frames": 64, "min_key_every": 15, "max_key_every": 40, "max_gap": 60}
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("matched_clips")
+    m = clip()
+    paths = [folder / "a_walk.bvh"]
+    io.save(m, paths[0])
+    for n, (swing, speed) in enumerate([(0.15, 0.95), (0.25, 1.05), (0.35, 1.0)]):
+        paths.append(folder / f"b_variant_{n}.bvh")
+        io.save(variant(m, swing, speed), paths[-1])
+    return paths
+
+
+@pytest.fixture(scope="module")
+def setup(clips, tmp_path_factory):
+    """``(corpus, library folder, matched set path, config)``."""
+    root = tmp_path_factory.mktemp("matched")
+    library = root / "lib"
+    store.build(clips, library)
+    corpus = load_corpus([clips[0].parent], cache=False)
+    cfg = tiny_config(**{**MATCH, "matched_set": str(root / "set.npz")})
+    arrays = matched_base.match_rows(Matcher(store.load(library)), clips, corpus.skeleton, corpus.folded, cfg, 3)
+    matched_base.save(arrays, root / "set.npz")
+    return corpus, library, root / "set.npz", cfg
+
+
+@pytest.fixture(scope="module")
+def models(setup, tmp_path_factory):
+    """``(fresh, trained)``: matched-base model folders, untrained (zero output layer) and after 2 steps."""
+    corpus, _, _, cfg = setup
+    root = tmp_path_factory.mktemp("matched_models")
+    cfg = tiny_config(**{**cfg.to_json(), "max_frames": 256, "steps_per_epoch": 2})
+    fresh = GanTask(corpus, cfg, "generator", epochs=1)
+    return fresh.save(root / "fresh", built(fresh), []), fit(GanTask(corpus, cfg, "generator", epochs=1),
+                                                              root / "trained").model
+
+
+def gan_completion(folder, library, motion, keys, seed=0):
+    """``keyfill complete --method gan --model FOLDER --library LIB --seed SEED --feet free``'s Completion."""
+    return complete(motion, keys, "gan", CompleteOptions(model=str(folder), library=str(library), seed=seed,
+                                                         feet="free"))
+
+
+def test_a_fresh_matched_base_model_completes_as_the_match(setup, models):
+    _corpus, library, _, _ = setup
+    motion = clip()
+    keys = Keys(np.array([0, 20, 45, motion.num_frames - 1]))
+    for seed in (0, 1):
+        gan = gan_completion(models[0], library, motion, keys, seed)
+        match = complete(motion, keys, "match", CompleteOptions(library=str(library), seed=seed, feet="free",
+                                                                guard="off")).motion
+        a, b = world(gan.motion), world(match)
+        height = np.ptp(b[..., 1])
+        assert np.abs(a - b).mean() < 2e-3 * height  # RC-FK clips the match into the joints' ranges
+        assert gan.info["matched_gaps"] >= 1 and gan.info["library"] == library.name
+        assert np.array_equal(gan.motion.rotations[keys.frames], motion.rotations[keys.frames])
+        assert np.array_equal(gan.motion.positions[keys.frames], motion.positions[keys.frames])
+
+
+def test_the_seed_picks_the_match_two_differ_one_twice_is_the_same(setup, models):
+    _, library, _, _ = setup
+    motion = variant(clip(), 0.3, 1.0)
+    keys = Keys(np.array([0, 25, 50, motion.num_frames - 1]))
+    one = [gan_completion(models[1], library, motion, keys, seed).motion for seed in (0, 1, 1)]
+    assert np.array_equal(one[1].rotations, one[2].rotations) and np.array_equal(one[1].positions, one[2].positions)
+    assert np.abs(world(one[0]) - world(one[1])).max() > 1e-3 * np.ptp(world(one[0])[..., 1])
+
+
+def test_a_trained_matched_base_model_moves_off_the_match_and_hits_its_keys(setup, models):
+    _, library, _, _ = setup
+    motion = clip()
+    keys = Keys(np.array([0, 30, motion.num_frames - 1]))
+    out = gan_completion(models[1], library, motion, keys).motion
+    zero = gan_completion(models[0], library, motion, keys).motion
+    assert np.array_equal(out.rotations[keys.frames], motion.rotations[keys.frames])
+    assert np.abs(world(out) - world(zero)).max() > 1e-4
+
+
+def test_windows_carry_the_match_of_their_own_row(setup):
+    corpus, _, path, cfg = setup
+    ranges = estimate_ranges(corpus.skeleton, corpus.quats)
+    pool = clip_pool(corpus, labels=True, rotations=True, matched_set=str(path))
+    assert all(len(rows) == 3 for rows in pool.matched)
+    for seed in range(6):
+        w = clip_window(pool, np.random.default_rng(seed), cfg, ranges=ranges)
+        # the same draws as clip_window makes: the clip, the row, the heading
+        rng = np.random.default_rng(seed)
+        c = pool.draw(rng, np.flatnonzero([len(r) > 0 for r in pool.matched]))
+        _s, keys, q, root = pool.matched[c][int(rng.integers(len(pool.matched[c])))]
+        heading = float(rng.uniform(-np.pi, np.pi))
+        L = len(q)
+        assert np.array_equal(np.flatnonzero(w["key_mask"]), keys) and w["valid"].sum() == L
+        base = track_values(ranges, turned_rotations(q, heading, pool.up_axis))
+        assert np.allclose(w["base"][:, :L], base, atol=1e-5)
+        assert np.allclose(w["base"][:, L:], base[:, -1:], atol=1e-5)  # the last frame held
+        shift = turn(root, heading, pool.up_axis)[0] - w["spline_root"][0]
+        assert np.allclose(turn(root, heading, pool.up_axis) - shift, w["spline_root"][:L], atol=1e-5)
+        assert np.allclose(w["spline_root"][keys], w["truth"][keys, 0], atol=1e-4)  # the match hits the keys
+
+
+def test_a_matched_set_of_other_clips_or_no_set_is_refused(setup, tmp_path):
+    corpus, _, path, cfg = setup
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["quats"] = arrays["quats"][::-1].copy()  # rows no longer the clips at their keys
+    matched_base.save(arrays, tmp_path / "other.npz")
+    with pytest.raises(UsageError, match="matched_set.*not the clip at its keys"):
+        clip_pool(corpus, matched_set=str(tmp_path / "other.npz"))
+    (tmp_path / "junk.npz").write_bytes(b"\x80\x04junk")
+    with pytest.raises(UsageError, match="matched_set.*not a matched set"):
+        clip_pool(corpus, matched_set=str(tmp_path / "junk.npz"))
+    with pytest.raises(UsageError, match="matched_set"):
+        GanTask(corpus, tiny_config(**{**cfg.to_json(), "matched_set": ""}), "generator", epochs=1)
+    with pytest.raises(UsageError, match="in_clip_fraction"):
+        tiny_config(**{**cfg.to_json(), "in_clip_fraction": 0.8})

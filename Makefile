@@ -15,7 +15,7 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-installed
 OUT := out/demo
 
-.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-graphs transformer-model transformer-model-2 transformer-model-4 transformer-model-5 transformer-model-5q transformer-model-6 transformer-model-7 transformer-model-8 library pose-indexes gltf-validator clean
+.PHONY: demo test test-slow test-interop blender-extension blender-pictures test-floors fuzz corpora gan-models gan-match-model gan-graphs transformer-model transformer-model-2 transformer-model-4 transformer-model-5 transformer-model-5q transformer-model-6 transformer-model-7 transformer-model-8 library pose-indexes gltf-validator clean
 
 $(DEMO_STAMP): pyproject.toml constraints.txt models/bandai/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -140,6 +140,21 @@ $(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/we
 	$(GAN_TRAIN) --config benchmarks/gan_recipe2.json -o $(MODELS)/bandai2-gan-partial --stage generator \
 	    --path-model $(MODELS)/bandai2-gan-path --dna --partial-keys --threads 1 \
 	    $(call resume_if,$(MODELS)/bandai2-gan-partial)
+
+# Issue 45's gan on a matched base (docs/gan.md "On a matched base"): the matched set of the gan's corpus
+# (benchmarks/gan_matched_set.py: each fold by style matched from a library of the other, 6 in-clip windows per
+# clip, 150 s), then the generator of benchmarks/gan_recipe4_match.json (the third recipe correcting the match
+# instead of the spline, in-clip windows only) on one thread. Interrupted, it continues from its checkpoint.
+GAN_MATCHED := data/starts/gan12.npz
+
+$(GAN_MATCHED): benchmarks/gan_recipe4_match.json | $(BANDAI2) $(BANDAI1)
+	$(BIN)/python benchmarks/gan_matched_set.py --config benchmarks/gan_recipe4_match.json -o $@
+
+$(MODELS)/bandai2-gan-match/weights.safetensors: $(GAN_MATCHED)
+	$(GAN_TRAIN) --config benchmarks/gan_recipe4_match.json -o $(MODELS)/bandai2-gan-match --stage generator \
+	    --dna --threads 1 $(call resume_if,$(MODELS)/bandai2-gan-match)
+
+gan-match-model: $(MODELS)/bandai2-gan-match/weights.safetensors
 
 # `make -j2 gan-models` trains the two generators side by side, one core each
 gan-models: $(MODELS)/bandai2-gan/weights.safetensors $(MODELS)/bandai2-gan-partial/weights.safetensors

@@ -122,9 +122,9 @@ def summary(rows: list[dict]) -> dict:
             "keys_exact": all(r["exact"] for r in rows)}
 
 
-def quality(sets: dict[str, list[Motion]], methods=METHODS, fill=None) -> dict:
-    """Per set: the real clips' skating and jitter, and per key spacing and method the summary of its fills;
-    ``fill(method, motion, keys) -> Motion`` (default: :func:`run_method`'s motion)."""
+def quality(sets: dict[str, list[Motion]], methods=METHODS, fill=None, gaps=GAPS) -> dict:
+    """Per set: the real clips' skating and jitter, and per key spacing of ``gaps`` and method the summary of its
+    fills; ``fill(method, motion, keys) -> Motion`` (default: :func:`run_method`'s motion)."""
     fill = fill or (lambda method, m, keys: run_method(method, m, keys).motion)
     out = {}
     for name, clips in sets.items():
@@ -134,7 +134,7 @@ def quality(sets: dict[str, list[Motion]], methods=METHODS, fill=None) -> dict:
             "foot_skating_cm_s": float(np.nanmean([foot_skating(w[None], foot_joints(sk), sk.up_axis, m.fps,
                                                                 sk.meters_per_unit) for w, m in zip(real, clips)])),
             "jitter_m_s3": float(np.mean([jitter(w[None], m.fps, sk.meters_per_unit) for w, m in zip(real, clips)]))}}
-        for gap in GAPS:
+        for gap in gaps:
             row = {}
             for method in methods:
                 row[method] = summary([figures_of(m, keys_every(m, gap), fill(method, m, keys_every(m, gap)))

@@ -17,7 +17,7 @@ from test_gan_recipe2 import RECIPE2
 from test_match import clip, variant
 
 from keyfill import io
-from keyfill.errors import UsageError
+from keyfill.errors import ModelError, UsageError
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.corpus import load_corpus
 from keyfill.learn.gan import matched_base
@@ -28,6 +28,7 @@ from keyfill.learn.gan.spline_base import track_values, turned_rotations
 from keyfill.learn.gan.task import GanTask
 from keyfill.learn.library import store
 from keyfill.learn.library.matcher import Matcher
+from keyfill.learn.library.search import Costs, DnaPull, candidates
 from keyfill.learn.registry import complete
 from keyfill.motion import Keys
 
@@ -67,7 +68,7 @@ def models(setup, tmp_path_factory):
     """``(fresh, trained)``: matched-base model folders, untrained (zero output layer) and after 2 steps."""
     corpus, _, _, cfg = setup
     root = tmp_path_factory.mktemp("matched_models")
-    cfg = tiny_config(**{**cfg.to_json(), "max_frames": 256, "steps_per_epoch": 2})
+    cfg = tiny_config(**{**cfg.to_json(), "max_frames": 256, "steps_per_epoch": 2, "style_dim": 4, "dna_width": 8})
     fresh = GanTask(corpus, cfg, "generator", epochs=1)
     return fresh.save(root / "fresh", built(fresh), []), fit(GanTask(corpus, cfg, "generator", epochs=1),
                                                               root / "trained").model
@@ -151,3 +152,70 @@ def test_a_matched_set_of_other_clips_or_no_set_is_refused(setup, tmp_path):
         GanTask(corpus, tiny_config(**{**cfg.to_json(), "matched_set": ""}), "generator", epochs=1)
     with pytest.raises(UsageError, match="in_clip_fraction"):
         tiny_config(**{**cfg.to_json(), "in_clip_fraction": 0.8})
+
+
+def test_a_dna_motion_joins_the_search_and_its_own_stretches_fill_the_gap(setup):
+    """Keys cut from a motion the library lacks: without a DNA the gap is filled from the library; with that
+    motion as the DNA its own stretch is among the candidates, wins, and gives the motion back."""
+    _, library, _, _ = setup
+    lib = store.load(library)
+    dna = variant(clip(), 0.9, 0.8)  # arms swung far more than any library clip's
+    keys = Keys(np.array([0, 30]))
+    plain, report = Matcher(lib).fill(dna, keys)
+    joined = store.with_clip(lib, dna, "the Motion DNA")
+    assert joined.num_frames == lib.num_frames + dna.num_frames and len(joined.clips) == len(lib.clips) + 1
+    assert np.allclose(joined.features[lib.num_frames:], store.describe_motion(dna, lib.frames)["features"],
+                       atol=1e-2)  # the library's half precision
+    pull = DnaPull(np.asarray(joined.features[lib.num_frames:], dtype=np.float64), len(lib.clips))
+    pulled, pulled_report = Matcher(joined).fill(dna, keys, dna=pull)
+    assert report[0]["source"]["clip"] != "the Motion DNA" and pulled_report[0]["source"]["clip"] == "the Motion DNA"
+    truth = world(dna)[:31]
+    assert np.abs(world(pulled)[:31] - truth).mean() < 0.2 * np.abs(world(plain)[:31] - truth).mean()
+
+
+def test_a_dna_change_moves_the_output_more_than_a_seed_change(setup, models, tmp_path):
+    _, library, _, _ = setup
+    motion = clip()
+    keys = Keys(np.array([0, 30, motion.num_frames - 1]))
+    dnas = []
+    for n, swing in enumerate((0.9, -0.9)):
+        dnas.append(tmp_path / f"dna_{n}.bvh")
+        io.save(variant(motion, swing, 0.8), dnas[-1])
+
+    def run(seed, dna):
+        return world(complete(motion, keys, "gan", CompleteOptions(model=str(models[1]), library=str(library),
+                                                                   seed=seed, feet="free", dna=str(dna))).motion)
+
+    by_dna = np.abs(run(0, dnas[0]) - run(0, dnas[1])).mean()
+    by_seed = np.abs(run(0, dnas[0]) - run(1, dnas[0])).mean()
+    assert by_dna > by_seed and by_dna > 1e-3 * np.ptp(world(motion)[..., 1])
+
+
+def test_every_other_frame_of_the_dna_clip_starts_candidates(setup):
+    _, library, _, _ = setup
+    lib = store.load(library)
+    dna = variant(clip(), 0.9, 0.8)
+    joined = store.with_clip(lib, dna, "the Motion DNA")
+    matcher = Matcher(joined)
+    (gap,) = matcher.gaps(clip(), Keys(np.array([0, 20])))
+    costs = Costs(neighbours=2)
+    first = lib.num_frames
+    i, _, _ = candidates(joined, matcher.tree, [gap], costs)[0]
+    assert not np.any(i >= first)  # the keys are the library's first clip: its poses are the nearest
+    pull = DnaPull(np.asarray(joined.features[first:first + 3], dtype=np.float64), len(lib.clips))
+    i, L, cost = candidates(joined, matcher.tree, [gap], costs, pull)[0]
+    own = np.unique(i[i >= first]) - first
+    assert np.array_equal(own, np.arange(0, dna.num_frames - int(L[i >= first].min()), 2))
+    assert np.all(np.diff(cost) >= 0)
+
+
+def test_a_matched_base_without_its_library_or_a_spline_model_given_one_is_one_error(setup, models):
+    _, library, _, _ = setup
+    motion = clip()
+    keys = Keys(np.array([0, 30, motion.num_frames - 1]))
+    with pytest.raises(ModelError, match="not installed; give library LIB") as e:
+        complete(motion, keys, "gan", CompleteOptions(model=str(models[0]), feet="free"))
+    assert e.value.params == ("library",)
+    with pytest.raises(UsageError, match="library applies to a gan model on a matched base") as e:
+        complete(motion, keys, "gan", CompleteOptions(library=str(library), feet="free"))
+    assert e.value.params == ("library",)

@@ -40,6 +40,8 @@ from keyfill.errors import DataError, ModelError, UsageError
 from keyfill.learn.gan.poses import turn
 from keyfill.learn.gan.spline_base import track_values, turned_rotations
 
+#: the most poses of a Motion DNA motion that pull the library search (evenly over it, unless frames are listed)
+DNA_SEARCH_POSES = 64
 #: a matched row's rotations at its keys must be the corpus clip's within this angle (radians), its root
 #: within this distance (metres): else the set was built from other clips or another hierarchy
 KEY_ANGLE, KEY_METRES = 1e-3, 1e-4
@@ -165,16 +167,20 @@ def library_path(model, options) -> Path:
     folder = installed_models.shipped(name) if name else None
     if folder is None:
         raise ModelError(f"this gan model corrects a match from the motion library {name or '(none named)'!r}, "
-                         f"which is not installed; give one with --library")
+                         f"which is not installed; give library LIB, one of your own", params="library")
     return folder
 
 
-def matched_start(model, motion, keys, seed: int, library: str | os.PathLike):
+def matched_start(model, motion, keys, seed: int, library: str | os.PathLike, dna_motion=None, dna_frames=None):
     """``motion`` (on the model's skeleton and frame rate) filled between ``keys`` by the library at ``library``
     (``--method match``'s search and placement, seed ``seed``, feet free): the base a generator on a matched base
-    corrects. Returns ``(motion, per-gap report)``; a :class:`ModelError` when the library serves another
-    skeleton or frame rate."""
-    from keyfill.learn.library.store import served_by
+    corrects. With a Motion DNA motion ``dna_motion`` (on the model's skeleton), its poses (``dna_frames``, else
+    up to :data:`DNA_SEARCH_POSES` frames evenly over it) pull the search towards stretches near them and its own
+    stretches join the candidates (:class:`~keyfill.learn.library.search.DnaPull`). Returns ``(motion, per-gap
+    report)``; a :class:`ModelError` when the library serves another skeleton or frame rate."""
+    from keyfill.learn.library.matcher import Matcher
+    from keyfill.learn.library.search import DnaPull
+    from keyfill.learn.library.store import on_library, served_by, with_clip
     from keyfill.learn.match.model import load as load_library
     from keyfill.learn.rig_bridge import fits
 
@@ -184,4 +190,13 @@ def matched_start(model, motion, keys, seed: int, library: str | os.PathLike):
     if abs(lib.fps - motion.fps) > 1e-6 or not fits(served, motion, int(keys.frames[0])):
         raise ModelError(f"the motion library {Path(library).name} serves another skeleton or frame rate "
                          f"({lib.fps:g} fps) than this gan model")
-    return matcher.fill(motion.replace(keys=None), keys, seed)
+    pull = None
+    if dna_motion is not None:
+        dna_motion = on_library(dna_motion, lib.skeleton, lib.fps, what="the DNA motion")
+        n = dna_motion.num_frames
+        frames = np.unique(np.linspace(0, n - 1, min(n, DNA_SEARCH_POSES)).round().astype(np.int64)) \
+            if dna_frames is None else np.asarray(dna_frames, dtype=np.int64)
+        matcher = Matcher(with_clip(lib, dna_motion, "the Motion DNA"))
+        pull = DnaPull(np.asarray(matcher.library.features[lib.num_frames + frames], dtype=np.float64),
+                       len(lib.clips))
+    return matcher.fill(motion.replace(keys=None), keys, seed, dna=pull)

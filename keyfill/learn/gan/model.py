@@ -522,9 +522,8 @@ def complete_with(model: GanModel, motion, keys, options, path):
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
 
-    dna = None
+    dna = source = frames = None
     if options.dna is not None or options.dna_count is not None:
-        source, frames = (None, None)
         if options.dna is not None:
             dna_file, frames = parse_dna(options.dna)
             served = rig_bridge.Served(model.skeleton, model.fps, model.folded)
@@ -541,7 +540,7 @@ def complete_with(model: GanModel, motion, keys, options, path):
         from keyfill.learn.gan.matched_base import library_path, matched_start
 
         library = library_path(model, options)
-        start, gaps = matched_start(model, motion, keys, options.seed, library)
+        start, gaps = matched_start(model, motion, keys, options.seed, library, source, frames)
         matched = {"library": library.name, "matched_gaps": sum(g["filled_by"] == "match" for g in gaps),
                    "gaps": gaps}
     filled, info = complete_motion(model, motion, keys, options.seed, dna, start)

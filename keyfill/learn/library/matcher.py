@@ -36,7 +36,7 @@ from keyfill import rotations as R
 from keyfill.errors import DataError, UsageError
 from keyfill.learn.library.features import chain_world, describe, hips_world, pose_world, yaw
 from keyfill.learn.library.index import THRESHOLD, Tree
-from keyfill.learn.library.search import Costs, Gap, candidates, choose, path_start
+from keyfill.learn.library.search import Costs, DnaPull, Gap, candidates, choose, path_start
 from keyfill.learn.library.stitch import join, place
 from keyfill.motion import Keys, Motion
 
@@ -112,10 +112,11 @@ class Matcher:
         moved = np.linalg.norm(world[1][list(fr.feet)][:, [a, b]] - world[0][list(fr.feet)][:, [a, b]], axis=-1)
         return bool(moved.max() < STANDING_FOOT_M)
 
-    def fill(self, motion: Motion, keys: Keys, seed: int = 0,
-             settings: MatchSettings = MatchSettings()) -> tuple[Motion, list[dict]]:
+    def fill(self, motion: Motion, keys: Keys, seed: int = 0, settings: MatchSettings = MatchSettings(),
+             dna: DnaPull | None = None) -> tuple[Motion, list[dict]]:
         """``(motion with every gap filled, per-gap report)``; ``motion`` is on the library's skeleton and
-        frame rate, ``keys`` whole poses. Frames outside the keys hold the nearest key, as the splines do."""
+        frame rate, ``keys`` whole poses. Frames outside the keys hold the nearest key, as the splines do.
+        ``dna``: a Motion DNA's pull on the search."""
         if keys.partial:
             motion, keys = self.path_poses(motion, keys, seed, settings), Keys(keys.frames)
         lib = self.library
@@ -133,7 +134,7 @@ class Matcher:
             else:
                 todo.append(n)
             report.append(entry)
-        found = candidates(lib, self.tree, [gaps[n] for n in todo], settings.costs)
+        found = candidates(lib, self.tree, [gaps[n] for n in todo], settings.costs, dna)
         chosen: dict[int, tuple[int, int, float]] = {}
         for n, (i, L, cost) in zip(todo, found):
             if not len(i):

@@ -12,6 +12,8 @@ the heading (all in meters and radians; :mod:`keyfill.learn.library.features`)::
          + roughness * mean(roughness[i .. i+L])^2                       the source's own jitter ((m/s^3)^2)
          + velocity * (|V[i] - V(A)|^2 + |V[i+L] - V(B)|^2) / J          only where the frame next to a key is
                                                                         given too (m^2/s^2, per joint)
+         + dna * mean_s min_p |F[i + s L / 4] - P_p|^2 / J               only with a Motion DNA: its poses P,
+                                                                        s = 0..4 (m^2; :func:`dna_distance`)
 
 Candidates are found with the library's tree (:class:`keyfill.learn.library.index.Tree`): the
 :attr:`Costs.neighbours` poses nearest to key ``A`` start a stretch, those nearest to ``B`` end one; every
@@ -42,6 +44,8 @@ class Costs:
     margin: float = 3.0
     margin_abs: float = 0.002
     temperature: float = 0.01
+    #: weight of a Motion DNA's pull (the search's ``dna`` poses; without them the term is left out)
+    dna: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -60,13 +64,25 @@ class Gap:
     end_pose: bool = True
 
 
+@dataclass(frozen=True, eq=False)
+class DnaPull:
+    """A Motion DNA for the search: the features ``poses (P, D)`` of its poses, which pull the search towards
+    stretches near them (:func:`dna_distance`, weighted by :attr:`Costs.dna`), and the library ``clip`` that
+    holds the DNA's own motion (every other frame of it then starts candidates too, so its stretches compete
+    where the library has nothing like it), or None."""
+
+    poses: np.ndarray
+    clip: int | None = None
+
+
 def _wrap(x: np.ndarray) -> np.ndarray:
     return (x + np.pi) % (2 * np.pi) - np.pi
 
 
-def candidates(lib, tree, gaps: list[Gap], costs: Costs = Costs()) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+def candidates(lib, tree, gaps: list[Gap], costs: Costs = Costs(),
+               dna: DnaPull | None = None) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """For each gap, ``(starts i (C,), lengths L (C,), costs (C,))`` of its candidate stretches, cheapest first
-    (empty arrays when no clip of the library is long enough for the gap)."""
+    (empty arrays when no clip of the library is long enough for the gap); ``dna``: a Motion DNA's pull."""
     from keyfill.learn.library.features import to_ground
 
     J = lib.features.shape[1] // 3
@@ -85,6 +101,10 @@ def candidates(lib, tree, gaps: list[Gap], costs: Costs = Costs()) -> list[tuple
         fb = near[n, 1] if gap.end_pose else near[n, 1][:0]  # a root path's B has no pose to be near
         i = np.concatenate([np.repeat(fa, len(Ls)), np.repeat(fb, len(Ls)) - np.tile(Ls, len(fb))])
         L = np.concatenate([np.tile(Ls, len(fa)), np.tile(Ls, len(fb))])
+        if dna is not None and dna.clip is not None:  # the DNA's own stretches
+            own = np.arange(starts[dna.clip], starts[dna.clip + 1], 2)
+            i = np.concatenate([i, np.repeat(own, len(Ls))])
+            L = np.concatenate([L, np.tile(Ls, len(own))])
         ok = (i >= 0) & (i < lib.num_frames)
         i, L = i[ok], L[ok]
         ok = (i >= clip_start[i]) & (i + L < clip_stop[i])
@@ -117,9 +137,25 @@ def candidates(lib, tree, gaps: list[Gap], costs: Costs = Costs()) -> list[tuple
                 dv = (np.asarray(lib.features[hi], np.float64) - np.asarray(lib.features[lo], np.float64))
                 dv *= (lib.fps * (L / g) / np.maximum(hi - lo, 1))[:, None]
                 cost += costs.velocity * ((dv - v) ** 2).sum(-1) / J
+        if dna is not None:
+            cost += costs.dna * dna_distance(lib, i, L, dna.poses)
         order = np.argsort(cost, kind="stable")
         out.append((i[order], L[order], cost[order]))
     return out
+
+
+def dna_distance(lib, i: np.ndarray, L: np.ndarray, dna: np.ndarray) -> np.ndarray:
+    """``(C,)`` m^2: how far each stretch ``(i, L)`` is from the Motion DNA poses ``dna (P, D)`` (features): at five
+    frames evenly along it, the mean square joint distance to the nearest DNA pose, averaged."""
+    J = lib.features.shape[1] // 3
+    d = np.asarray(dna, dtype=np.float64)
+    dd = np.square(d).sum(1)
+    out = np.zeros(len(i))
+    for s in range(5):
+        F = np.asarray(lib.features[i + (L * s) // 4], dtype=np.float64)
+        d2 = np.square(F).sum(1)[:, None] - 2 * F @ d.T + dd[None]
+        out += np.maximum(d2.min(1), 0.0) / J
+    return out / 5
 
 
 def _range_means(lib, i: np.ndarray, j: np.ndarray) -> np.ndarray:

@@ -32,6 +32,7 @@ as a licence, stay).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -138,25 +139,45 @@ def describe_motion(motion: Motion, frames: Frames) -> dict[str, np.ndarray]:
             "roughness": third}
 
 
-def _clip_arrays(path: str, skeleton_json: dict, rig_map: dict | None, fps: float) -> dict:
-    """One clip of a build (a worker's job): its arrays on the library's skeleton and frame rate."""
-    from keyfill import interpolate, io
+def on_library(motion: Motion, skeleton: Skeleton, fps: float, rig_map: dict | None = None,
+               what: str = "the motion") -> Motion:
+    """``motion`` on a library's ``skeleton`` (the rig bridge) and frame rate ``fps`` (resampled); a
+    :class:`DataError` or :class:`ModelError` naming ``what`` when its rig cannot be brought there."""
+    from keyfill import interpolate
     from keyfill.learn.rig_bridge import on_model_skeleton
 
-    motion = io.load(path).replace(keys=None)
-    skeleton = Skeleton.from_json(skeleton_json)
-    served = served_by(skeleton, fps)
-    try:
-        motion = on_model_skeleton(motion, served, rig_map, what=f"{Path(path).name}")
-    except (DataError, ModelError) as e:
-        raise DataError(f"{path}: cannot join the library: {e}") from None
+    motion = on_model_skeleton(motion, served_by(skeleton, fps), rig_map, what=what)
     if abs(motion.fps - fps) > 1e-9 * fps:
         t = np.arange(0.0, (motion.num_frames - 1) / motion.fps + 1e-9, 1.0 / fps) * motion.fps
         rot, pos = interpolate.at_times(R.quat_continuous_np(motion.rotations, axis=0), motion.positions, t)
         motion = Motion(motion.skeleton, fps, rot, pos)
+    return motion.replace(skeleton=skeleton)
+
+
+def _clip_arrays(path: str, skeleton_json: dict, rig_map: dict | None, fps: float) -> dict:
+    """One clip of a build (a worker's job): its arrays on the library's skeleton and frame rate."""
+    from keyfill import io
+
+    skeleton = Skeleton.from_json(skeleton_json)
+    try:
+        motion = on_library(io.load(path).replace(keys=None), skeleton, fps, rig_map, what=f"{Path(path).name}")
+    except (DataError, ModelError) as e:
+        raise DataError(f"{path}: cannot join the library: {e}") from None
     if motion.num_frames < MIN_CLIP_FRAMES:
         return {"skipped": f"{motion.num_frames} frames (a clip needs {MIN_CLIP_FRAMES})"}
-    return describe_motion(motion.replace(skeleton=skeleton), frames_of(skeleton))
+    return describe_motion(motion, frames_of(skeleton))
+
+
+def with_clip(lib: Library, motion: Motion, name: str) -> Library:
+    """``lib`` with one more clip, ``motion`` (on its skeleton and frame rate, :func:`on_library`; at least
+    :data:`MIN_CLIP_FRAMES` frames), in memory (nothing is written): a Motion DNA clip whose own stretches join
+    the search (:func:`keyfill.learn.gan.matched_base.matched_start`)."""
+    a = describe_motion(motion, lib.frames)
+    n, N = motion.num_frames, lib.num_frames
+    arrays = {k: np.concatenate([np.asarray(getattr(lib, k)), a[k].astype(getattr(lib, k).dtype)])
+              for k in ("rotations", "hips", "features", "ground", "heading", "roughness")}
+    clip_of = np.concatenate([lib.clip_of, np.full(n, len(lib.clips), dtype=lib.clip_of.dtype)])
+    return dataclasses.replace(lib, clips=(*lib.clips, Clip(name, "", N, N + n)), clip_of=clip_of, **arrays)
 
 
 def served_by(skeleton: Skeleton, fps: float):

@@ -1,0 +1,235 @@
+"""The gan on a matched base (issue 45) as a generator: realism per seed, variety, best-of-5, Motion DNA's pull,
+speed; against cubic, match alone, the shipped gan (on the spline) and the shipped transformer.
+
+Held-out clips as ``bench_match.py`` (6 s clips of dataset-2 ``normal`` and of dataset-1 ``sad`` / ``feminine``,
+styles no gan corpus holds), keys every 60 and every 120 frames, feet free and the guard off for every method
+so that each is scored as it fills. Per method: foot skating (cm/s, against the true clip's floor), jitter
+(m/s^3), gap error (cm) and whether the keys are exact; for the gan on a matched base (``MODEL``), each of the
+seeds 0-4, the mean pairwise distance of their in-betweens (cm, variety) and the best of the five gap errors
+per clip, averaged. Motion DNA (keys every 60): each clip completed with the DNA of a run and of a wave
+(``--dna``, held-out ``normal`` clips of dataset-2): the Eq. 11 error of each in-between to the DNA it was given
+and to the other (mean over the DNA's poses of the nearest in-between frame's mean joint distance, cm), and how
+far changing the DNA moves the in-between against how far changing the seed (0 to 1) does, and the gap error
+with a DNA. Speed: 2,048 frames
+keyed every 120 on one CPU thread, library search included (median of 5, warm). The shipped transformer
+fills gaps of at most 63 frames: it is scored at keys every 60 only.
+
+    .venv/bin/python benchmarks/bench_gan_match.py data/models/bandai2-gan-match          # --clips 24 per set
+    .venv/bin/python benchmarks/bench_gan_match.py data/models/bandai2-gan-match --clips 4 --no-record
+
+Without the corpora it says ``skipped`` and exits 0. The run is recorded in
+``benchmarks/results/gan_match-<model folder>.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import results
+from bench_match import figures_of, keys_every, run_method, style_sets, summary, world
+
+from keyfill import io
+from keyfill.errors import DataError
+from keyfill.learn import registry, rig_bridge
+from keyfill.learn.completion import CompleteOptions
+from keyfill.learn.corpus import locate, model_hierarchy
+from keyfill.learn.gan.dna import dna_poses
+from keyfill.learn.gan.model import load_model
+from keyfill.learn.protocols.metrics import foot_joints, foot_skating, jitter
+from keyfill.learn.representative import root_free_poses
+from keyfill.motion import Motion
+
+SETS = ("normal (dataset-2)", "sad, feminine (dataset-1)")
+GAPS = (60, 120)
+SEEDS = 5
+BASELINES = ("cubic", "match raw", "gan", "transformer")
+DNAS = {"run": "dataset-2_run_normal_001.bvh", "wave": "dataset-2_wave-both-hands_normal_001.bvh"}
+
+
+def gan_match(model: str, m: Motion, keys, seed: int = 0, dna: str | None = None) -> Motion:
+    return registry.complete(m, keys, "gan", CompleteOptions(model=model, seed=seed, feet="free", guard="off",
+                                                             dna=dna)).motion
+
+
+def baseline(method: str, m: Motion, keys) -> Motion:
+    if method in ("gan", "transformer"):
+        return registry.complete(m, keys, method, CompleteOptions(feet="free", guard="off")).motion
+    return run_method(method, m, keys).motion
+
+
+def generator_figures(model: str, sets: dict[str, list[Motion]]) -> dict:
+    """Per set and key spacing: the baselines' summaries, each seed's, ``pairwise_cm`` and ``best_of_5_cm``."""
+    out = {}
+    for name in SETS:
+        clips = sets[name]
+        sk = clips[0].skeleton
+        real = [world(m)[None] for m in clips]
+        out[name] = {"real": {  # as bench_match.quality measures the real clips
+            "foot_skating_cm_s": float(np.nanmean([foot_skating(w, foot_joints(sk), sk.up_axis, m.fps,
+                                                                sk.meters_per_unit) for w, m in zip(real, clips)])),
+            "jitter_m_s3": float(np.mean([jitter(w, m.fps, sk.meters_per_unit) for w, m in zip(real, clips)]))}}
+        for gap in GAPS:
+            rows = {b: [] for b in BASELINES if b != "transformer" or gap <= 60}  # its gaps: at most 63 frames
+            seeds = {s: [] for s in range(SEEDS)}
+            pairwise = []
+            for m in clips:
+                keys = keys_every(m, gap)
+                between = np.setdiff1d(np.arange(m.num_frames), keys.frames)
+                for b, figures in rows.items():
+                    figures.append(figures_of(m, keys, baseline(b, m, keys)))
+                outs = []
+                for s in range(SEEDS):
+                    filled = gan_match(model, m, keys, s)
+                    seeds[s].append(figures_of(m, keys, filled))
+                    outs.append(world(filled)[between])
+                mpu = sk.meters_per_unit
+                pairwise.append(np.mean([np.linalg.norm(outs[a] - outs[b], axis=-1).mean() * mpu * 100
+                                         for a in range(SEEDS) for b in range(a + 1, SEEDS)]))
+            row = {b: summary(r) for b, r in rows.items()}
+            row["seeds"] = {str(s): summary(r) for s, r in seeds.items()}
+            row["pairwise_cm"] = float(np.mean(pairwise))
+            row["best_of_5_cm"] = float(np.mean([min(seeds[s][i]["error"] for s in range(SEEDS))
+                                                 for i in range(len(clips))]))
+            out[name][str(gap)] = row
+            print(f"{name}, keys every {gap}: " + "; ".join(
+                f"{k} {v['foot_skating_cm_s']:.1f}/{v['jitter_m_s3']:.0f}/{v['gap_error_cm']:.2f}"
+                for k, v in {**{b: row[b] for b in rows}, **{f"seed {s}": v for s, v in row["seeds"].items()}}
+                .items()) + f"; pairwise {row['pairwise_cm']:.1f} cm, best of 5 {row['best_of_5_cm']:.2f} cm "
+                f"(real {out[name]['real']['foot_skating_cm_s']:.1f}/{out[name]['real']['jitter_m_s3']:.0f})",
+                flush=True)
+    return out
+
+
+def dna_figures(model_path: str, sets: dict[str, list[Motion]]) -> dict:
+    """Per set, keys every 60: the Eq. 11 errors to the DNA given and to the other, and the DNA's and the
+    seed's effect on the in-between (mean joint distance, cm)."""
+    model = load_model(model_path)
+    served = rig_bridge.Served(model.skeleton, model.fps, model.folded)
+    folder = locate("bandai2")
+    files = {k: next(folder.rglob(v)) for k, v in DNAS.items()}
+    sources = {k: rig_bridge.on_model_skeleton(io.load(f), served, what="the DNA motion") for k, f in files.items()}
+    m_per_unit = model.skeleton.meters_per_unit
+    offsets = model.skeleton.offsets * m_per_unit
+
+    def poses(motion: Motion, frames) -> np.ndarray:
+        q, _ = model_hierarchy(model.skeleton, model.folded, motion.skeleton, motion.rotations[frames],
+                               motion.positions[frames])
+        return root_free_poses(q, offsets, model.skeleton.parents)
+
+    def eq11(p: np.ndarray, dna: np.ndarray) -> float:  # cm
+        d = np.linalg.norm(p[:, None] - dna[None], axis=-1).mean(-1)  # (T, P)
+        return float(d.min(0).mean() * 100)
+
+    out = {}
+    for name in SETS:
+        own, other, by_dna, by_seed, errors = [], [], [], [], []
+        for m in sets[name]:
+            keys = keys_every(m, 60)
+            between = np.setdiff1d(np.arange(m.num_frames), keys.frames)
+            done = {k: gan_match(model_path, m, keys, 0, str(f)) for k, f in files.items()}
+            for k, filled in done.items():
+                errors.append(figures_of(m, keys, filled)["error"])
+                dna = dna_poses(model, sources[k], key_frames=keys.frames)
+                o = "wave" if k == "run" else "run"
+                p = poses(filled, between)
+                own.append(eq11(p, dna))
+                other.append(eq11(p, dna_poses(model, sources[o], key_frames=keys.frames)))
+            w = {k: world(v)[between] for k, v in done.items()}
+            by_dna.append(np.linalg.norm(w["run"] - w["wave"], axis=-1).mean() * m_per_unit * 100)
+            s0, s1 = (world(gan_match(model_path, m, keys, s))[between] for s in (0, 1))
+            by_seed.append(np.linalg.norm(s0 - s1, axis=-1).mean() * m_per_unit * 100)
+        out[name] = {"eq11_own_cm": float(np.mean(own)), "eq11_other_cm": float(np.mean(other)),
+                     "dna_change_cm": float(np.mean(by_dna)), "seed_change_cm": float(np.mean(by_seed)),
+                     "gap_error_cm": float(np.mean(errors))}
+        f = out[name]
+        print(f"DNA {name}: Eq. 11 own {f['eq11_own_cm']:.2f} cm, other {f['eq11_other_cm']:.2f} cm; "
+              f"DNA change {f['dna_change_cm']:.2f} cm, seed change {f['seed_change_cm']:.2f} cm; gap error "
+              f"{f['gap_error_cm']:.2f} cm", flush=True)
+    return out
+
+
+def speed(model: str, clip: Motion, repeat: int = 5) -> dict:
+    import torch
+
+    torch.set_num_threads(1)
+    long = Motion(clip.skeleton, clip.fps, np.concatenate([clip.rotations] * 12)[:2048],
+                  np.concatenate([clip.positions] * 12)[:2048])
+    keys = keys_every(long, 120)
+    gan_match(model, long, keys)  # warm: the model and the library loaded once
+    runs = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        gan_match(model, long, keys)
+        runs.append(time.perf_counter() - t)
+    return {"frames": 2048, "key_every": 120, "threads": 1, "median_s": statistics.median(runs), "runs": runs}
+
+
+def goals(f: dict) -> list[dict]:
+    """Issue 45's goals on the figures."""
+    g = []
+    for name in SETS:
+        q = f["quality"][name]
+        real = q["real"]
+        rows = [q[str(gap)] for gap in GAPS]
+        per_seed = [(s, r) for r in rows for s in r["seeds"].values()]
+        sk = max(s["foot_skating_cm_s"] / real["foot_skating_cm_s"] for s, _ in per_seed)
+        ji = [s["jitter_m_s3"] / real["jitter_m_s3"] for s, _ in per_seed]
+        worse = max(s["gap_error_cm"] / r["match raw"]["gap_error_cm"] for s, r in per_seed)
+        cubic = max(s["gap_error_cm"] / r["cubic"]["gap_error_cm"] for s, r in per_seed)
+        g.append(results.goal(45, f"{name}, keys every 60 / 120, every seed: foot skating at most 1.5x real",
+                              f"at most {sk:.2f}x", sk <= 1.5))
+        g.append(results.goal(45, f"{name}, every seed: jitter 0.67x-1.5x real", f"{min(ji):.2f}x-{max(ji):.2f}x",
+                              min(ji) >= 0.67 and max(ji) <= 1.5))
+        g.append(results.goal(45, f"{name}, every seed: gap error at most match's and below cubic's",
+                              f"at most {worse:.2f}x match's, {cubic:.2f}x cubic's", worse <= 1 and cubic < 1))
+        exact = all(s["keys_exact"] for s, _ in per_seed)
+        g.append(results.goal(45, f"{name}: keys exact", str(exact), exact))
+        r60 = q["60"]
+        g.append(results.goal(45, f"{name}, keys every 60: 5 seeds at least 5 cm apart",
+                              f"{r60['pairwise_cm']:.1f} cm", r60["pairwise_cm"] >= 5))
+        g.append(results.goal(45, f"{name}, keys every 60: best-of-5 gap error below the shipped transformer's",
+                              f"{r60['best_of_5_cm']:.2f} against {r60['transformer']['gap_error_cm']:.2f} cm",
+                              r60["best_of_5_cm"] < r60["transformer"]["gap_error_cm"]))
+        d = f["dna"][name]
+        g.append(results.goal(45, f"{name}: Eq. 11 error to the DNA given at least 30 % below the other DNA's",
+                              f"{d['eq11_own_cm']:.2f} against {d['eq11_other_cm']:.2f} cm "
+                              f"({1 - d['eq11_own_cm'] / d['eq11_other_cm']:.0%} lower)",
+                              d["eq11_own_cm"] <= 0.7 * d["eq11_other_cm"]))
+        g.append(results.goal(45, f"{name}: changing the DNA moves the in-between at least as far as the seed",
+                              f"{d['dna_change_cm']:.2f} against {d['seed_change_cm']:.2f} cm",
+                              d["dna_change_cm"] >= d["seed_change_cm"]))
+    sp = f["speed"]
+    g.append(results.goal(45, "2,048 frames keyed every 120 in at most 0.3 s on one thread, search included",
+                          f"{sp['median_s']:.3f} s", sp["median_s"] <= 0.3))
+    return g
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("model", help="a gan model folder on a matched base")
+    ap.add_argument("--clips", type=int, default=24, help="clips per style set (default 24)")
+    results.add_option(ap)
+    args = ap.parse_args(argv)
+    bench = results.Run()
+    try:
+        sets = style_sets(args.clips)
+    except DataError as e:
+        print(f"skipped: {e}")
+        return 0
+    held_out = {k: sets[k] for k in SETS}
+    figures = {"clips": {k: len(v) for k, v in held_out.items()}, "model": Path(args.model).name,
+               "quality": generator_figures(args.model, held_out), "dna": dna_figures(args.model, held_out),
+               "speed": speed(args.model, held_out[SETS[0]][0])}
+    record = bench.record(f"gan_match-{Path(args.model).name}", figures, goals(figures), write=not args.no_record)
+    results.print_goals(record)
+    print(results.summary(record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -219,3 +219,23 @@ def test_a_matched_base_without_its_library_or_a_spline_model_given_one_is_one_e
     with pytest.raises(UsageError, match="library applies to a gan model on a matched base") as e:
         complete(motion, keys, "gan", CompleteOptions(library=str(library), feet="free"))
     assert e.value.params == ("library",)
+
+
+def test_lafan_windows_complete_through_the_matched_base(setup, models):
+    from keyfill.learn.gan.model import load_model
+    from keyfill.learn.match.model import load as load_library
+
+    corpus, library, _, _ = setup
+    quats, root = corpus.clip(0)
+    T = 41
+    q = np.stack([quats[:T], quats[20:20 + T]]).astype(np.float64)
+    r = np.stack([root[:T], root[20:20 + T]]).astype(np.float64)
+    keys = np.r_[np.arange(10), T - 1]
+    hidden_q, hidden_r = q.copy(), r.copy()
+    hidden_q[:, 10:T - 1], hidden_r[:, 10:T - 1] = np.nan, np.nan  # the protocol hides the frames between
+    got_q, got_r = load_model(models[0]).benchmark_method(library=library)(corpus.skeleton, hidden_q, hidden_r, keys)
+    want_q, want_r = load_library(library).benchmark_method()(corpus.skeleton, hidden_q, hidden_r, keys)
+    height = np.ptp(r[..., 1])
+    assert np.abs(got_r - want_r).max() < 1e-3 * height  # the matched root path
+    assert np.abs(np.abs((got_q * want_q).sum(-1)) - 1).max() < 1e-3  # the match's rotations (in the ranges)
+    assert np.array_equal(got_q[:, keys], q[:, keys])

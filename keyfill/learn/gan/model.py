@@ -138,11 +138,21 @@ class GanModel:
             "training": self.info,
         }
 
-    def benchmark_method(self, seed: int = 0):
-        """This model as a method of :func:`keyfill.learn.protocols.lafan1.evaluate` (the LaFAN1 protocol)."""
+    def benchmark_method(self, seed: int = 0, library: str | os.PathLike | None = None):
+        """This model as a method of :func:`keyfill.learn.protocols.lafan1.evaluate` (the LaFAN1 protocol); on a
+        matched base, the windows are matched from ``library`` (default: the shipped library it names) first."""
+
+        match = None
+        if self.config.base == "match":
+            from keyfill.learn.gan.matched_base import library_path
+            from keyfill.learn.match.model import load as load_library
+
+            folder = library if library is not None else library_path(self, None)
+            match = load_library(folder).benchmark_method()
 
         def method(skeleton: Skeleton, quats, root, keys):
-            return complete_windows(self, skeleton, quats, root, keys, seed)
+            starts = None if match is None else match(skeleton, quats, root, keys)
+            return complete_windows(self, skeleton, quats, root, keys, seed, starts)
 
         method.folded = self.folded  # the protocol should prepare clips as the model's corpus was
         return method
@@ -553,13 +563,17 @@ def complete_with(model: GanModel, motion, keys, options, path):
     return Completion(filled, info)
 
 
-def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys, seed: int = 0):
+def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, root: np.ndarray, keys, seed: int = 0,
+                     starts=None):
     """Fill windows that share their ``keys`` (the benchmark's arrays; numpy in, numpy out).
 
     Args:
         skeleton: the windows' skeleton (as the model's corpus was prepared: folded or not).
         quats: ``(B, T, J, 4)`` local quaternions, root: ``(B, T, 3)`` (only key frames are read).
         keys: ``(K,)`` increasing frames.
+
+        starts: for a model on a matched base, ``(quats (B, T, J, 4), root (B, T, 3))``: each window's
+            matched in-between, on the windows' skeleton (:meth:`GanModel.benchmark_method` makes them).
 
     Returns ``(quats, root)`` of all ``T`` frames with exact keys (the shared smooth correction).
     """
@@ -587,7 +601,11 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
     k0, end = int(k[0]), int(k[-1])
     dna = dna_poses(model, key_frames=k, seed=seed, key_quats=np.asarray(quats)[:, k]) if model.config.dna \
         else None  # as complete: from the bank, or the keys' own poses
-    gq, groot = generate(model, k - k0, poses, seed, dna=dna, key_quats=np.asarray(quats)[:, k])
+    track = None
+    if starts is not None:  # in the key poses' frame: metres, re-centred
+        span = slice(k0, end + 1)
+        track = (np.asarray(starts[0])[:, span], np.asarray(starts[1])[:, span] * m - np.array(shifts)[:, None])
+    gq, groot = generate(model, k - k0, poses, seed, dna=dna, key_quats=np.asarray(quats)[:, k], track=track)
     out_q, out_r = [], []
     undriven = _undriven(model, skeleton.num_joints)
     for b in range(len(poses)):
@@ -595,6 +613,8 @@ def complete_windows(model: GanModel, skeleton: Skeleton, quats: np.ndarray, roo
         src = window_motion(skeleton, np.nan_to_num(np.asarray(quats[b], dtype=np.float64)),
                             np.nan_to_num(np.asarray(root[b], dtype=np.float64)))
         rot, pos, _ = model_take(skeleton, False, src, k, undriven)
+        if starts is not None:  # the undriven joints as the match has them
+            rot[k0 : end + 1] = np.asarray(starts[0][b], dtype=np.float64)[k0 : end + 1]
         driven = np.concatenate([[0], model.ranges.driven])
         rot[k0 : end + 1, driven] = snap_in_range(model.ranges, gq[b], k - k0, rot[k])[:, driven]
         pos[k0 : end + 1, 0] = (groot[b] + shifts[b]) / m

@@ -41,12 +41,16 @@ from keyfill.learn.registry import ALIASES, METHODS
                    "(.onnx) written by 'keyfill export'.")
 @click.option("--exact-keys/--no-exact-keys", default=True, show_default=True,
               help="Make frames at keys equal the input keys exactly (learned methods correct smoothly).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed for methods with randomness.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed for methods with randomness: match and a gan model on a matched base take another good "
+                   "stretch of their library per seed (0: the best); the shipped spline-base gan only draws its "
+                   "Motion DNA from its bank by it, which moves its in-betweens by millimetres (docs/gan.md).")
 @click.option("--device", default="cpu", show_default=True, help="Torch device for learned methods.")
 @click.option("--dna", metavar="FILE[:FRAMES]",
               help="Motion DNA (gan models trained with --dna): the representative frames of FILE, or the listed "
-                   "frames of it (e.g. salsa.bvh:12,80,140), steer the style of the in-betweens. Without it the "
-                   "poses are drawn from the model's own bank by --seed.")
+                   "frames of it (e.g. salsa.bvh:12,80,140), steer the style of the in-betweens; a gan model on a "
+                   "matched base also searches its library for stretches near the DNA's poses and among the DNA's "
+                   "own. Without it the poses are drawn from the model's own bank by --seed.")
 @click.option("--dna-count", type=int, metavar="K",
               help="How many representative frames of the DNA file (or the bank) to use (default: one per 3 s of "
                    "the gaps between keys).")
@@ -61,8 +65,9 @@ from keyfill.learn.registry import ALIASES, METHODS
               help="Height of the ground along the up axis, in IN's units, for --feet (default: the lowest foot "
                    "at the keys).")
 @click.option("--library", type=click.Path(exists=True, file_okay=False), metavar="LIB",
-              help="Motion library for --method match (keyfill library build) [default: the shipped library of "
-                   "the Bandai-Namco skeleton, models/bandai, CC BY-NC 4.0].")
+              help="Motion library for --method match, or for a gan model on a matched base (keyfill library "
+                   "build) [default: the shipped library of the Bandai-Namco skeleton, models/bandai, CC BY-NC 4.0; "
+                   "for a gan, the one its model names].")
 @click.option("--guard", type=click.Choice(["fallback", "warn", "off"]),
               help="What the human methods (transformer, gan, match) do with gaps whose keys or output are unlike "
                    "anything their model or library knows (docs/match.md): fallback (the default) fills them with "

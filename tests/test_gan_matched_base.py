@@ -7,6 +7,8 @@ needed."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -239,3 +241,33 @@ def test_lafan_windows_complete_through_the_matched_base(setup, models):
     assert np.abs(got_r - want_r).max() < 1e-3 * height  # the matched root path
     assert np.abs(np.abs((got_q * want_q).sum(-1)) - 1).max() < 1e-3  # the match's rotations (in the ranges)
     assert np.array_equal(got_q[:, keys], q[:, keys])
+
+
+#: the shipped gan models' output on the bundled example, recorded with the code before the matched base
+#: (f8563e3): (seed, dna, partial) -> SHA-256 of the rotations' and positions' bytes. Retraining a shipped
+#: model changes these; the code around a spline-base or second-recipe model must not.
+OLD_BYTES = {
+    (1, None, False): "d29e375e4c6df2ef2819f4bded0716035d9ccd8f22de0572e90e08eb1327a026",
+    (2, "keys.usda", False): "13941d60d18d8cc0021ae165bbcff63a3e11a0e6b23416a9fe3862fdb24d6503",
+    (1, None, True): "9fdd6303a1e970a1dea262667bd062679dad9e7954b6f7a33ec3e0438711d7f4",
+}
+
+
+@pytest.mark.parametrize(("seed", "dna", "partial"), list(OLD_BYTES))
+def test_the_shipped_models_give_their_old_bytes(seed, dna, partial):
+    import hashlib
+
+    from keyfill.learn.gan.model import DEFAULT_MODEL, PARTIAL_MODEL
+
+    if DEFAULT_MODEL is None or PARTIAL_MODEL is None:
+        pytest.skip("the model distribution models/bandai is not installed")
+    example = Path(__file__).parents[1] / "examples" / "human"
+    m = io.load(example / "keys.usda")
+    keys = m.keys
+    if partial:  # the hips' positions only: the second recipe's partial-key model
+        mask = np.eye(1, m.num_joints, 1, dtype=bool).repeat(len(keys.frames), 0)
+        keys = Keys(keys.frames, given="position", mask=mask)
+    dna_file = None if dna is None else str(example / dna)
+    out = complete(m, keys, "gan", CompleteOptions(seed=seed, dna=dna_file, feet="free")).motion
+    got = hashlib.sha256(np.ascontiguousarray(out.rotations).tobytes() + np.ascontiguousarray(out.positions).tobytes())
+    assert got.hexdigest() == OLD_BYTES[(seed, dna, partial)]

@@ -159,6 +159,9 @@ def test_reconstruction_loss_matches_a_hand_computed_value():
     valid = torch.tensor([[True, True, True, True], [True, True, False, False]])
     # row 0: frames 1, 2 between keys, joints 1-2: (0.25 / 2 + 0.04 / 2) / 2 = 0.0725; row 1: frame 1, 0
     assert math.isclose(float(L.reconstruction_loss(pos, truth, key, valid)), (0.0725 + 0.0) / 2, rel_tol=1e-6)
+    # loss_form "distance": the distances 0.5 and 0.2 m in place of their squares: (0.5 / 2 + 0.2 / 2) / 2 / 2
+    got = float(L.reconstruction_loss(pos, truth, key, valid, "distance"))
+    assert math.isclose(got, (0.175 + 0.0) / 2, abs_tol=2e-4)  # sqrt(d^2 + 1e-8): 1e-4 m at d = 0
     none = torch.ones(2, 4, dtype=torch.bool)
     assert float(L.reconstruction_loss(pos, truth, none, valid)) == 0.0
 
@@ -176,6 +179,8 @@ def test_foot_sliding_loss_matches_a_hand_computed_value():
     # pair, and 1.5 m/s along z in the last: (9 + 9 + 9 + 2.25) / 5 at 30 fps
     got = float(L.foot_sliding_loss(root, rel, torch.tensor([1, 2]), contact, 30.0, up=1))
     assert math.isclose(got, (0 + 0 + 9 + 9 + 9 + 2.25) / 5, rel_tol=1e-5)
+    got = float(L.foot_sliding_loss(root, rel, torch.tensor([1, 2]), contact, 30.0, 1, "distance"))  # speeds, m/s
+    assert math.isclose(got, (0 + 0 + 3 + 3 + 45**0.5 / 2) / 5, abs_tol=2e-4)
     assert float(L.foot_sliding_loss(root, rel, torch.tensor([1, 2]), contact & False, 30.0, 1)) == 0.0
 
 

@@ -76,10 +76,12 @@ CHOICES = {
     "root_weight_schedule": ("steps", "run"),
     "base": ("none", "spline", "linear", "match"),
     "dna_source": ("any", "own"),
+    "loss_form": ("squared", "distance"),
 }
 #: settings added after models were shipped, with their defaults: :meth:`GanConfig.to_json` leaves them out at
 #: the default, so the config.json of older folders and what ``--resume`` compares keep their bytes
-LATER_DEFAULTS = {"dna_norm": False, "dna_source": "any", "sketch_stretch": 0.0, "library": "", "matched_set": ""}
+LATER_DEFAULTS = {"dna_norm": False, "dna_source": "any", "sketch_stretch": 0.0, "library": "", "matched_set": "",
+                  "loss_form": "squared"}
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
@@ -194,6 +196,10 @@ class GanConfig:
             ``partial_keys``): partial keys have no rotations to interpolate. ``"match"``: the in-between
             ``--method match`` gives through the keys, its rotations and its root path
             (:mod:`keyfill.learn.gan.matched_base`, issue 45).
+        loss_form: the reconstruction and foot-sliding terms as ``"squared"`` (mean squared joint distance,
+            m^2, and squared foot speed, (m/s)^2: the second recipe's) or ``"distance"`` (mean joint distance, m, and
+            foot speed, m/s: the figures the benchmarks report; a squared error rewards pulling every frame towards
+            the mean motion, which lowered the squared error of a matched base and raised its mean distance).
         library: with base ``"match"``, the shipped motion library (a name of
             :func:`keyfill.learn.installed_models.shipped`) the base is matched from when ``complete`` is given
             no ``--library``.
@@ -258,6 +264,7 @@ class GanConfig:
     recon_weight: float = 0.0
     foot_weight: float = 0.0
     base: str = "none"
+    loss_form: str = "squared"
     library: str = ""
     matched_set: str = ""
     seed: int = 0

@@ -175,15 +175,21 @@ def key_root_loss(root, key_root, key_mask):
     return d.mean()
 
 
-def reconstruction_loss(positions, truth, key_mask, valid):
+def _form(squared, form: str):
+    """``squared`` distances as they are (``"squared"``), or their square roots (``"distance"``; ``GanConfig.loss_form``,
+    kept off the root's infinite slope at 0)."""
+    return squared if form == "squared" else (squared + 1e-8).sqrt()
+
+
+def reconstruction_loss(positions, truth, key_mask, valid, form: str = "squared"):
     """The second recipe's supervised term (not in the paper): per row, the mean over its valid frames between
-    keys and its non-root joints of the squared distance to the ground truth; the mean over rows with such
-    frames (zero when none has).
+    keys and its non-root joints of the squared distance to the ground truth (``form`` ``"distance"``: of the
+    distance); the mean over rows with such frames (zero when none has).
 
     ``positions``, ``truth``: ``(B, T, J, 3)`` root-relative (joint 0 skipped); ``key_mask``, ``valid``: ``(B, T)``
     bool (valid: frames that have a ground truth).
     """
-    d = ((positions[:, :, 1:] - truth[:, :, 1:]) ** 2).sum(-1).mean(-1)  # (B, T)
+    d = _form(((positions[:, :, 1:] - truth[:, :, 1:]) ** 2).sum(-1), form).mean(-1)  # (B, T)
     m = (valid & ~key_mask).to(d.dtype)
     n = m.sum(1)
     rows = n > 0
@@ -192,9 +198,10 @@ def reconstruction_loss(positions, truth, key_mask, valid):
     return ((d * m).sum(1)[rows] / n[rows]).mean()
 
 
-def foot_sliding_loss(root, relative, joints, contact, fps: float, up: int):
+def foot_sliding_loss(root, relative, joints, contact, fps: float, up: int, form: str = "squared"):
     """The foot-sliding term: the mean squared horizontal speed, (m/s)^2, of the foot joints over the frame pairs
-    ``(t, t + 1)`` that the labels have in contact at both frames (zero when there is none).
+    ``(t, t + 1)`` that the labels have in contact at both frames (zero when there is none); ``form``
+    ``"distance"``: the mean speed, m/s.
 
     Args:
         root: ``(B, T, 3)`` root path; ``relative``: ``(B, T, J, 3)`` root-relative positions (world axes), metres.
@@ -208,4 +215,4 @@ def foot_sliding_loss(root, relative, joints, contact, fps: float, up: int):
     count = both.sum()
     if float(count) == 0:
         return root.sum() * 0
-    return ((v**2).sum(-1) * both).sum() / count
+    return (_form((v**2).sum(-1), form) * both).sum() / count

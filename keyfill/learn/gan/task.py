@@ -474,13 +474,13 @@ class GanTask(TrainingTask):
                 truth = torch.as_tensor(a["truth"], device=dev)
                 valid = torch.as_tensor(a["valid"], device=dev)
                 if cfg.recon_weight:
-                    out["recon"] = L.reconstruction_loss(rel, truth, key_mask, valid)
+                    out["recon"] = L.reconstruction_loss(rel, truth, key_mask, valid, cfg.loss_form)
                     total = total + cfg.recon_weight * out["recon"]
                 if cfg.foot_weight and len(self.train_pool.foot_joints):
                     up = 1 if self.skeleton.up_axis == "Y" else 2
                     out["foot"] = L.foot_sliding_loss(root, rel, self.train_pool.foot_joints,
                                                       torch.as_tensor(a["contact"], device=dev),
-                                                      float(self.corpus.fps), up)
+                                                      float(self.corpus.fps), up, cfg.loss_form)
                     total = total + cfg.foot_weight * out["foot"]
             if cfg.dna:
                 out["dna_1"], out["dna_2"] = L.dna_losses(L.root_free(quats, rel), dna, dna_valid, key_mask,

@@ -109,6 +109,11 @@ SECTIONS = {
         "pre-fill on held-out clips, keys every 30 and 60 (issue 46; the shipped model never trained on such "
         "starts).",
         S.transformer_start),
+    "gan_match": Section(
+        "The gan on a matched base: `{variant}`", "A generator correcting `--method match`'s in-between (issue 45), "
+        "per seed and as a distribution against cubic, match alone and the shipped gan and transformer on held-out "
+        "clips, keys every 60 and 120; Motion DNA's pull and speed (docs/gan.md, \"On a matched base\").",
+        S.gan_match),
     "feet": Section(
         "Feet on the ground: raw and locked", "Every method with its feet free and locked (`keyfill complete --feet "
         "lock`), on held-out clips of styles no shipped model saw (docs/feet.md).", S.feet),

@@ -223,6 +223,20 @@ def test_a_matched_base_without_its_library_or_a_spline_model_given_one_is_one_e
     assert e.value.params == ("library",)
 
 
+def test_a_gan_on_a_matched_base_locks_its_feet_by_default_as_match_does(setup, models):
+    _, library, _, _ = setup
+    motion = clip()
+    keys = Keys(np.array([0, 30, motion.num_frames - 1]))
+
+    def run(feet):
+        return complete(motion, keys, "gan", CompleteOptions(model=str(models[1]), library=str(library), feet=feet))
+
+    default, locked, free = run(None), run("lock"), run("free")
+    assert default.info["feet"] == "lock" and "feet" not in free.info
+    assert np.array_equal(default.motion.rotations, locked.motion.rotations)
+    assert not np.array_equal(default.motion.rotations, free.motion.rotations)
+
+
 def test_lafan_windows_complete_through_the_matched_base(setup, models):
     from keyfill.learn.gan.model import load_model
     from keyfill.learn.match.model import load as load_library
@@ -243,20 +257,16 @@ def test_lafan_windows_complete_through_the_matched_base(setup, models):
     assert np.array_equal(got_q[:, keys], q[:, keys])
 
 
-#: the shipped gan models' output on the bundled example, recorded with the code before the matched base
-#: (f8563e3): (seed, dna, partial) -> SHA-256 of the rotations' and positions' bytes. Retraining a shipped
-#: model changes these; the code around a spline-base or second-recipe model must not.
-OLD_BYTES = {
-    (1, None, False): "d29e375e4c6df2ef2819f4bded0716035d9ccd8f22de0572e90e08eb1327a026",
-    (2, "keys.usda", False): "13941d60d18d8cc0021ae165bbcff63a3e11a0e6b23416a9fe3862fdb24d6503",
-    (1, None, True): "9fdd6303a1e970a1dea262667bd062679dad9e7954b6f7a33ec3e0438711d7f4",
-}
+#: the shipped gan models' output on the bundled example, every 4th frame, recorded with the code before the
+#: matched base (f8563e3; the same bytes as this code's on the recording machine): keys ``SEED-DNA-PARTIAL-r``
+#: (rotations) and ``-p`` (positions). Retraining a shipped model changes them; the code around a spline-base or
+#: second-recipe model must not. Compared within float rounding: another CPU rounds a float32 network's sums
+#: in another order (the bytes differ there at the 1e-7 level), a change of the code by far more.
+OLD_OUTPUTS = Path(__file__).parent / "data" / "gan_shipped_outputs.npz"
 
 
-@pytest.mark.parametrize(("seed", "dna", "partial"), list(OLD_BYTES))
-def test_the_shipped_models_give_their_old_bytes(seed, dna, partial):
-    import hashlib
-
+@pytest.mark.parametrize(("seed", "dna", "partial"), [(1, None, False), (2, "keys.usda", False), (1, None, True)])
+def test_the_shipped_models_give_their_old_output(seed, dna, partial):
     from keyfill.learn.gan.model import DEFAULT_MODEL, PARTIAL_MODEL
 
     if DEFAULT_MODEL is None or PARTIAL_MODEL is None:
@@ -268,6 +278,9 @@ def test_the_shipped_models_give_their_old_bytes(seed, dna, partial):
         mask = np.eye(1, m.num_joints, 1, dtype=bool).repeat(len(keys.frames), 0)
         keys = Keys(keys.frames, given="position", mask=mask)
     dna_file = None if dna is None else str(example / dna)
-    out = complete(m, keys, "gan", CompleteOptions(seed=seed, dna=dna_file, feet="free")).motion
-    got = hashlib.sha256(np.ascontiguousarray(out.rotations).tobytes() + np.ascontiguousarray(out.positions).tobytes())
-    assert got.hexdigest() == OLD_BYTES[(seed, dna, partial)]
+    out = complete(m, keys, "gan", CompleteOptions(seed=seed, dna=dna_file)).motion  # feet free by default
+    old = np.load(OLD_OUTPUTS)
+    name = f"{seed}-{'dna' if dna else None}-{partial}"
+    scale = np.abs(old[f"{name}-p"]).max()  # the farthest joint offset (cm): what float32 rounds against
+    assert np.abs(out.rotations[::4] - old[f"{name}-r"]).max() < 1e-5
+    assert np.abs(out.positions[::4] - old[f"{name}-p"]).max() < 1e-5 * scale

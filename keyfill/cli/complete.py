@@ -60,7 +60,8 @@ from keyfill.learn.registry import ALIASES, METHODS
                    "through retargeting (see 'keyfill info IN --rig' and docs/retarget.md).")
 @click.option("--feet", type=click.Choice(["lock", "free"]),
               help="lock: hold each foot still while it touches the ground (legs solved with two-bone IK, keys "
-                   "exact; docs/feet.md); free (the default): the method's output as it is.")
+                   "exact; docs/feet.md); free: the method's output as it is [default: lock for --method match and a gan "
+                   "on a matched base, whose steps are real motion; free for the others].")
 @click.option("--ground", type=float, metavar="HEIGHT",
               help="Height of the ground along the up axis, in IN's units, for --feet (default: the lowest foot "
                    "at the keys).")

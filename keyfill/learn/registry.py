@@ -391,12 +391,15 @@ def reported(m: Method, motion: Motion, keys: Keys, options: CompleteOptions, re
 
 def with_feet(m: Method, result: Completion, keys: Keys, options: CompleteOptions, source: Motion) -> Completion:
     """``result`` with its feet locked (:func:`keyfill.characters.feet.lock_feet`) when ``options.feet`` is
-    ``"lock"``, or is None and the method's default (:attr:`Method.feet`) is; ``info`` then gives the foot
-    skating (cm/s) before and after. The default is ``"free"`` for the learned methods and splines: measured
-    on held-out styles, locking lowers their foot skating by 5-15 % only and can raise the gap error by up to
-    19 % (docs/feet.md); ``"lock"`` for ``match``, whose real steps it keeps planted (docs/match.md). The
-    feet are locked in ``result``'s own arrays unless they may be ``source``'s (the input's) too."""
-    if (options.feet or m.feet) != "lock":
+    ``"lock"``, or is None and the default is; ``info`` then gives the foot skating (cm/s) before and after.
+    The default is the method's (:attr:`Method.feet`): ``"free"`` for the learned methods and splines, as
+    measured on held-out styles locking lowers their foot skating by 5-15 % only and can raise the gap error by
+    up to 19 % (docs/feet.md); ``"lock"`` for ``match``, whose real steps it keeps planted (docs/match.md), and
+    for any result built on matched real motion (``info`` has ``matched_gaps``: a gan on a matched base, whose
+    skating locking lowers by 13-23 % and gap error by up to 2 %, docs/gan.md). The feet are locked in
+    ``result``'s own arrays unless they may be ``source``'s (the input's) too."""
+    default = "lock" if "matched_gaps" in result.info else m.feet
+    if (options.feet or default) != "lock":
         return result
 
     from keyfill.characters.feet import lock_feet

@@ -3,7 +3,9 @@ speed; against cubic, match alone, the shipped gan (on the spline) and the shipp
 
 Held-out clips as ``bench_match.py`` (6 s clips of dataset-2 ``normal`` and of dataset-1 ``sad`` / ``feminine``,
 styles no gan corpus holds), keys every 60 and every 120 frames, feet free and the guard off for every method
-so that each is scored as it fills. Per method: foot skating (cm/s, against the true clip's floor), jitter
+so that each is scored as it fills
+(``--feet lock``: the gan on a matched base and match with their feet locked, the default of both, the record
+``gan_match-<model>-lock``). Per method: foot skating (cm/s, against the true clip's floor), jitter
 (m/s^3), gap error (cm) and whether the keys are exact; for the gan on a matched base (``MODEL``), each of the
 seeds 0-4, the mean pairwise distance of their in-betweens (cm, variety) and the best of the five gap errors
 per clip, averaged. Motion DNA (keys every 60): each clip completed with the DNA of a run and of a wave
@@ -48,11 +50,17 @@ SETS = ("normal (dataset-2)", "sad, feminine (dataset-1)")
 GAPS = (60, 120)
 SEEDS = 5
 BASELINES = ("cubic", "match raw", "gan", "transformer")
+FEET = "free"  # --feet: the gan on a matched base, and match beside it, raw or locked
+
+
+def match_name() -> str:
+    """The baseline the gan on a matched base is held to: match raw, or match locked with ``--feet lock``."""
+    return "match raw" if FEET == "free" else "match"
 DNAS = {"run": "dataset-2_run_normal_001.bvh", "wave": "dataset-2_wave-both-hands_normal_001.bvh"}
 
 
 def gan_match(model: str, m: Motion, keys, seed: int = 0, dna: str | None = None) -> Motion:
-    return registry.complete(m, keys, "gan", CompleteOptions(model=model, seed=seed, feet="free", guard="off",
+    return registry.complete(m, keys, "gan", CompleteOptions(model=model, seed=seed, feet=FEET, guard="off",
                                                              dna=dna)).motion
 
 
@@ -74,7 +82,8 @@ def generator_figures(model: str, sets: dict[str, list[Motion]]) -> dict:
                                                                 sk.meters_per_unit) for w, m in zip(real, clips)])),
             "jitter_m_s3": float(np.mean([jitter(w, m.fps, sk.meters_per_unit) for w, m in zip(real, clips)]))}}
         for gap in GAPS:
-            rows = {b: [] for b in BASELINES if b != "transformer" or gap <= 60}  # its gaps: at most 63 frames
+            rows = {match_name() if b == "match raw" else b: [] for b in BASELINES
+                    if b != "transformer" or gap <= 60}  # the transformer's gaps: at most 63 frames
             seeds = {s: [] for s in range(SEEDS)}
             pairwise = []
             for m in clips:
@@ -180,7 +189,7 @@ def goals(f: dict) -> list[dict]:
 
     sk = each(lambda n: max(s["foot_skating_cm_s"] for s, _ in per_set[n]) / real[n]["foot_skating_cm_s"])
     ji = each(lambda n: [s["jitter_m_s3"] / real[n]["jitter_m_s3"] for s, _ in per_set[n]])
-    vs_match = each(lambda n: max(s["gap_error_cm"] / r["match raw"]["gap_error_cm"] for s, r in per_set[n]))
+    vs_match = each(lambda n: max(s["gap_error_cm"] / r[f["match"]]["gap_error_cm"] for s, r in per_set[n]))
     vs_cubic = each(lambda n: max(s["gap_error_cm"] / r["cubic"]["gap_error_cm"] for s, r in per_set[n]))
     exact = all(s["keys_exact"] for n in SETS for s, _ in per_set[n])
     r60 = each(lambda n: f["quality"][n]["60"])
@@ -218,8 +227,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("model", help="a gan model folder on a matched base")
     ap.add_argument("--clips", type=int, default=24, help="clips per style set (default 24)")
+    ap.add_argument("--feet", choices=("free", "lock"), default="free",
+                    help="the gan on a matched base and match raw (free, the default) or locked")
     results.add_option(ap)
     args = ap.parse_args(argv)
+    global FEET
+    FEET = args.feet
     bench = results.Run()
     try:
         sets = style_sets(args.clips)
@@ -227,10 +240,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"skipped: {e}")
         return 0
     held_out = {k: sets[k] for k in SETS}
-    figures = {"clips": {k: len(v) for k, v in held_out.items()}, "model": Path(args.model).name,
+    figures = {"clips": {k: len(v) for k, v in held_out.items()}, "model": Path(args.model).name, "feet": FEET,
+               "match": match_name(),
                "quality": generator_figures(args.model, held_out), "dna": dna_figures(args.model, held_out),
                "speed": speed(args.model, held_out[SETS[0]][0])}
-    record = bench.record(f"gan_match-{Path(args.model).name}", figures, goals(figures), write=not args.no_record)
+    suffix = "" if FEET == "free" else "-lock"
+    record = bench.record(f"gan_match-{Path(args.model).name}{suffix}", figures, goals(figures), write=not args.no_record)
     results.print_goals(record)
     print(results.summary(record))
     return 0

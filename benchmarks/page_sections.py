@@ -491,6 +491,8 @@ def transformer_start(f: dict) -> list[str]:
 
 def gan_match(f: dict) -> list[str]:
     """The gan on a matched base as a generator: realism per seed against the baselines, variety, DNA, speed."""
+    feet = f.get("feet", "free")
+    match = f.get("match", "match raw")
     rows = []
     for name, by_gap in f["quality"].items():
         real = by_gap["real"]
@@ -502,15 +504,17 @@ def gan_match(f: dict) -> list[str]:
 
             seeds = list(r["seeds"].values())
             rows.append([name, gap, f"{num(real['foot_skating_cm_s'], 1)}, {num(real['jitter_m_s3'], 0)}",
-                         *(cell(r[m]) if m in r else "" for m in ("cubic", "match raw", "gan", "transformer")),
+                         *(cell(r[m]) if m in r else "" for m in ("cubic", match, "gan", "transformer")),
                          cell(seeds[0]), " / ".join(num(s["gap_error_cm"]) for s in seeds[1:]),
                          num(r["pairwise_cm"], 1), num(r["best_of_5_cm"])])
-    out = [(f"Each cell: foot skating (cm/s), jitter (m/s^3), gap error (cm); feet free, guard off; real clips: "
+    locked = "the feet of match and of the model locked (their default), the others' free" if feet == "lock" \
+        else "feet free"
+    out = [(f"Each cell: foot skating (cm/s), jitter (m/s^3), gap error (cm); {locked}, guard off; real clips: "
             f"skating, jitter. {', '.join(f'{k}: {v}' for k, v in f['clips'].items())} clips. `gan`: the shipped "
             f"spline-base model; `{f['model']}`: seed 0, then the gap errors of seeds 1-4, the mean pairwise distance of "
             "the five seeds' in-betweens and the best of their gap errors (the transformer fills gaps of at most 63 "
             "frames)."), ""]
-    out += table(["held-out clips", "keys every", "real", "cubic", "match raw", "gan", "transformer", "seed 0",
+    out += table(["held-out clips", "keys every", "real", "cubic", match, "gan", "transformer", "seed 0",
                   "seeds 1-4 (cm)", "pairwise (cm)", "best of 5 (cm)"], rows) + [""]
     dna = "; ".join(f"{name}: Eq. 11 error {num(d['eq11_own_cm'])} cm to the DNA given, {num(d['eq11_other_cm'])} to "
                     f"the other, the DNA moves the in-between {num(d['dna_change_cm'])} cm and the seed "

@@ -76,6 +76,15 @@ def models(setup, tmp_path_factory):
                                                               root / "trained").model
 
 
+@pytest.fixture(scope="module")
+def seeing(setup, tmp_path_factory):
+    """A matched-base model folder whose generator reads its base (``base_input``), after 2 steps."""
+    corpus, _, _, cfg = setup
+    cfg = tiny_config(**{**cfg.to_json(), "max_frames": 256, "steps_per_epoch": 2, "style_dim": 4, "dna_width": 8,
+                         "base_input": True})
+    return fit(GanTask(corpus, cfg, "generator", epochs=1), tmp_path_factory.mktemp("seeing") / "model").model
+
+
 def gan_completion(folder, library, motion, keys, seed=0):
     """``keyfill complete --method gan --model FOLDER --library LIB --seed SEED --feet free``'s Completion."""
     return complete(motion, keys, "gan", CompleteOptions(model=str(folder), library=str(library), seed=seed,
@@ -115,6 +124,29 @@ def test_a_trained_matched_base_model_moves_off_the_match_and_hits_its_keys(setu
     zero = gan_completion(models[0], library, motion, keys).motion
     assert np.array_equal(out.rotations[keys.frames], motion.rotations[keys.frames])
     assert np.abs(world(out) - world(zero)).max() > 1e-4
+
+
+def test_a_model_reading_its_matched_base_completes_hits_its_keys_and_exports(setup, seeing, tmp_path):
+    from keyfill.learn.gan.model import load_model
+    from keyfill.learn.gan.onnx import export_onnx
+
+    _, library, _, _ = setup
+    assert load_model(seeing).config.base_input and "base_input" not in tiny_config().to_json()
+    motion = clip()
+    keys = Keys(np.array([0, 30, 61, motion.num_frames - 1]))
+    torch_out = gan_completion(seeing, library, motion, keys).motion
+    assert np.array_equal(torch_out.rotations[keys.frames], motion.rotations[keys.frames])
+    export_onnx(load_model(seeing), seeing, seeing / "model.onnx")
+    onnx_out = complete(motion, keys, "gan", CompleteOptions(model=str(seeing), library=str(library), feet="free",
+                                                             runtime="onnx"))
+    assert onnx_out.info["runtime"] == "onnx"
+    height = np.ptp(world(torch_out)[..., 1])
+    assert np.abs(world(torch_out) - world(onnx_out.motion)).max() <= 1e-4 * height
+
+
+def test_base_input_needs_a_base():
+    with pytest.raises(UsageError, match="base_input .* needs a base"):
+        tiny_config(base_input=True)
 
 
 def test_windows_carry_the_match_of_their_own_row(setup):

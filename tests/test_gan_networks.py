@@ -220,3 +220,23 @@ def test_path_errors_are_table_2_displacement_errors():
     assert got[4] == pytest.approx(100 * hand_4) and got[5] is None  # no pair 5 frames apart in 5 frames
     exact = np.concatenate([np.diff(root, axis=0), np.zeros((1, 3))]).T  # entry t = root[t + 1] - root[t]
     assert path_errors(type("M", (), {"path": Fixed(exact)})(), pool, horizons=(1, 4))[4] == pytest.approx(0, abs=1e-5)
+
+
+def test_a_generator_that_reads_its_base_corrects_what_it_sees():
+    """``base_input``: the residual depends on the base (blind, one residual for any base); zero output gives it."""
+    J, T = 5, 64
+    rcfk = _tiny_rcfk(J)
+    torch.manual_seed(0)
+    dense = torch.randn(1, 6 * J, T)
+    bases = torch.randn(2, rcfk.channels, T)
+    for reads in (False, True):
+        torch.manual_seed(1)
+        g = Generator(J, rcfk, [8] * 6, [8] * 13, base_input=reads).eval()
+        with torch.no_grad():
+            residual = [g(dense, base=b[None]) - b[None] for b in bases]
+        assert torch.allclose(residual[0], residual[1], atol=1e-5) is not reads  # (v + b) - b: rounding
+    zero = Generator(J, rcfk, [8] * 6, [8] * 13, output_init="zero", base_input=True).eval()
+    with torch.no_grad():
+        assert torch.equal(zero(dense, base=bases[:1]), bases[:1])  # a fresh one gives its base
+    with pytest.raises(ValueError, match="give base"):
+        zero(dense)

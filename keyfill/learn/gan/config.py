@@ -81,7 +81,7 @@ CHOICES = {
 #: settings added after models were shipped, with their defaults: :meth:`GanConfig.to_json` leaves them out at
 #: the default, so the config.json of older folders and what ``--resume`` compares keep their bytes
 LATER_DEFAULTS = {"dna_norm": False, "dna_source": "any", "sketch_stretch": 0.0, "library": "", "matched_set": "",
-                  "loss_form": "squared"}
+                  "loss_form": "squared", "base_input": False}
 #: the JSON value types each annotated field type accepts (an int where a float is expected)
 _JSON_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,), "dict": (dict,)}
 #: hidden width of the Motion DNA encoder per preset (Table 5: 1024), used by ``keyfill train gan --dna``
@@ -200,6 +200,11 @@ class GanConfig:
             m^2, and squared foot speed, (m/s)^2: the second recipe's) or ``"distance"`` (mean joint distance, m, and
             foot speed, m/s: the figures the benchmarks report; a squared error rewards pulling every frame towards
             the mean motion, which lowered the squared error of a matched base and raised its mean distance).
+        base_input: with a ``base``, the generator's encoder also reads the base (its ``6 + 3 D`` values on every
+            frame, beside the keys' dense input), so its residual can depend on what it corrects. Without it the
+            network sees the keys alone: enough for a spline, which the keys decide, but a matched base is one
+            library stretch among many, and a residual blind to it can only learn the average correction
+            (issue 45: 40 epochs of it left a matched base's held-out error where it was).
         library: with base ``"match"``, the shipped motion library (a name of
             :func:`keyfill.learn.installed_models.shipped`) the base is matched from when ``complete`` is given
             no ``--library``.
@@ -265,6 +270,7 @@ class GanConfig:
     foot_weight: float = 0.0
     base: str = "none"
     loss_form: str = "squared"
+    base_input: bool = False
     library: str = ""
     matched_set: str = ""
     seed: int = 0
@@ -309,6 +315,8 @@ class GanConfig:
         if self.base != "none" and self.partial_keys:
             raise UsageError(f"base {self.base!r} interpolates the keys' rotations, which partial keys do not give; "
                              "train a partial-key model with base \"none\"")
+        if self.base_input and self.base == "none":
+            raise UsageError("base_input reads the base into the generator; it needs a base (spline, linear or match)")
         if self.base == "match" and self.in_clip_fraction < 1:
             raise UsageError("base \"match\" trains on in-clip windows of its matched set only: set "
                              "in_clip_fraction to 1")

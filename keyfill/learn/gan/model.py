@@ -92,7 +92,7 @@ def build_networks(skeleton: Skeleton, ranges: JointRanges, cfg: GanConfig) -> d
     w = cfg.widths
     return {
         "generator": Generator(J, rcfk, w["encoder"], w["decoder"], cfg.noise_dim, cfg.style_dim, cfg.dna_width,
-                               cfg.residual_form, cfg.upsampling, cfg.output_init, cfg.dna_norm),
+                               cfg.residual_form, cfg.upsampling, cfg.output_init, cfg.dna_norm, cfg.base_input),
         "discriminator": Discriminator(3 * (J - 1), w["discriminator"], cfg.residual_form),
         "path": PathPredictor(3 * (J - 1), w["path"]),
     }

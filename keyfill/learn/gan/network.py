@@ -127,7 +127,7 @@ class Generator(nn.Module):
     """Encoder, latent joining, decoder, and the RC-FK layer (parameter-free) as ``self.rcfk``.
 
     Args:
-        num_joints: ``J``; the input has ``6 J`` channels.
+        num_joints: ``J``; the input has ``6 J`` channels (and the base's ``rcfk.channels`` with ``base_input``).
         rcfk: the RC-FK layer of the skeleton; the output has ``rcfk.channels``.
         encoder, decoder: widths (6 and 13).
         noise_dim, style_dim: channels joined to every latent step.
@@ -136,17 +136,19 @@ class Generator(nn.Module):
         dna_norm: the encoder's ``normalise``.
         form, upsampling: of the residual layers (:class:`~keyfill.learn.gan.layers.ResidualConv`).
         output_init: ``"default"`` or ``"small"`` (``GanConfig.output_init``).
+        base_input: the encoder reads the base beside the dense input (``GanConfig.base_input``).
     """
 
     def __init__(self, num_joints: int, rcfk: RCFK, encoder, decoder, noise_dim: int = 0, style_dim: int = 0,
                  dna_width: int = 0, form: str = "printed", upsampling: str = "transposed",
-                 output_init: str = "default", dna_norm: bool = False):
+                 output_init: str = "default", dna_norm: bool = False, base_input: bool = False):
         super().__init__()
         self.num_joints = num_joints
         self.noise_dim, self.style_dim = noise_dim, style_dim
         if dna_width:
             self.dna = DnaEncoder(3 * (num_joints - 1), dna_width, style_dim, dna_norm)
-        self.encoder = _stack(6 * num_joints, encoder, ENCODER, ENCODER_RATIOS, form)
+        self.base_input = base_input
+        self.encoder = _stack(6 * num_joints + rcfk.channels * base_input, encoder, ENCODER, ENCODER_RATIOS, form)
         self.decoder = _stack(encoder[-1] + noise_dim + style_dim, decoder, DECODER, DECODER_RATIOS, form, upsampling)
         k, s, p = DECODER_OUT
         self.output = nn.Conv1d(decoder[-1], rcfk.channels, k, s, p)
@@ -163,14 +165,17 @@ class Generator(nn.Module):
         ``dna (B, P, J - 1, 3)`` root-free representative poses (metres) with ``dna_valid (B, P)``
         make the style through ``self.dna`` (instead of ``style``). Missing noise or style count as zeros.
         ``base (B, 6 + 3 D, T)``: values the output is added to (``GanConfig.base``,
-        :func:`keyfill.learn.gan.spline_base.spline_values`); None: the identity root rotation.
+        :func:`keyfill.learn.gan.spline_base.spline_values`); None: the identity root rotation. With
+        ``base_input`` the encoder reads it too (then it is required).
         """
         B, _, T = dense.shape
         if T % GENERATOR_MULTIPLE:
             raise ValueError(f"the generator takes a multiple of {GENERATOR_MULTIPLE} frames, got {T}")
         if dna is not None:
             style = self.dna(dna.flatten(2).transpose(1, 2), dna_valid)
-        z = self.encoder(dense)
+        if self.base_input and base is None:
+            raise ValueError("this generator reads its base (base_input): give base")
+        z = self.encoder(torch.cat([dense, base.to(dense.dtype)], dim=1) if self.base_input else dense)
         parts = [z]
         if self.noise_dim:
             parts.append(noise if noise is not None else z.new_zeros(B, self.noise_dim, z.shape[-1]))

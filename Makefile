@@ -143,15 +143,16 @@ $(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/we
 
 # Issue 45's gan on a matched base (docs/gan.md "On a matched base"): the matched set of the gan's corpus
 # (benchmarks/gan_matched_set.py: each fold by style matched from a library of the other, 6 in-clip windows per
-# clip, 150 s), then the generator of benchmarks/gan_recipe4_match.json (the third recipe correcting the match
-# instead of the spline, in-clip windows only) on one thread. Interrupted, it continues from its checkpoint.
+# clip, 150 s), then the generator of benchmarks/gan_recipe6_match_seen.json (the third recipe correcting the
+# match instead of the spline and reading it, in-clip windows only, distances as losses) on one thread: 40 epochs,
+# about 50 minutes. Interrupted, it continues from its checkpoint.
 GAN_MATCHED := data/starts/gan12.npz
 
-$(GAN_MATCHED): benchmarks/gan_recipe4_match.json | $(BANDAI2) $(BANDAI1)
-	$(BIN)/python benchmarks/gan_matched_set.py --config benchmarks/gan_recipe4_match.json -o $@
+$(GAN_MATCHED): benchmarks/gan_recipe6_match_seen.json | $(BANDAI2) $(BANDAI1)
+	$(BIN)/python benchmarks/gan_matched_set.py --config benchmarks/gan_recipe6_match_seen.json -o $@
 
 $(MODELS)/bandai2-gan-match/weights.safetensors: $(GAN_MATCHED)
-	$(GAN_TRAIN) --config benchmarks/gan_recipe4_match.json -o $(MODELS)/bandai2-gan-match --stage generator \
+	$(GAN_TRAIN) --config benchmarks/gan_recipe6_match_seen.json -o $(MODELS)/bandai2-gan-match --stage generator \
 	    --dna --threads 1 $(call resume_if,$(MODELS)/bandai2-gan-match)
 
 gan-match-model: $(MODELS)/bandai2-gan-match/weights.safetensors

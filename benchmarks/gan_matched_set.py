@@ -8,7 +8,7 @@ gan's in-clip windows are (``GanConfig`` of ``--config``: whole short clips keye
 longer ones keyed every ``min_key_every``-``max_key_every``, the LaFAN1 layout a quarter of the time), matched
 with seed 0, feet free. The two folds run in parallel (``--workers``).
 
-    .venv/bin/python benchmarks/gan_matched_set.py --config benchmarks/gan_recipe4_match.json -o data/starts/gan12.npz
+    .venv/bin/python benchmarks/gan_matched_set.py --config benchmarks/gan_recipe6_match_seen.json -o data/starts/gan12.npz
 """
 
 from __future__ import annotations

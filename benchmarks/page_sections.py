@@ -344,15 +344,17 @@ def gan_quality(f: dict) -> list[str]:
     s, paper = f["sampled"], f["paper"]
     p = f.get("path_cm")  # none for a model with a base (its root path is the keys' interpolation)
     rows = [["path predictor error per frame / after 64 / after 128 frames (cm)",
-             f"{num(p['1'])} / {num(p['64'], 1)} / {num(p['128'], 1)}" if p else "none (the spline's root path)",
+             f"{num(p['1'])} / {num(p['64'], 1)} / {num(p['128'], 1)}" if p else "none (the base's root path)",
              f"{paper['path_cm_per_frame']} per frame, {paper['path_cm_2s']} after 2.1 s (60 fps)"]]
     if "key_errors_every" in f:
         e = f["key_errors_every"]
         rows.append([(f"key errors before post-processing, keys every {e['gap']} frames of {e['clips']} clips: "
                      "joints / root (cm)"), f"{num(e['joints_cm'], 1)} / {num(e['root_cm'], 1)}", "goal: 5 / 30"])
     held = f.get("test_pattern", "*_normal_*")
-    lines = [f"Held-out clips `{held}`; {s['sequences']} key layouts of {num(s['frames'], 0)} frames over them.", ""]
-    lines += table(["figure", "measured", "paper"], rows + _sampled_rows(s, paper))
+    layouts = (f"{s['sequences']} key layouts of {num(s['frames'], 0)} frames over them" if s else
+               "a matched base: no Table 4 layouts (they jump between clips, which a library search does not follow)")
+    lines = [f"Held-out clips `{held}`; {layouts}.", ""]
+    lines += table(["figure", "measured", "paper"], rows + (_sampled_rows(s, paper) if s else []))
     gaps = in_order(f["realism"])
     methods = [m for m in in_order(f["realism"][gaps[0]], METHODS) if m != "linear"]  # linear: the feet section
     realism = []

@@ -498,7 +498,7 @@ def gan_match(f: dict) -> list[str]:
     rows = []
     for name, by_gap in f["quality"].items():
         real = by_gap["real"]
-        for gap in (g for g in by_gap if g != "real"):
+        for gap in sorted((g for g in by_gap if g != "real"), key=int):
             r = by_gap[gap]
 
             def cell(v):

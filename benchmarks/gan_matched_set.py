@@ -26,7 +26,7 @@ from transformer_starts import FOLDS, FOLDS_1, fold_libraries
 def one_fold(folders: list[str], patterns: list[str], library: str, settings: dict, per_clip: int) -> dict:
     from keyfill.learn.gan import model as G
     from keyfill.learn.gan.config import GanConfig
-    from keyfill.learn.gan.matched_base import match_rows
+    from keyfill.learn.gan.matched_set import match_rows
     from keyfill.learn.library.matcher import Matcher
     from keyfill.learn.library.store import clip_files
     from keyfill.learn.library.store import load as load_library
@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     import numpy as np
 
     from keyfill.learn.corpus import locate
-    from keyfill.learn.gan.matched_base import save
+    from keyfill.learn.gan.matched_set import save
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("-o", "--output", required=True, help="the .npz matched set to write")

@@ -22,7 +22,7 @@ from keyfill import io
 from keyfill.errors import ModelError, UsageError
 from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.corpus import load_corpus
-from keyfill.learn.gan import matched_base
+from keyfill.learn.gan import matched_set
 from keyfill.learn.gan.poses import clip_pool, turn
 from keyfill.learn.gan.ranges import estimate_ranges
 from keyfill.learn.gan.sampling import clip_window
@@ -60,8 +60,8 @@ def setup(clips, tmp_path_factory):
     store.build(clips, library)
     corpus = load_corpus([clips[0].parent], cache=False)
     cfg = tiny_config(**{**MATCH, "matched_set": str(root / "set.npz")})
-    arrays = matched_base.match_rows(Matcher(store.load(library)), clips, corpus.skeleton, corpus.folded, cfg, 3)
-    matched_base.save(arrays, root / "set.npz")
+    arrays = matched_set.match_rows(Matcher(store.load(library)), clips, corpus.skeleton, corpus.folded, cfg, 3)
+    matched_set.save(arrays, root / "set.npz")
     return corpus, library, root / "set.npz", cfg
 
 
@@ -152,7 +152,9 @@ def test_base_input_needs_a_base():
 def test_windows_carry_the_match_of_their_own_row(setup):
     corpus, _, path, cfg = setup
     ranges = estimate_ranges(corpus.skeleton, corpus.quats)
-    pool = clip_pool(corpus, labels=True, rotations=True, matched_set=str(path))
+    everything = np.arange(len(corpus))
+    rows = matched_set.load_rows(path, corpus, everything, corpus.skeleton.meters_per_unit)
+    pool = clip_pool(corpus, labels=True, rotations=True, matched=rows)
     assert all(len(rows) == 3 for rows in pool.matched)
     for seed in range(6):
         w = clip_window(pool, np.random.default_rng(seed), cfg, ranges=ranges)
@@ -176,12 +178,13 @@ def test_a_matched_set_of_other_clips_or_no_set_is_refused(setup, tmp_path):
     with np.load(path) as z:
         arrays = {k: z[k] for k in z.files}
     arrays["quats"] = arrays["quats"][::-1].copy()  # rows no longer the clips at their keys
-    matched_base.save(arrays, tmp_path / "other.npz")
+    matched_set.save(arrays, tmp_path / "other.npz")
+    everything = np.arange(len(corpus))
     with pytest.raises(UsageError, match="matched_set.*not the clip at its keys"):
-        clip_pool(corpus, matched_set=str(tmp_path / "other.npz"))
+        matched_set.load_rows(tmp_path / "other.npz", corpus, everything, corpus.skeleton.meters_per_unit)
     (tmp_path / "junk.npz").write_bytes(b"\x80\x04junk")
     with pytest.raises(UsageError, match="matched_set.*not a matched set"):
-        clip_pool(corpus, matched_set=str(tmp_path / "junk.npz"))
+        matched_set.load_rows(tmp_path / "junk.npz", corpus, everything, corpus.skeleton.meters_per_unit)
     with pytest.raises(UsageError, match="matched_set"):
         GanTask(corpus, tiny_config(**{**cfg.to_json(), "matched_set": ""}), "generator", epochs=1)
     with pytest.raises(UsageError, match="in_clip_fraction"):

@@ -43,7 +43,7 @@ def _library_cases(tmp_path):
     from keyfill.learn import onnx, registry
     from keyfill.learn.arnn.task import Settings
     from keyfill.learn.completion import CompleteOptions
-    from keyfill.learn.gan.model import parse_dna
+    from keyfill.learn.gan.dna import parse_dna
     from keyfill.learn.protocols import choose_protocol
     from keyfill.learn.training import train
     from keyfill.sim.runner import simulate

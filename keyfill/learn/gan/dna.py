@@ -152,3 +152,21 @@ def dna_poses(model, source=None, frames=None, count: int | None = None, key_fra
     if len(bad):
         raise UsageError(f"DNA frame {int(bad[0])} is outside the motion (frames 0-{len(q) - 1})")
     return root_free_poses(q[frames], model.skeleton.offsets * m, model.skeleton.parents).astype(np.float32)
+
+
+def parse_dna(text: str) -> tuple[str, list[int] | None]:
+    """``"FILE[:FRAMES]"`` (``CompleteOptions.dna``) -> ``(file, frames or None)``; a file name holding ``:`` is
+    read whole when it exists. Errors name the option ``dna``."""
+    import os
+
+    if os.path.exists(text) or ":" not in text:
+        return text, None
+    path, _, listed = text.rpartition(":")
+    try:
+        frames = [int(t) for t in listed.split(",") if t.strip()]
+    except ValueError:
+        raise UsageError(f"dna takes FILE or FILE:FRAMES with frames separated by commas; got {text!r}",
+                         params="dna") from None
+    if not frames:
+        raise UsageError(f"dna {text!r} lists no frames", params="dna")
+    return path, frames

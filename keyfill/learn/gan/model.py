@@ -1,17 +1,14 @@
 """A trained generative tweening model: its folder (kind ``"gan"``) and ``complete``.
 
-A model folder (:mod:`keyfill.learn.modelfile`) holds ``weights.safetensors``
-with the generator's tensors under ``generator.`` and the path predictor's
-under ``path.`` (none for a model with a base, ``GanConfig.base``), and a ``config.json`` with the skeleton it serves, whether its
-corpus folded a static top joint into the hips, the frame rate, the
-:class:`~keyfill.learn.gan.config.GanConfig`, the joint ranges of the RC-FK
-layer (plain arrays, :class:`~keyfill.learn.gan.ranges.JointRanges`), the
-``stage`` (``"path"``: only the path predictor, from the first training stage;
-``"full"``: both networks) and a training summary. A model with a Motion DNA
-encoder (``GanConfig.dna_width`` > 0) also keeps the representative poses of its
-training clips (:class:`~keyfill.learn.gan.dna.DnaBank`) under ``dna_bank.``, the
-DNA ``complete`` draws by the seed when no DNA file is given. The discriminator is a
-training tool and is not saved in the model (training checkpoints keep it).
+A model folder (:mod:`keyfill.learn.modelfile`) holds ``weights.safetensors`` with the generator's tensors under
+``generator.`` and the path predictor's under ``path.`` (none for a model with a base, ``GanConfig.base``), and a
+``config.json`` with the skeleton it serves, whether its corpus folded a static top joint into the hips, the frame
+rate, the :class:`~keyfill.learn.gan.config.GanConfig`, the joint ranges of the RC-FK layer (plain arrays,
+:class:`~keyfill.learn.gan.ranges.JointRanges`), the ``stage`` (``"path"``: only the path predictor, from the first
+training stage; ``"full"``: both networks) and a training summary. A model with a Motion DNA encoder
+(``GanConfig.dna_width`` > 0) also keeps the representative poses of its training clips
+(:class:`~keyfill.learn.gan.dna.DnaBank`) under ``dna_bank.``, the DNA ``complete`` draws by the seed when no DNA
+file is given. The discriminator is a training tool and is not saved in the model (training checkpoints keep it).
 
 :func:`complete_motion` fills a motion between its keys:
 
@@ -22,25 +19,23 @@ training tool and is not saved in the model (training checkpoints keep it).
    gives every frame's local rotations through RC-FK; the path predictor gives
    root velocities, summed to a path and moved (a least-squares translation,
    as in Eq. 10) onto the key roots. With a base the generator corrects the keys'
-   interpolation (:func:`spline_input`) and the root path is that interpolation of
-   the key roots (:mod:`keyfill.learn.gan.spline_base`);
+   interpolation (:func:`spline_input`, :mod:`keyfill.learn.gan.spline_base`) or a
+   match (:mod:`keyfill.learn.gan.matched_base`), whose root path it keeps;
 3. joints the network does not drive (leaves) are interpolated between keys;
    frames outside the key range hold the generated first or last frame, so
    the exact-key correction puts them on the nearest key.
 
-With whole keys the driven joints' rotations are then made to hit the keys inside
-their ranges (:func:`keyfill.learn.gan.ranges.snap_in_range`); the rest of the
-keys (root, undriven joints) are not yet exact: :func:`complete` applies the
-shared correction (:func:`keyfill.learn.exact_keys.snap_to_keys`) when asked.
-The generator's angles are low-passed before FK (``GanConfig.output_smoothing``).
-Without ``--model``, :data:`DEFAULT_MODEL` (whole keys) or :data:`PARTIAL_MODEL`
-(partial keys) is used: they serve the Bandai-Namco skeleton.
+With whole keys the driven joints' rotations are then made to hit the keys inside their ranges
+(:func:`keyfill.learn.gan.ranges.snap_in_range`); the rest of the keys (root, undriven joints) are not yet exact:
+:func:`complete` applies the shared correction (:func:`keyfill.learn.exact_keys.snap_to_keys`) when asked. The
+generator's angles are low-passed before FK (``GanConfig.output_smoothing``). Without ``--model``,
+:data:`DEFAULT_MODEL` (whole keys) or :data:`PARTIAL_MODEL` (partial keys) is used: they serve the Bandai-Namco
+skeleton.
 
-Partial keys (:attr:`keyfill.motion.Keys.partial`) need a model trained with
-``partial_keys``; its input is the sparse format with the coordinates the keys
-give, and the root path is moved onto the key roots along the axes they give.
-A Motion DNA (:func:`dna_poses`) is a set of representative poses of a motion
-file (its representative frames, or listed frames) or of the model's bank.
+Partial keys (:attr:`keyfill.motion.Keys.partial`) need a model trained with ``partial_keys``; its input is the
+sparse format with the coordinates the keys give, and the root path is moved onto the key roots along the axes
+they give. A Motion DNA (:func:`dna_poses`) is a set of representative poses of a motion file (its representative
+frames, or listed frames) or of the model's bank.
 """
 
 from __future__ import annotations
@@ -145,10 +140,9 @@ class GanModel:
         match = None
         if self.config.base == "match":
             from keyfill.learn.gan.matched_base import library_path
-            from keyfill.learn.match.model import load as load_library
+            from keyfill.learn.library.matcher import load_matcher, window_method
 
-            folder = library if library is not None else library_path(self, None)
-            match = load_library(folder).benchmark_method()
+            match = window_method(load_matcher(library if library is not None else library_path(self, None)))
 
         def method(skeleton: Skeleton, quats, root, keys):
             starts = None if match is None else match(skeleton, quats, root, keys)
@@ -496,24 +490,6 @@ def _fill_window(model: GanModel, key_frames: np.ndarray, key_quats: np.ndarray,
     return gq, (groot + shift) / m
 
 
-def parse_dna(text: str) -> tuple[str, list[int] | None]:
-    """``"FILE[:FRAMES]"`` (``CompleteOptions.dna``) -> ``(file, frames or None)``; a file name holding ``:`` is
-    read whole when it exists. Errors name the option ``dna``."""
-    import os
-
-    if os.path.exists(text) or ":" not in text:
-        return text, None
-    path, _, listed = text.rpartition(":")
-    try:
-        frames = [int(t) for t in listed.split(",") if t.strip()]
-    except ValueError:
-        raise UsageError(f"dna takes FILE or FILE:FRAMES with frames separated by commas; got {text!r}",
-                         params="dna") from None
-    if not frames:
-        raise UsageError(f"dna {text!r} lists no frames", params="dna")
-    return path, frames
-
-
 def complete(motion, keys, options):
     """``keyfill complete --method gan``: :func:`complete_motion`, then exact keys when ``options.exact_keys``.
 
@@ -531,6 +507,8 @@ def complete_with(model: GanModel, motion, keys, options, path):
     from keyfill.learn import rig_bridge
     from keyfill.learn.completion import Completion
     from keyfill.learn.exact_keys import snap_to_keys
+    from keyfill.learn.gan.dna import parse_dna
+    from keyfill.learn.gan.matched_base import completion_start
 
     dna = source = frames = None
     if options.dna is not None or options.dna_count is not None:
@@ -541,18 +519,7 @@ def complete_with(model: GanModel, motion, keys, options, path):
         if options.dna_count is not None and model.config.dna:  # named as the option, not dna_poses' count
             check_count("dna_count", options.dna_count, model.config.max_frames)
         dna = dna_poses(model, source, frames, options.dna_count, keys.frames, options.seed)
-    start, matched = None, {}
-    if options.library is not None and model.config.base != "match":
-        raise UsageError(f"library applies to a gan model on a matched base; this one corrects "
-                         f"{'nothing' if model.config.base == 'none' else 'an interpolation'} "
-                         f"(base {model.config.base!r})", params="library")
-    if model.config.base == "match":
-        from keyfill.learn.gan.matched_base import library_path, matched_start
-
-        library = library_path(model, options)
-        start, gaps = matched_start(model, motion, keys, options.seed, library, source, frames)
-        matched = {"library": library.name, "matched_gaps": sum(g["filled_by"] == "match" for g in gaps),
-                   "gaps": gaps}
+    start, matched = completion_start(model, motion, keys, options, source, frames)
     filled, info = complete_motion(model, motion, keys, options.seed, dna, start)
     info = {"model": str(options.model or path.name), **info, **matched, "exact_keys": bool(options.exact_keys)}
     if options.dna is not None:

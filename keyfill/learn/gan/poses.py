@@ -62,7 +62,7 @@ class ClipPool:
         parents: ``(J,)`` the skeleton's parent indices (-1 at the root; for stretched sketch keys,
             ``GanConfig.sketch_stretch``), or None.
         matched: per clip its rows of a matched set (a base ``"match"``,
-            :func:`keyfill.learn.gan.matched_base.load_rows`), or empty when not needed.
+            :func:`keyfill.learn.gan.matched_set.load_rows`), or empty when not needed.
     """
 
     relative: tuple[np.ndarray, ...]
@@ -97,10 +97,11 @@ class ClipPool:
         return int(rng.choice(usable[g == content]))
 
 
-def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False, matched_set=None) -> ClipPool:
+def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False, matched: tuple = ()) -> ClipPool:
     """The :class:`ClipPool` of the clips ``clips`` (indices; all when None) of a :class:`~keyfill.learn.corpus.Corpus`;
     ``labels``: with foot contacts and content groups (:mod:`keyfill.learn.gan.labels`); ``rotations``: with
-    the local rotations; ``matched_set``: with the rows of that matched set (a path)."""
+    the local rotations; ``matched``: the clips' rows of a matched set
+    (:func:`keyfill.learn.gan.matched_set.load_rows`)."""
     s = corpus.skeleton
     m = s.meters_per_unit
     clips = list(range(len(corpus))) if clips is None else [int(i) for i in clips]
@@ -114,11 +115,6 @@ def clip_pool(corpus, clips=None, labels: bool = False, rotations: bool = False,
     root = tuple(np.asarray(corpus.root[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float64) * m for i in clips)
     quats = tuple(np.asarray(corpus.quats[corpus.starts[i] : corpus.starts[i + 1]], dtype=np.float32)
                   for i in clips) if rotations else ()
-    matched = ()
-    if matched_set:
-        from keyfill.learn.gan.matched_base import load_rows
-
-        matched = load_rows(matched_set, corpus, clips, m)
     if not labels:
         return ClipPool(rel, root, float(corpus.fps), s.up_axis, quats=quats, parents=s.parents, matched=matched)
     from keyfill.learn.gan.labels import clip_contacts, content_groups

@@ -57,6 +57,7 @@ from keyfill.errors import DataError, UsageError
 from keyfill.learn.gan import KIND
 from keyfill.learn.gan.config import GanConfig
 from keyfill.learn.gan.dna import build_bank, pad_dna
+from keyfill.learn.gan.matched_set import load_rows
 from keyfill.learn.gan.poses import clip_pool
 from keyfill.learn.gan.ranges import estimate_ranges
 from keyfill.learn.gan.sampling import body_halves, clip_batch, clip_window, crop_starts, real_crops, training_sequence
@@ -126,8 +127,11 @@ class GanTask(TrainingTask):
         if self.cfg.base == "match" and stage == "generator" and not matched:
             raise UsageError("a gan model on base \"match\" trains on a matched set of its clips: give the GAN "
                              "setting matched_set (benchmarks/gan_matched_set.py builds one)")
-        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline, matched)
-        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline, matched) if n_val else None
+        def rows(clips):  # the clips' rows of the matched set
+            return load_rows(matched, corpus, clips, corpus.skeleton.meters_per_unit) if matched and len(clips) else ()
+
+        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline, rows(self.train_clips))
+        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline, rows(self.val_clips)) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
         self.spline_ranges = self.ranges if spline else None  # the sampling's spline base

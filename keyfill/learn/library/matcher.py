@@ -27,7 +27,10 @@ as above, and the keyed positions come out exact.
 
 from __future__ import annotations
 
+import functools
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -249,3 +252,60 @@ class Matcher:
         else:
             out_pos[:, fr.hips] = hips
         return spline.replace(rotations=R.quat_continuous_np(R.quat_normalize(out_rot), axis=0), positions=out_pos)
+
+
+def load_matcher(path: str | os.PathLike) -> Matcher:
+    """The :class:`Matcher` of the library folder ``path``, loaded once per process while its manifest is
+    unchanged (``--method match``'s model, and the matched start of a gan on a matched base)."""
+    from keyfill.learn.library.store import MANIFEST
+
+    manifest = Path(path) / MANIFEST
+    return _load_matcher(str(Path(path).resolve()), manifest.stat().st_mtime_ns if manifest.is_file() else 0.0)
+
+
+@functools.lru_cache(maxsize=4)
+def _load_matcher(path: str, stamp: float) -> Matcher:
+    from keyfill.learn.library.store import load
+
+    return Matcher(load(path))
+
+
+def window_method(matcher: Matcher):
+    """``method(skeleton, quats (B, T, J, 4), root (B, T, 3), keys) -> (quats, root)``: the LaFAN1 protocol's windows
+    (:func:`keyfill.learn.protocols.lafan1.evaluate`) each filled as one motion on the library's skeleton. A library
+    whose hips sit below one static top joint (Bandai's ``joint_Root``) takes windows whose top joint carries the
+    hips' world transform (the protocol folds the clips, as the human models' corpora do); one whose hips are the
+    root takes them as they are. ``method.folded`` says which."""
+    from keyfill.learn.corpus import bone_difference
+    from keyfill.learn.library.store import served_by
+
+    lib = matcher.library
+    served = served_by(lib.skeleton, lib.fps)
+    hips, top = lib.frames.hips, 0
+    identity = np.array([1.0, 0.0, 0.0, 0.0])
+
+    def method(skeleton, quats, root, keys):
+        from keyfill.errors import ModelError
+
+        diff = bone_difference(served.skeleton, skeleton)
+        if diff is not None or lib.frames.ancestors not in ((), (top,)):
+            raise ModelError(f"the library serves another skeleton: {diff or 'joints above its hips'}")
+        q_out, r_out = np.array(quats), np.array(root)
+        for w in range(len(quats)):  # unknown frames are NaN: only the keys are read
+            rot = np.where(np.isnan(quats[w]), identity, quats[w])
+            rot[:, hips] = rot[:, top]  # the top joint carries the hips' world transform
+            pos = np.broadcast_to(lib.skeleton.offsets, rot.shape[:-1] + (3,)).copy()
+            if served.folded:
+                rot[:, top] = identity
+                pos[:, top] = 0.0
+            pos[:, hips] = np.nan_to_num(root[w])
+            filled, _ = matcher.fill(Motion(lib.skeleton, lib.fps, rot, pos), Keys(np.asarray(keys)))
+            q_out[w] = filled.rotations
+            q_out[w][:, top] = filled.rotations[:, hips]
+            if served.folded:
+                q_out[w][:, hips] = identity
+            r_out[w] = filled.positions[:, hips]
+        return q_out, r_out
+
+    method.folded = served.folded
+    return method

@@ -11,7 +11,6 @@ figures.
 
 from __future__ import annotations
 
-import functools
 import os
 from pathlib import Path
 
@@ -34,61 +33,19 @@ class MatchModel:
         self.library = matcher.library
 
     def benchmark_method(self):
-        """This library as a method of :func:`keyfill.learn.protocols.lafan1.evaluate`, each window filled as one
-        motion on the library's skeleton. A library whose hips sit below one static top joint (Bandai's
-        ``joint_Root``) takes windows whose top joint carries the hips' world transform (the protocol folds the
-        clips, as the human models' corpora do); one whose hips are the root takes them as they are."""
-        import numpy as np
+        """This library as a method of :func:`keyfill.learn.protocols.lafan1.evaluate`
+        (:func:`keyfill.learn.library.matcher.window_method`)."""
+        from keyfill.learn.library.matcher import window_method
 
-        from keyfill.errors import ModelError
-        from keyfill.learn.corpus import bone_difference
-        from keyfill.learn.library.store import served_by
-
-        lib = self.library
-        served = served_by(lib.skeleton, lib.fps)
-        hips, top = lib.frames.hips, 0
-        identity = np.array([1.0, 0.0, 0.0, 0.0])
-
-        def method(skeleton, quats, root, keys):
-            diff = bone_difference(served.skeleton, skeleton)
-            if diff is not None or lib.frames.ancestors not in ((), (top,)):
-                raise ModelError(f"the library serves another skeleton: {diff or 'joints above its hips'}")
-            q_out, r_out = np.array(quats), np.array(root)
-            for w in range(len(quats)):  # unknown frames are NaN: only the keys are read
-                rot = np.where(np.isnan(quats[w]), identity, quats[w])
-                rot[:, hips] = rot[:, top]  # the top joint carries the hips' world transform
-                pos = np.broadcast_to(lib.skeleton.offsets, rot.shape[:-1] + (3,)).copy()
-                if served.folded:
-                    rot[:, top] = identity
-                    pos[:, top] = 0.0
-                pos[:, hips] = np.nan_to_num(root[w])
-                filled, _ = self.matcher.fill(Motion(lib.skeleton, lib.fps, rot, pos), Keys(np.asarray(keys)))
-                q_out[w] = filled.rotations
-                q_out[w][:, top] = filled.rotations[:, hips]
-                if served.folded:
-                    q_out[w][:, hips] = identity
-                r_out[w] = filled.positions[:, hips]
-            return q_out, r_out
-
-        method.folded = served.folded
-        return method
-
-
-@functools.lru_cache(maxsize=4)
-def _load(path: str, stamp: float) -> MatchModel:
-    from keyfill.learn.library.matcher import Matcher
-    from keyfill.learn.library.store import load as load_library
-
-    return MatchModel(Matcher(load_library(path)))
+        return window_method(self.matcher)
 
 
 def load(path: str | os.PathLike, device: str = "cpu") -> MatchModel:
     """The :class:`MatchModel` of the library folder ``path`` (``device`` is ignored: matching runs on the
     CPU), loaded once per process while its manifest is unchanged."""
-    from keyfill.learn.library.store import MANIFEST
+    from keyfill.learn.library.matcher import load_matcher
 
-    manifest = Path(path) / MANIFEST
-    return _load(str(Path(path).resolve()), manifest.stat().st_mtime_ns if manifest.is_file() else 0.0)
+    return MatchModel(load_matcher(path))
 
 
 def model_path(options, keys=None) -> Path:

@@ -243,9 +243,10 @@ def _ratio(f: dict, method: str, metric: str, n: str) -> float:
 def transformer_quality(f: dict) -> list[str]:
     """The LaFAN1 table, its ratios against SSMCT and Qin et al., and other key layouts."""
     p = f["protocol"]
-    lines = [(f"LaFAN1 protocol on Bandai-Namco dataset-2: {num(p['test_windows'], 0)} test windows of the "
-             f"{p['test_clips']} held-out `normal` clips, statistics from {num(p['train_windows'], 0)} windows of "
-             f"{num(p['train_clips'], 0)} clips of the other styles; transitions of 5-45 frames."), ""]
+    held = f.get("test_pattern", "*_normal_*")
+    lines = [(f"LaFAN1 protocol: {num(p['test_windows'], 0)} test windows of the {p['test_clips']} held-out clips "
+             f"`{held}`, statistics from {num(p['train_windows'], 0)} windows of {num(p['train_clips'], 0)} clips of "
+             f"the other styles of their folder; transitions of 5-45 frames."), ""]
     header = ["method"] + [f"{m} {n}" for m in METRICS for n in LENGTHS] + ["skating cm/s", "jitter m/s^3"]
     rows = []
     for method in in_order(f["inbetweening"], METHODS):
@@ -254,10 +255,12 @@ def transformer_quality(f: dict) -> list[str]:
                    for k in ("skate", "jitter")]
         rows.append([method] + _scores(by_length, "L2Q", 4) + _scores(by_length, "L2P", 4)
                     + _scores(by_length, "NPSS", 5) + realism)
+    fair = " / the fair anchor (issue 46: the Delta-Interpolator's at 5-30, Qin's first stage at 45)" \
+        if "fair" in f else ""
     lines += table(header, rows) + ["", ("Ratios to interpolation, each cell: the transformer's / cubic's / SSMCT's "
-                                        "/ Qin et al. 2022's (the papers' data is LaFAN1, so ratios, not values, "
-                                        "are compared; at 45 frames SSMCT's 30-frame ratio); **bold**: a paper's "
-                                        "ratio the transformer misses:"), ""]
+                                        f"/ Qin et al. 2022's headline{fair} (the papers' data is LaFAN1, so ratios, "
+                                        "not values, are compared; at 45 frames SSMCT's 30-frame ratio); **bold**: a "
+                                        "paper's ratio the transformer misses:"), ""]
     return lines + _ratio_table(f) + [""] + _layouts_table(f)
 
 
@@ -271,8 +274,9 @@ def _ratio_table(f: dict) -> list[str]:
         cells = []
         for n in LENGTHS:
             mine = _ratio(f, "transformer", m, n)
+            fair = f" / {_paper(f['fair'][m].get(n), mine, 3)}" if "fair" in f else ""
             cells.append(f"{num(mine, 3)} / {num(_ratio(f, 'cubic', m, n), 3)} / {_paper(f['ssmct'][m][n], mine, 3)}"
-                         f" / {_paper(f['qin'][m].get(n), mine, 2)}")
+                         f" / {_paper(f['qin'][m].get(n), mine, 2)}{fair}")
         rows.append([m] + cells)
     return table(["metric"] + [f"{n} frames" for n in LENGTHS], rows)
 

@@ -50,8 +50,9 @@ def test_the_page_stays_short():
     # 500 since issue 42 (match: its quality, variety, guard and speed tables); 560 since issue 44 (every command
     # at four lengths: 30 rows, and the plot); 600 since issue 46 (the transformer from a matched start, a table per
     # model: the shipped one and one trained on such starts); 640 since issue 45 (the gan on a matched base as a
-    # generator, feet free and locked: a table each)
-    assert len(make_page.PAGE.read_text().splitlines()) <= 640
+    # generator, feet free and locked: a table each); 680 since issue 46's fair anchors (the shipped transformer on
+    # a second held-out set, dataset-1's sad and feminine)
+    assert len(make_page.PAGE.read_text().splitlines()) <= 680
 
 
 def test_a_changed_figure_is_caught(copy):

@@ -145,7 +145,7 @@ $(MODELS)/bandai2-gan-partial/weights.safetensors: $(MODELS)/bandai2-gan-path/we
 # (benchmarks/gan_matched_set.py: each fold by style matched from a library of the other, 6 in-clip windows per
 # clip, 150 s), then the generator of benchmarks/gan_recipe6_match_seen.json (the third recipe correcting the
 # match instead of the spline and reading it, in-clip windows only, distances as losses) on one thread: 40 epochs,
-# about 50 minutes. Interrupted, it continues from its checkpoint.
+# about 40 minutes. Interrupted, it continues from its checkpoint.
 GAN_MATCHED := data/starts/gan12.npz
 
 $(GAN_MATCHED): benchmarks/gan_recipe6_match_seen.json | $(BANDAI2) $(BANDAI1)

@@ -1,6 +1,8 @@
 """The gan on a matched base (``GanConfig.base = "match"``, issue 45; docs/gan.md): a generator whose residual is
 zero gives ``--method match``'s in-between, the seed picks the match (two seeds differ, one seed twice is the
-same), training windows carry the match of their own keys, and a matched set of other clips is refused.
+same), training windows carry the match of their own keys, a matched set of other clips is refused, a Motion DNA
+steers the search, a model reading its base exports, the feet lock by default, and the shipped spline-base models
+give the output they gave before the matched base.
 
 The library and the corpus are the Mixamo test clip and variants of it (``test_match``'s), so no shared data is
 needed."""

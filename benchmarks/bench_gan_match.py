@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import results
-from bench_match import figures_of, keys_every, run_method, style_sets, summary, world
+from bench_match import figures_of, keys_every, quality, run_method, seed_figures, style_sets, world
 
 from keyfill import io
 from keyfill.errors import DataError
@@ -42,25 +42,22 @@ from keyfill.learn.completion import CompleteOptions
 from keyfill.learn.corpus import locate, model_hierarchy
 from keyfill.learn.gan.dna import dna_poses
 from keyfill.learn.gan.model import load_model
-from keyfill.learn.protocols.metrics import foot_joints, foot_skating, jitter
 from keyfill.learn.representative import root_free_poses
 from keyfill.motion import Motion
 
 SETS = ("normal (dataset-2)", "sad, feminine (dataset-1)")
 GAPS = (60, 120)
-SEEDS = 5
 BASELINES = ("cubic", "match raw", "gan", "transformer")
-FEET = "free"  # --feet: the gan on a matched base, and match beside it, raw or locked
 
 
-def match_name() -> str:
+def match_name(feet: str) -> str:
     """The baseline the gan on a matched base is held to: match raw, or match locked with ``--feet lock``."""
-    return "match raw" if FEET == "free" else "match"
+    return "match raw" if feet == "free" else "match"
 DNAS = {"run": "dataset-2_run_normal_001.bvh", "wave": "dataset-2_wave-both-hands_normal_001.bvh"}
 
 
-def gan_match(model: str, m: Motion, keys, seed: int = 0, dna: str | None = None) -> Motion:
-    return registry.complete(m, keys, "gan", CompleteOptions(model=model, seed=seed, feet=FEET, guard="off",
+def gan_match(model: str, m: Motion, keys, seed: int = 0, dna: str | None = None, feet: str = "free") -> Motion:
+    return registry.complete(m, keys, "gan", CompleteOptions(model=model, seed=seed, feet=feet, guard="off",
                                                              dna=dna)).motion
 
 
@@ -70,51 +67,27 @@ def baseline(method: str, m: Motion, keys) -> Motion:
     return run_method(method, m, keys).motion
 
 
-def generator_figures(model: str, sets: dict[str, list[Motion]]) -> dict:
-    """Per set and key spacing: the baselines' summaries, each seed's, ``pairwise_cm`` and ``best_of_5_cm``."""
+def generator_figures(model: str, sets: dict[str, list[Motion]], feet: str) -> dict:
+    """Per set: the real clips' figures, and per key spacing the baselines' summaries (:func:`bench_match.quality`)
+    with each seed's (``seeds``), ``pairwise_cm`` and ``best_of_5_cm`` (:func:`bench_match.seed_figures`)."""
     out = {}
-    for name in SETS:
-        clips = sets[name]
-        sk = clips[0].skeleton
-        real = [world(m)[None] for m in clips]
-        out[name] = {"real": {  # as bench_match.quality measures the real clips
-            "foot_skating_cm_s": float(np.nanmean([foot_skating(w, foot_joints(sk), sk.up_axis, m.fps,
-                                                                sk.meters_per_unit) for w, m in zip(real, clips)])),
-            "jitter_m_s3": float(np.mean([jitter(w, m.fps, sk.meters_per_unit) for w, m in zip(real, clips)]))}}
-        for gap in GAPS:
-            rows = {match_name() if b == "match raw" else b: [] for b in BASELINES
-                    if b != "transformer" or gap <= 60}  # the transformer's gaps: at most 63 frames
-            seeds = {s: [] for s in range(SEEDS)}
-            pairwise = []
-            for m in clips:
-                keys = keys_every(m, gap)
-                between = np.setdiff1d(np.arange(m.num_frames), keys.frames)
-                for b, figures in rows.items():
-                    figures.append(figures_of(m, keys, baseline(b, m, keys)))
-                outs = []
-                for s in range(SEEDS):
-                    filled = gan_match(model, m, keys, s)
-                    seeds[s].append(figures_of(m, keys, filled))
-                    outs.append(world(filled)[between])
-                mpu = sk.meters_per_unit
-                pairwise.append(np.mean([np.linalg.norm(outs[a] - outs[b], axis=-1).mean() * mpu * 100
-                                         for a in range(SEEDS) for b in range(a + 1, SEEDS)]))
-            row = {b: summary(r) for b, r in rows.items()}
-            row["seeds"] = {str(s): summary(r) for s, r in seeds.items()}
-            row["pairwise_cm"] = float(np.mean(pairwise))
-            row["best_of_5_cm"] = float(np.mean([min(seeds[s][i]["error"] for s in range(SEEDS))
-                                                 for i in range(len(clips))]))
-            out[name][str(gap)] = row
+    for gap in GAPS:
+        methods = [match_name(feet) if b == "match raw" else b for b in BASELINES
+                   if b != "transformer" or gap <= 60]  # the transformer's gaps: at most 63 frames
+        base = quality(sets, methods, baseline, gaps=(gap,))
+        for name in SETS:
+            row = base[name][str(gap)]
+            v = seed_figures(sets[name], gap, lambda m, keys, s: gan_match(model, m, keys, s, feet=feet))
+            row.update(seeds=v["seeds"], pairwise_cm=v["pairwise_cm"], best_of_5_cm=v["best_of_5_gap_error_cm"])
+            out.setdefault(name, {"real": base[name]["real"]})[str(gap)] = row
             print(f"{name}, keys every {gap}: " + "; ".join(
-                f"{k} {v['foot_skating_cm_s']:.1f}/{v['jitter_m_s3']:.0f}/{v['gap_error_cm']:.2f}"
-                for k, v in {**{b: row[b] for b in rows}, **{f"seed {s}": v for s, v in row["seeds"].items()}}
-                .items()) + f"; pairwise {row['pairwise_cm']:.1f} cm, best of 5 {row['best_of_5_cm']:.2f} cm "
-                f"(real {out[name]['real']['foot_skating_cm_s']:.1f}/{out[name]['real']['jitter_m_s3']:.0f})",
-                flush=True)
+                f"seed {s} {r['foot_skating_cm_s']:.1f}/{r['jitter_m_s3']:.0f}/{r['gap_error_cm']:.2f}"
+                for s, r in row["seeds"].items()) + f"; pairwise {row['pairwise_cm']:.1f} cm, best of 5 "
+                f"{row['best_of_5_cm']:.2f} cm", flush=True)
     return out
 
 
-def dna_figures(model_path: str, sets: dict[str, list[Motion]]) -> dict:
+def dna_figures(model_path: str, sets: dict[str, list[Motion]], feet: str) -> dict:
     """Per set, keys every 60: the Eq. 11 errors to the DNA given and to the other, and the DNA's and the
     seed's effect on the in-between (mean joint distance, cm)."""
     model = load_model(model_path)
@@ -140,7 +113,7 @@ def dna_figures(model_path: str, sets: dict[str, list[Motion]]) -> dict:
         for m in sets[name]:
             keys = keys_every(m, 60)
             between = np.setdiff1d(np.arange(m.num_frames), keys.frames)
-            done = {k: gan_match(model_path, m, keys, 0, str(f)) for k, f in files.items()}
+            done = {k: gan_match(model_path, m, keys, 0, str(f), feet) for k, f in files.items()}
             for k, filled in done.items():
                 errors.append(figures_of(m, keys, filled)["error"])
                 dna = dna_poses(model, sources[k], key_frames=keys.frames)
@@ -150,7 +123,7 @@ def dna_figures(model_path: str, sets: dict[str, list[Motion]]) -> dict:
                 other.append(eq11(p, dna_poses(model, sources[o], key_frames=keys.frames)))
             w = {k: world(v)[between] for k, v in done.items()}
             by_dna.append(np.linalg.norm(w["run"] - w["wave"], axis=-1).mean() * m_per_unit * 100)
-            s0, s1 = (world(gan_match(model_path, m, keys, s))[between] for s in (0, 1))
+            s0, s1 = (world(gan_match(model_path, m, keys, s, feet=feet))[between] for s in (0, 1))
             by_seed.append(np.linalg.norm(s0 - s1, axis=-1).mean() * m_per_unit * 100)
         out[name] = {"eq11_own_cm": float(np.mean(own)), "eq11_other_cm": float(np.mean(other)),
                      "dna_change_cm": float(np.mean(by_dna)), "seed_change_cm": float(np.mean(by_seed)),
@@ -162,18 +135,18 @@ def dna_figures(model_path: str, sets: dict[str, list[Motion]]) -> dict:
     return out
 
 
-def speed(model: str, clip: Motion, repeat: int = 5) -> dict:
+def speed(model: str, clip: Motion, feet: str, repeat: int = 5) -> dict:
     import torch
 
     torch.set_num_threads(1)
     long = Motion(clip.skeleton, clip.fps, np.concatenate([clip.rotations] * 12)[:2048],
                   np.concatenate([clip.positions] * 12)[:2048])
     keys = keys_every(long, 120)
-    gan_match(model, long, keys)  # warm: the model and the library loaded once
+    gan_match(model, long, keys, feet=feet)  # warm: the model and the library loaded once
     runs = []
     for _ in range(repeat):
         t = time.perf_counter()
-        gan_match(model, long, keys)
+        gan_match(model, long, keys, feet=feet)
         runs.append(time.perf_counter() - t)
     return {"frames": 2048, "key_every": 120, "threads": 1, "median_s": statistics.median(runs), "runs": runs}
 
@@ -231,8 +204,6 @@ def main(argv: list[str] | None = None) -> int:
                     help="the gan on a matched base and match raw (free, the default) or locked")
     results.add_option(ap)
     args = ap.parse_args(argv)
-    global FEET
-    FEET = args.feet
     bench = results.Run()
     try:
         sets = style_sets(args.clips)
@@ -240,11 +211,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"skipped: {e}")
         return 0
     held_out = {k: sets[k] for k in SETS}
-    figures = {"clips": {k: len(v) for k, v in held_out.items()}, "model": Path(args.model).name, "feet": FEET,
-               "match": match_name(),
-               "quality": generator_figures(args.model, held_out), "dna": dna_figures(args.model, held_out),
-               "speed": speed(args.model, held_out[SETS[0]][0])}
-    suffix = "" if FEET == "free" else "-lock"
+    figures = {"clips": {k: len(v) for k, v in held_out.items()}, "model": Path(args.model).name,
+               "feet": args.feet, "match": match_name(args.feet),
+               "quality": generator_figures(args.model, held_out, args.feet),
+               "dna": dna_figures(args.model, held_out, args.feet), "speed": speed(args.model, held_out[SETS[0]][0], args.feet)}
+    suffix = "" if args.feet == "free" else "-lock"
     record = bench.record(f"gan_match-{Path(args.model).name}{suffix}", figures, goals(figures), write=not args.no_record)
     results.print_goals(record)
     print(results.summary(record))

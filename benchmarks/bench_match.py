@@ -147,28 +147,35 @@ def quality(sets: dict[str, list[Motion]], methods=METHODS, fill=None, gaps=GAPS
     return out
 
 
+def seed_figures(clips: list[Motion], gap: int, fill) -> dict:
+    """``fill(motion, keys, seed) -> Motion`` for seeds 0 to ``SEEDS - 1`` on ``clips`` keyed every ``gap``: each
+    seed's summary (``seeds``), the mean pairwise distance of the seeds' in-betweens (``pairwise_cm``) and the mean
+    over clips of the best seed's gap error (``best_of_5_gap_error_cm``)."""
+    per_seed = {s: [] for s in range(SEEDS)}
+    distances = []
+    for m in clips:
+        keys = keys_every(m, gap)
+        between = np.setdiff1d(np.arange(m.num_frames), keys.frames)
+        outs = []
+        for s in range(SEEDS):
+            filled = fill(m, keys, s)
+            per_seed[s].append(figures_of(m, keys, filled))
+            outs.append(world(filled)[between])
+        mpu = m.skeleton.meters_per_unit
+        distances.append(np.mean([np.linalg.norm(outs[a] - outs[b], axis=-1).mean() * mpu * 100
+                                  for a in range(SEEDS) for b in range(a + 1, SEEDS)]))
+    best = float(np.mean([min(per_seed[s][i]["error"] for s in range(SEEDS)) for i in range(len(clips))]))
+    return {"pairwise_cm": float(np.mean(distances)), "seeds": {str(s): summary(r) for s, r in per_seed.items()},
+            "best_of_5_gap_error_cm": best}
+
+
 def variety(sets: dict[str, list[Motion]], gap: int = 60) -> dict:
     out = {}
     for name in ("normal (dataset-2)", "sad, feminine (dataset-1)"):
-        per_seed = {s: [] for s in range(SEEDS)}
-        distances = []
-        for m in sets[name]:
-            keys = keys_every(m, gap)
-            between = np.setdiff1d(np.arange(m.num_frames), keys.frames)
-            outs = []
-            for s in range(SEEDS):
-                filled = run_method("match", m, keys, seed=s).motion
-                per_seed[s].append(figures_of(m, keys, filled))
-                outs.append(world(filled)[between])
-            mpu = m.skeleton.meters_per_unit
-            distances.append(np.mean([np.linalg.norm(outs[a] - outs[b], axis=-1).mean() * mpu * 100
-                                      for a in range(SEEDS) for b in range(a + 1, SEEDS)]))
-        seeds = {str(s): summary(r) for s, r in per_seed.items()}
-        best = float(np.mean([min(per_seed[s][i]["error"] for s in range(SEEDS)) for i in range(len(sets[name]))]))
-        out[name] = {"pairwise_cm": float(np.mean(distances)), "seeds": seeds, "best_of_5_gap_error_cm": best}
-        print(f"variety {name}: pairwise {out[name]['pairwise_cm']:.1f} cm, best-of-5 {best:.2f} cm; " + "; ".join(
-            f"seed {s} {v['foot_skating_cm_s']:.1f}/{v['jitter_m_s3']:.0f}/{v['gap_error_cm']:.2f}"
-            for s, v in seeds.items()), flush=True)
+        out[name] = v = seed_figures(sets[name], gap, lambda m, keys, s: run_method("match", m, keys, seed=s).motion)
+        print(f"variety {name}: pairwise {v['pairwise_cm']:.1f} cm, best-of-5 {v['best_of_5_gap_error_cm']:.2f} cm; "
+              + "; ".join(f"seed {s} {r['foot_skating_cm_s']:.1f}/{r['jitter_m_s3']:.0f}/{r['gap_error_cm']:.2f}"
+                          for s, r in v["seeds"].items()), flush=True)
     return out
 
 

@@ -6,7 +6,7 @@ core types, so that every package can use it without importing another one.
 :func:`quiet_stderr` silences what C and C++ libraries (pxr, pybullet) print
 straight to file descriptor 2, where Python's ``sys.stderr`` cannot catch it.
 :func:`read_json_object` reads a user's settings file (``--config``) with
-one-line errors. :func:`sha256_file` and :func:`verified` check files against their
+one-line errors, :func:`read_arrays` a training set of arrays (``.npz``) without pickles. :func:`sha256_file` and :func:`verified` check files against their
 recorded SHA-256 (model weights, library arrays) without hashing an unchanged
 file again; the marks of what was verified live under :func:`cache_dir`.
 """
@@ -215,6 +215,20 @@ def read_json_object(path: str | os.PathLike) -> dict:
     if not isinstance(data, dict):
         raise UsageError(f"{path}: the config must be a JSON object")
     return data
+
+
+def read_arrays(path: str | os.PathLike, what: str, kind: str) -> dict:
+    """The arrays of the ``.npz`` file ``path``, read without pickles; a :class:`UsageError` ``"{what}: ..."`` when it
+    cannot be read or is no ``.npz`` of arrays (``kind`` says what it should be: ``"a matched set"``)."""
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except OSError as e:
+        raise UsageError(f"{what}: {e.strerror or 'cannot be read'}") from None
+    except (ValueError, EOFError):  # numpy takes bytes that are no zip for a pickle
+        raise UsageError(f"{what}: not {kind} (an .npz of arrays)") from None
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:

@@ -18,7 +18,7 @@ torch = pytest.importorskip("torch")
 
 from gan_helpers import built, fit, tiny_config, world
 from test_gan_recipe2 import RECIPE2
-from test_match import clip, variant
+from test_match import clip, variant, write_clips
 
 from keyfill import io
 from keyfill.errors import ModelError, UsageError
@@ -44,14 +44,7 @@ MATCH = {**RECIPE2, "base": "match", "output_init": "zero", "in_clip_fraction": 
 
 @pytest.fixture(scope="module")
 def clips(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("matched_clips")
-    m = clip()
-    paths = [folder / "a_walk.bvh"]
-    io.save(m, paths[0])
-    for n, (swing, speed) in enumerate([(0.15, 0.95), (0.25, 1.05), (0.35, 1.0)]):
-        paths.append(folder / f"b_variant_{n}.bvh")
-        io.save(variant(m, swing, speed), paths[-1])
-    return paths
+    return write_clips(tmp_path_factory.mktemp("matched_clips"))
 
 
 @pytest.fixture(scope="module")
@@ -155,7 +148,7 @@ def test_windows_carry_the_match_of_their_own_row(setup):
     corpus, _, path, cfg = setup
     ranges = estimate_ranges(corpus.skeleton, corpus.quats)
     everything = np.arange(len(corpus))
-    rows = matched_set.load_rows(path, corpus, everything, corpus.skeleton.meters_per_unit)
+    (rows,) = matched_set.load_rows(path, corpus, [everything], corpus.skeleton.meters_per_unit)
     pool = clip_pool(corpus, labels=True, rotations=True, matched=rows)
     assert all(len(rows) == 3 for rows in pool.matched)
     for seed in range(6):
@@ -183,10 +176,10 @@ def test_a_matched_set_of_other_clips_or_no_set_is_refused(setup, tmp_path):
     matched_set.save(arrays, tmp_path / "other.npz")
     everything = np.arange(len(corpus))
     with pytest.raises(UsageError, match="matched_set.*not the clip at its keys"):
-        matched_set.load_rows(tmp_path / "other.npz", corpus, everything, corpus.skeleton.meters_per_unit)
+        matched_set.load_rows(tmp_path / "other.npz", corpus, [everything], corpus.skeleton.meters_per_unit)
     (tmp_path / "junk.npz").write_bytes(b"\x80\x04junk")
     with pytest.raises(UsageError, match="matched_set.*not a matched set"):
-        matched_set.load_rows(tmp_path / "junk.npz", corpus, everything, corpus.skeleton.meters_per_unit)
+        matched_set.load_rows(tmp_path / "junk.npz", corpus, [everything], corpus.skeleton.meters_per_unit)
     with pytest.raises(UsageError, match="matched_set"):
         GanTask(corpus, tiny_config(**{**cfg.to_json(), "matched_set": ""}), "generator", epochs=1)
     with pytest.raises(UsageError, match="in_clip_fraction"):

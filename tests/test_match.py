@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,9 +42,8 @@ def variant(m: Motion, swing: float, speed: float) -> Motion:
     return Motion(m.skeleton, m.fps, rot, pos)
 
 
-@pytest.fixture(scope="module")
-def clips(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("clips")
+def write_clips(folder: Path) -> list[Path]:
+    """The test walk and three variants of it as BVH files in ``folder`` (a library's or a corpus's clips)."""
     m = clip()
     paths = [folder / "a_walk.bvh"]
     io.save(m, paths[0])
@@ -51,6 +51,11 @@ def clips(tmp_path_factory):
         paths.append(folder / f"b_variant_{n}.bvh")
         io.save(variant(m, swing, speed), paths[-1])
     return paths
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory):
+    return write_clips(tmp_path_factory.mktemp("clips"))
 
 
 @pytest.fixture(scope="module")

@@ -78,21 +78,18 @@ def save(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> None:
     np.savez(path, **arrays)
 
 
-def load_rows(path: str | os.PathLike, corpus, clips, meters_per_unit: float) -> tuple[tuple, ...]:
-    """The matched rows of the corpus clips ``clips`` (indices), one tuple per clip (empty where the set has
-    none) of ``(start, key frames, quats (L, J, 4) float32, root (L, 3) float64 metres)``: the
-    :attr:`~keyfill.learn.gan.poses.ClipPool.matched` of their pool. A :class:`UsageError` naming the setting
-    ``matched_set`` when the file is no matched set of this corpus (its rows must start where the clip is at
-    every key, :data:`KEY_ANGLE`, :data:`KEY_METRES`)."""
+def load_rows(path: str | os.PathLike, corpus, groups, meters_per_unit: float) -> tuple[tuple, ...]:
+    """For each group of corpus clips (indices; the file is read once for all), the matched rows of its clips,
+    one tuple per clip (empty where the set has none) of ``(start, key frames, quats (L, J, 4) float32, root (L, 3)
+    float64 metres)``: the :attr:`~keyfill.learn.gan.poses.ClipPool.matched` of their pool (``()`` for an empty
+    group). A :class:`UsageError` naming the setting ``matched_set`` when the file is no matched set of this corpus
+    (its rows must start where the clip is at every key, :data:`KEY_ANGLE`, :data:`KEY_METRES`) or holds no row for
+    the clips of a group."""
+
+    from keyfill.files import read_arrays
 
     what = f"GAN setting 'matched_set' {path}"
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            a = {k: z[k] for k in z.files}
-    except OSError as e:
-        raise UsageError(f"{what}: {e.strerror or 'cannot be read'}") from None
-    except (ValueError, EOFError):  # numpy takes bytes that are no zip for a pickle
-        raise UsageError(f"{what}: not a matched set (an .npz of arrays)") from None
+    a = read_arrays(path, what, "a matched set")
     need = ("clips", "row_clip", "row_start", "row_length", "row_keys", "quats", "root")
     J = corpus.skeleton.num_joints
     if any(k not in a for k in need) or a["quats"].shape[1:] != (J, 4) or len(a["root"]) != len(a["quats"]) \
@@ -102,10 +99,10 @@ def load_rows(path: str | os.PathLike, corpus, clips, meters_per_unit: float) ->
     by_name: dict[str, list[int]] = {}
     for i, c in enumerate(a["row_clip"]):
         by_name.setdefault(str(a["clips"][c]), []).append(i)
-    out = []
-    for c in clips:
-        name = Path(corpus.files[int(c)]).name
-        q_clip, r_clip = corpus.clip(int(c))
+
+    def rows_of(c: int) -> tuple:
+        name = Path(corpus.files[c]).name
+        q_clip, r_clip = corpus.clip(c)
         rows = []
         for i in by_name.get(name, ()):
             s, L = int(a["row_start"][i]), int(a["row_length"][i])
@@ -121,7 +118,12 @@ def load_rows(path: str | os.PathLike, corpus, clips, meters_per_unit: float) ->
                 raise UsageError(f"{what}: a row of {name} is not the clip at its keys ({angle:.3g} rad, "
                                  f"{moved:.3g} m): built from other clips or another hierarchy")
             rows.append((s, keys, q, r * meters_per_unit))
-        out.append(tuple(rows))
-    if not any(out):
-        raise UsageError(f"{what}: no row for these clips")
+        return tuple(rows)
+
+    out = []
+    for clips in groups:
+        group = tuple(rows_of(int(c)) for c in clips)
+        if len(group) and not any(group):
+            raise UsageError(f"{what}: no row for these clips")
+        out.append(group)
     return tuple(out)

@@ -127,11 +127,10 @@ class GanTask(TrainingTask):
         if self.cfg.base == "match" and stage == "generator" and not matched:
             raise UsageError("a gan model on base \"match\" trains on a matched set of its clips: give the GAN "
                              "setting matched_set (benchmarks/gan_matched_set.py builds one)")
-        def rows(clips):  # the clips' rows of the matched set
-            return load_rows(matched, corpus, clips, corpus.skeleton.meters_per_unit) if matched and len(clips) else ()
-
-        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline, rows(self.train_clips))
-        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline, rows(self.val_clips)) if n_val else None
+        train_rows, val_rows = load_rows(matched, corpus, (self.train_clips, self.val_clips),
+                                         corpus.skeleton.meters_per_unit) if matched else ((), ())
+        self.train_pool = clip_pool(corpus, self.train_clips, labels, spline, train_rows)
+        self.val_pool = clip_pool(corpus, self.val_clips, labels, spline, val_rows) if n_val else None
         train_q = np.concatenate([corpus.clip(int(i))[0] for i in self.train_clips])
         self.ranges = estimate_ranges(self.skeleton, train_q)
         self.spline_ranges = self.ranges if spline else None  # the sampling's spline base

@@ -128,14 +128,10 @@ def save(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> None:
 def load(path: str | os.PathLike, joints: int) -> dict[int, tuple[np.ndarray, ...]]:
     """A start set as ``{spacing: (truth_q, truth_r, start_q, start_r)}`` (float32, see the module); a
     :class:`UsageError` naming the setting ``matched_starts`` when the file is not one for ``joints`` joints."""
+    from keyfill.files import read_arrays
+
     what = f"training setting 'matched_starts' {path}"
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            files = {k: z[k] for k in z.files}
-    except OSError as e:
-        raise UsageError(f"{what}: {e.strerror or 'cannot be read'}") from None
-    except (ValueError, EOFError):  # numpy takes bytes that are no zip for a pickle
-        raise UsageError(f"{what}: not a start set (an .npz of arrays)") from None
+    files = read_arrays(path, what, "a start set")
     sets = {}
     for key in files:
         if not key.startswith("truth_q_"):

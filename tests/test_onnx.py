@@ -80,7 +80,16 @@ def transformer_with_key_distances(tmp_path_factory, one_torch_thread):
     return folder, None
 
 
-@pytest.mark.parametrize("which", ["transformer", "transformer_with_key_distances"])
+@pytest.fixture(scope="module")
+def transformer_reading_zeros(tmp_path_factory, one_torch_thread):
+    """issue 46's input: zero-filled unknown frames, a mask and velocities, computed inside the graph."""
+    folder = tmp_path_factory.mktemp("tf-zero") / "model"
+    random_transformer(folder, 3, unknown_input="zero", velocity_input=True)
+    assert main(["export", str(folder)]) == 0
+    return folder, None
+
+
+@pytest.mark.parametrize("which", ["transformer", "transformer_with_key_distances", "transformer_reading_zeros"])
 def test_transformer_graph_equals_torch_on_random_inputs(which, request):
     import torch
 

@@ -84,6 +84,30 @@ def test_mixture_embedding_selects_position_and_kind_rows():
     assert not torch.equal(net.keyframe.weight[TF.KEY], net.keyframe.weight[TF.UNKNOWN])
 
 
+def test_zero_filled_input_with_a_mask_and_velocities():
+    """issue 46's input layout: the features on keys and zero elsewhere, then the velocity channels (0 unless a
+    frame and its predecessor are keys), then the mask (1 on keys); by default the network reads the pre-fill."""
+    rng = np.random.default_rng(0)
+    x = torch.as_tensor(rng.standard_normal((2, 9, 5)), dtype=torch.float64)
+    kinds = torch.as_tensor(np.stack([TF.frame_kinds(9, [0, 1, 2, 6, 7]), TF.frame_kinds(9, [1, 4, 8])]))
+    known = (kinds == TF.KEY).numpy()
+    assert torch.equal(TN.network_input(x, kinds, TINY), x)
+    zero = TC.ModelConfig(**{**TINY.__dict__, "unknown_input": "zero", "velocity_input": True})
+    got = TN.network_input(x, kinds, zero).numpy()
+    assert got.shape == (2, 9, 11) == (2, 9, TN.input_size(5, zero))
+    xn = x.numpy()
+    np.testing.assert_array_equal(got[..., :5], np.where(known[..., None], xn, 0.0))
+    np.testing.assert_array_equal(got[..., 10], known.astype(float))
+    both = known[:, 1:] & known[:, :-1]
+    np.testing.assert_allclose(got[:, 1:, 5:10], np.where(both[..., None], xn[:, 1:] - xn[:, :-1], 0.0))
+    assert (got[:, 0, 5:10] == 0).all() and both.sum() == 3  # frames 1-2 and 7 of the first window
+    speed = TC.ModelConfig(**{**TINY.__dict__, "velocity_input": True})
+    got = TN.network_input(x, kinds, speed).numpy()  # the pre-fill's velocity everywhere
+    np.testing.assert_allclose(got[:, 1:, 5:], xn[:, 1:] - xn[:, :-1])
+    with pytest.raises(ModelError, match="unknown_input"):
+        TC.ModelConfig(unknown_input="mean")
+
+
 def test_only_key_and_unknown_frames_carry_loss(corpus):
     torch.manual_seed(0)
     model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
@@ -224,6 +248,16 @@ def test_fine_tuning_starts_from_a_model_and_may_change_its_prefill(trained, cor
     np.testing.assert_allclose(dr, mr, atol=1e-4)
     assert T.load(tmp_path / "distances").config.key_distances
     assert "since_key.weight" in distances.network.state_dict()
+    # so do velocity inputs (their input weights); a zero-filled input keeps the features' weights and the mask's
+    # start at zero, so its network is the old one reading other inputs
+    with_velocity = TC.ModelConfig(**{**TINY.__dict__, "velocity_input": True})
+    velocity = train(corpus, tmp_path / "velocity", with_velocity, cfg, seed=1, init=folder)
+    _, vr = velocity.complete_windows(q[:2], r[:2], keys)
+    np.testing.assert_allclose(vr, mr, atol=1e-4)
+    zero = train(corpus, tmp_path / "zero", TC.ModelConfig(**{**TINY.__dict__, "unknown_input": "zero"}), cfg,
+                 seed=1, init=folder)
+    w, old = zero.network.input.weight, model.network.input.weight
+    assert torch.equal(w[:, :-1], old) and not w[:, -1].any()
     with pytest.raises(ModelError, match="prefill must be one of interpolation, cubic, velocity"):
         TC.ModelConfig(prefill="spline")
     with pytest.raises(ModelError, match="rotation_weight must be a number from 0 to 1e"):
@@ -684,13 +718,16 @@ def test_training_draws_matched_start_batches_only_when_asked(corpus, tmp_path):
         TrainConfig(matched_share=0.5)
 
 
-def test_a_zero_residual_gives_the_interpolation_it_corrects(corpus, corpus_dir):
+@pytest.mark.parametrize("layout", [{}, {"unknown_input": "zero", "velocity_input": True}])
+def test_a_zero_residual_gives_the_interpolation_it_corrects(corpus, corpus_dir, layout):
     """The output is a correction of the pre-fill: a new residual model (its output layer zero) gives the linear
-    interpolation of the keys back, to the float32 precision of the features."""
+    interpolation of the keys back, to the float32 precision of the features, also when the network reads
+    zeros and a mask in place of it (issue 46's delta from interpolation)."""
     from keyfill import interpolate
     from keyfill.motion import Keys
 
-    model = T.new_model(corpus.skeleton, TINY, np.zeros(24), np.full(24, 30.0), corpus.folded)
+    cfg = TC.ModelConfig(**{**TINY.__dict__, **layout})
+    model = T.new_model(corpus.skeleton, cfg, np.zeros(24), np.full(24, 30.0), corpus.folded)
     motion = io.load(min(corpus_dir.rglob("*.bvh"))).frames(slice(0, 81)).replace(keys=None)
     keys = Keys([0, 20, 50, 80])
     ((done, _),) = T.complete_motions(model, [(motion, keys)], batch=False)

@@ -23,7 +23,10 @@ PREFILLS = tuple(PREFILL_FUNCTIONS)
 #: that value they are left out of a model's ``config.json`` and of what ``--resume`` compares, so older runs
 #: resume and retrain to the same bytes (:meth:`ModelConfig.recorded`)
 LATER_ARCHITECTURE = {"prefill": "interpolation", "rotation_weight": 1.0, "key_distances": False,
-                      "output_smoothing": 0, "foot_weight": 0.0, "smooth_weight": 0.0}
+                      "output_smoothing": 0, "foot_weight": 0.0, "smooth_weight": 0.0, "unknown_input": "prefill",
+                      "velocity_input": False}
+#: what the network reads in the frames it fills (:attr:`ModelConfig.unknown_input`)
+UNKNOWN_INPUTS = ("prefill", "zero")
 #: the highest order of :attr:`ModelConfig.output_smoothing` (a 65-tap kernel: more than a window)
 MAX_SMOOTHING = 64
 #: each number of a :class:`ModelConfig`: (whole number?, lowest, highest); larger sizes would exhaust memory
@@ -62,6 +65,12 @@ class ModelConfig:
         smooth_weight: weight of a smoothness term (issue 30): the mean excess of the decoded output's jerk
             (third difference of world joint positions, m/s^3) over the real window's at the same joint and
             frame, clipped at 0 (:func:`keyfill.learn.realism_terms.excess_jerk_loss`). 0: off.
+        unknown_input: what the network reads in the frames that are not keys (issue 46): ``"prefill"`` (the
+            pre-filled frames, as the paper) or ``"zero"`` (zeros, plus a mask channel that is 1 on keys and 0
+            elsewhere: the Delta-Interpolator's layout). Either way a ``residual`` output is added to the
+            pre-fill, so the network writes a correction of the interpolation it cannot see.
+        velocity_input: the network also reads each frame's feature velocity: its features minus the previous
+            frame's (0 on the first frame; with ``unknown_input`` ``"zero"``, 0 unless both frames are keys).
     """
 
     coordinates: str = "global"
@@ -81,6 +90,8 @@ class ModelConfig:
     output_smoothing: int = 0
     foot_weight: float = 0.0
     smooth_weight: float = 0.0
+    unknown_input: str = "prefill"
+    velocity_input: bool = False
 
     def __post_init__(self):
         for name, (whole, low, high) in NUMBER_LIMITS.items():  # before any arithmetic (heads 0, layers 1e9)
@@ -92,7 +103,9 @@ class ModelConfig:
         axis_vector(self.facing_axis)
         if self.prefill not in PREFILLS:
             raise ModelError(f"prefill must be one of {', '.join(PREFILLS)}, not {self.prefill!r}")
-        for name in ("residual", "key_distances"):
+        if self.unknown_input not in UNKNOWN_INPUTS:
+            raise ModelError(f"unknown_input must be one of {', '.join(UNKNOWN_INPUTS)}, not {self.unknown_input!r}")
+        for name in ("residual", "key_distances", "velocity_input"):
             if not isinstance(getattr(self, name), bool):
                 raise ModelError(f"{name} must be true or false, not {getattr(self, name)!r}")
         s = self.output_smoothing

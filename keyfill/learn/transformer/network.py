@@ -25,7 +25,7 @@ class MotionTransformer(nn.Module):
     def __init__(self, features: int, cfg: ModelConfig):
         super().__init__()
         self.cfg = cfg
-        self.input = nn.Conv1d(features, cfg.d_model, kernel_size=3, padding=1)
+        self.input = nn.Conv1d(input_size(features, cfg), cfg.d_model, kernel_size=3, padding=1)
         self.position = nn.Embedding(cfg.max_frames, cfg.d_model)
         self.keyframe = nn.Embedding(3, cfg.d_model)
         if cfg.key_distances:
@@ -57,10 +57,60 @@ class MotionTransformer(nn.Module):
         T = x.shape[1]
         if T > self.cfg.max_frames:
             raise ModelError(f"{T} frames do not fit this model's {self.cfg.max_frames}-frame window")
-        h = self.input(x.transpose(1, 2)).transpose(1, 2) + self.embed(kinds)
+        h = self.input(network_input(x, kinds, self.cfg).transpose(1, 2)).transpose(1, 2) + self.embed(kinds)
         h = self.encoder(h)
         y = self.output(h.transpose(1, 2)).transpose(1, 2)
         return x + y if self.cfg.residual else y
+
+
+def input_size(features: int, cfg: ModelConfig) -> int:
+    """Channels per frame of :func:`network_input` for ``features`` per frame."""
+    return features * (2 if cfg.velocity_input else 1) + (cfg.unknown_input == "zero")
+
+
+def network_input(x, kinds, cfg: ModelConfig):
+    """What the network reads, ``(B, T, input_size)``, from pre-filled features ``x (B, T, F)`` and kinds ``(B, T)``.
+
+    In this order: the features (with ``unknown_input`` ``"zero"``: zero on every frame that is not a key);
+    with ``velocity_input`` each frame's features minus the previous frame's (0 on the first frame and, with
+    zeros, wherever either frame is not a key); with ``"zero"`` a mask channel, 1 on keys and 0 elsewhere.
+    With neither setting: ``x`` itself.
+    """
+    zero = cfg.unknown_input == "zero"
+    known = (kinds == KEY).unsqueeze(-1).to(x.dtype)  # (B, T, 1)
+    seen = x * known if zero else x
+    parts = [seen]
+    if cfg.velocity_input:
+        step = seen[:, 1:] - seen[:, :-1]
+        if zero:
+            step = step * known[:, 1:] * known[:, :-1]
+        parts.append(torch.cat([torch.zeros_like(seen[:, :1]), step], dim=1))
+    if zero:
+        parts.append(known)
+    return torch.cat(parts, dim=-1) if len(parts) > 1 else seen
+
+
+def input_channels(features: int, cfg: ModelConfig) -> dict:
+    """Where each part of :func:`network_input` lies: ``{"features" | "velocity" | "mask": slice}``."""
+    parts = {"features": slice(0, features)}
+    if cfg.velocity_input:
+        parts["velocity"] = slice(features, 2 * features)
+    if cfg.unknown_input == "zero":
+        parts["mask"] = slice(input_size(features, cfg) - 1, input_size(features, cfg))
+    return parts
+
+
+def widen_input(state: dict, features: int, old: ModelConfig, new: ModelConfig) -> dict:
+    """``state`` (a network's tensors under ``old``) with its input layer laid out for ``new``'s input: the
+    weights of each part both read are kept, those of a part only ``new`` reads start at zero, so a model
+    fine-tuned with velocities added starts as the model it tunes (``--init``)."""
+    weight = state["input.weight"]  # (d_model, channels, 3)
+    have, want = input_channels(features, old), input_channels(features, new)
+    wide = weight.new_zeros((weight.shape[0], input_size(features, new), weight.shape[2]))
+    for name, where in want.items():
+        if name in have:
+            wide[:, where] = weight[:, have[name]]
+    return {**state, "input.weight": wide}
 
 
 def key_distances(kinds, limit: int):

@@ -54,7 +54,7 @@ from keyfill.learn.training import train as run_training
 from keyfill.learn.transformer.config import ModelConfig
 from keyfill.learn.transformer.features import apply_transform, canonical_transform, frame_kinds
 from keyfill.learn.transformer.model import KIND, CompletionModel, load, new_model
-from keyfill.learn.transformer.network import losses
+from keyfill.learn.transformer.network import losses, widen_input
 from keyfill.learn.transformer.realism import column_swap, contact_windows, realism_losses
 from keyfill.learn.transformer.starts import draw_batch
 from keyfill.learn.transformer.starts import load as load_starts
@@ -378,7 +378,8 @@ class TransformerTask(TrainingTask):
                                                                            self.init.features.pos_std)
         self.model = new_model(self.corpus.skeleton, self.model_cfg, mean, std, self.corpus.folded, self.info)
         if self.init is not None:
-            start = self.init.network.state_dict()
+            start = widen_input(self.init.network.state_dict(), self.model.features.size, self.init.config,
+                                self.model_cfg)
             if self.model_cfg.key_distances and not self.init.config.key_distances:
                 # the new embeddings keep their zeros: the run starts as the model it tunes
                 start.update({k: v for k, v in self.model.network.state_dict().items()
